@@ -1,0 +1,54 @@
+//! The library's error type.
+
+use std::path::PathBuf;
+
+/// Every failure the library reports. Messages name the field, joint, link or input at fault,
+/// the offending value, and what would have been accepted.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A configuration value out of its allowed range.
+    #[error("config: `{field}` = {value} is invalid: {allowed}")]
+    Config {
+        field: String,
+        value: String,
+        allowed: String,
+    },
+    /// A configuration file that does not parse or has unknown fields or wrong types.
+    #[error("config file {path}: {message}")]
+    ConfigParse { path: PathBuf, message: String },
+    /// A URDF that cannot be turned into a serial chain.
+    #[error("URDF: {0}")]
+    Urdf(String),
+    /// Input to a function that is outside its domain (wrong length, non-finite value, ...).
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl Error {
+    /// Shorthand for [`Error::Config`].
+    pub fn config(field: impl Into<String>, value: impl ToString, allowed: impl Into<String>) -> Self {
+        Error::Config {
+            field: field.into(),
+            value: value.to_string(),
+            allowed: allowed.into(),
+        }
+    }
+
+    /// Shorthand for [`Error::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
+
+/// The library's result type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
