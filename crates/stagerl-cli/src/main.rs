@@ -1,1 +1,57 @@
-fn main() {}
+//! `stagerl`: a thin command-line layer over the `stagerl` library.
+
+mod cmd;
+mod jsonl;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "stagerl",
+    version,
+    about = "Deep RL for robot-arm reaching with the stage-incentive dense rewards"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the scripted Jacobian controller on the reaching task, printing every reward term
+    /// step by step, then its success rate over many random targets.
+    Demo(cmd::demo::Args),
+    /// Forward kinematics: JSON lines {"joints":[...]} on stdin (radians), one
+    /// {"position":[x,y,z],"quaternion":[x,y,z,w]} line out per input (metres, base frame).
+    Fk(cmd::fk::Args),
+    /// Reward terms: JSON lines {"ee_pos","ee_quat","target","joint_vel"} on stdin, one line of
+    /// every term out per input.
+    Reward(cmd::reward::Args),
+    /// Benchmarks.
+    #[command(subcommand)]
+    Bench(cmd::bench::Bench),
+    /// Print the default configuration as TOML (every field, with the paper's values).
+    Config,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(a) => cmd::demo::run(a),
+        Command::Fk(a) => cmd::fk::run(a),
+        Command::Reward(a) => cmd::reward::run(a),
+        Command::Bench(b) => cmd::bench::run(b),
+        Command::Config => {
+            print!("{}", stagerl::config::Config::default().to_toml_string());
+            Ok(())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("stagerl: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

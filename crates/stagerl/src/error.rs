@@ -8,11 +8,7 @@ use std::path::PathBuf;
 pub enum Error {
     /// A configuration value out of its allowed range.
     #[error("config: `{field}` = {value} is invalid: {allowed}")]
-    Config {
-        field: String,
-        value: String,
-        allowed: String,
-    },
+    Config { field: String, value: String, allowed: String },
     /// A configuration file that does not parse or has unknown fields or wrong types.
     #[error("config file {path}: {message}")]
     ConfigParse { path: PathBuf, message: String },
@@ -34,19 +30,12 @@ pub enum Error {
 impl Error {
     /// Shorthand for [`Error::Config`].
     pub fn config(field: impl Into<String>, value: impl ToString, allowed: impl Into<String>) -> Self {
-        Error::Config {
-            field: field.into(),
-            value: value.to_string(),
-            allowed: allowed.into(),
-        }
+        Error::Config { field: field.into(), value: value.to_string(), allowed: allowed.into() }
     }
 
     /// Shorthand for [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io {
-            path: path.into(),
-            source,
-        }
+        Error::Io { path: path.into(), source }
     }
 }
 

@@ -27,3 +27,5 @@ pub mod rng;
 pub mod robot;
 
 pub use error::{Error, Result};
+/// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).
+pub use nalgebra;

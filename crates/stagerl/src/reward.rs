@@ -1,1 +1,606 @@
-//! (in progress)
+//! The paper's reward functions: position (eqs. 1-2), direction (eqs. 3-6), posture (eq. 7),
+//! movement (eqs. 8-9), stride (eq. 10), hard stage incentive HAR (eqs. 11-12), soft stage
+//! incentive SAR (eqs. 13-15) and the sparse basic reward (eq. 18), plus the +20 success bonus of
+//! section VI.
+//!
+//! [`RewardTerms::compute`] evaluates every term at once, so a caller can see why a step got its
+//! reward; [`RewardTerms::reward`] is the value of the configured [`RewardFunction`] and
+//! [`RewardTerms::total`] adds the bonus.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+use std::fmt;
+use std::str::FromStr;
+
+use crate::{Error, Result};
+
+/// Which reward the agent is trained on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RewardFunction {
+    /// Sparse: 1 when the task is done, else 0 (eq. 18).
+    Basic,
+    /// Position minus direction (eq. 7).
+    Posture,
+    /// Position minus movement (eq. 10).
+    Stride,
+    /// Hard stage incentive: posture far from the target, stride near it (eqs. 11-12).
+    Har,
+    /// Soft stage incentive: distance-weighted blend of stride and posture (eqs. 13-15).
+    Sar,
+}
+
+impl RewardFunction {
+    /// All five, in the paper's Table 1 order.
+    pub const ALL: [RewardFunction; 5] = [
+        RewardFunction::Basic,
+        RewardFunction::Posture,
+        RewardFunction::Stride,
+        RewardFunction::Har,
+        RewardFunction::Sar,
+    ];
+
+    /// The lowercase name used in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            RewardFunction::Basic => "basic",
+            RewardFunction::Posture => "posture",
+            RewardFunction::Stride => "stride",
+            RewardFunction::Har => "har",
+            RewardFunction::Sar => "sar",
+        }
+    }
+}
+
+impl fmt::Display for RewardFunction {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for RewardFunction {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        RewardFunction::ALL
+            .into_iter()
+            .find(|r| r.name() == s)
+            .ok_or_else(|| Error::config("reward.function", s, "one of basic, posture, stride, har, sar"))
+    }
+}
+
+/// Where the "actual direction" of eq. 4 comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DirectionSource {
+    /// The paper's eq. 4: the rotation axis of the end-effector's orientation quaternion,
+    /// `V_PP' = (x, y, z) / sin(acos(w))`, compared with `V_PT = T - P` (eq. 3).
+    Quaternion,
+    /// Our alternative: the end-effector's displacement over the step, `V_PP' = P - P_prev`,
+    /// compared with the direction the step should have taken, `V_PT = T - P_prev`.
+    Displacement,
+}
+
+/// Reward settings; every constant of the paper is here with the paper's value as default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardConfig {
+    /// The reward the agent is trained on.
+    pub function: RewardFunction,
+    /// Success radius beta of eq. 1, metres (paper: 0.01). Reached when `D_PT < beta`.
+    pub beta_m: f64,
+    /// Added to the step's reward when the target is reached (paper, section VI: +20).
+    pub success_bonus: f64,
+    /// HAR stage boundary (eq. 11), metres (paper: 0.5): posture when `D_PT > boundary`, else stride.
+    pub har_boundary_m: f64,
+    /// SAR exponent sigma1 of eq. 13 (paper: 1).
+    pub sar_sigma1: f64,
+    /// SAR exponent sigma2 of eq. 14 (paper: 1).
+    pub sar_sigma2: f64,
+    /// SAR distance scale, metres: eqs. 13-14 use `clamp(D_PT / scale, 0, 1)`. The paper clamps
+    /// `D_PT` itself to [0, 1], which is the default scale of 1 m.
+    pub sar_scale_m: f64,
+    /// Source of the actual direction in eq. 4 (paper: the quaternion).
+    pub direction: DirectionSource,
+    /// Apply eq. 6's fold (`phi` if `phi < pi/2`, else `pi - phi`). The paper does; turning it off
+    /// makes the direction reward `phi / 2 pi` in [0, 1/2], which tells moving away from moving
+    /// towards when used with [`DirectionSource::Displacement`].
+    pub direction_fold: bool,
+}
+
+impl Default for RewardConfig {
+    fn default() -> Self {
+        RewardConfig {
+            function: RewardFunction::Sar,
+            beta_m: 0.01,
+            success_bonus: 20.0,
+            har_boundary_m: 0.5,
+            sar_sigma1: 1.0,
+            sar_sigma2: 1.0,
+            sar_scale_m: 1.0,
+            direction: DirectionSource::Quaternion,
+            direction_fold: true,
+        }
+    }
+}
+
+impl RewardConfig {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |field: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::config(field, v, "a finite number > 0"))
+            }
+        };
+        let non_negative = |field: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(Error::config(field, v, "a finite number >= 0"))
+            }
+        };
+        positive("reward.beta_m", self.beta_m)?;
+        if !self.success_bonus.is_finite() {
+            return Err(Error::config("reward.success_bonus", self.success_bonus, "a finite number"));
+        }
+        non_negative("reward.har_boundary_m", self.har_boundary_m)?;
+        non_negative("reward.sar_sigma1", self.sar_sigma1)?;
+        non_negative("reward.sar_sigma2", self.sar_sigma2)?;
+        positive("reward.sar_scale_m", self.sar_scale_m)?;
+        Ok(())
+    }
+}
+
+/// What a reward is computed from (all in the base frame).
+#[derive(Clone, Copy, Debug)]
+pub struct RewardInput<'a> {
+    /// End-effector position P, metres.
+    pub ee_pos: Vector3<f64>,
+    /// End-effector orientation P' as `[x, y, z, w]`, unit norm.
+    pub ee_quat: [f64; 4],
+    /// Target position T, metres.
+    pub target: Vector3<f64>,
+    /// Joint velocities V of eq. 8 (rad/s, or m/s for prismatic joints); N = its length.
+    pub joint_vel: &'a [f64],
+    /// End-effector position before the step; needed by [`DirectionSource::Displacement`].
+    pub prev_ee_pos: Option<Vector3<f64>>,
+}
+
+impl RewardInput<'_> {
+    /// Reject input outside the reward's domain: non-finite values, an empty velocity vector, a
+    /// quaternion whose norm is off 1 by more than 1e-6.
+    pub fn validate(&self) -> Result<()> {
+        let finite = |name: &str, v: &[f64]| match v.iter().position(|x| !x.is_finite()) {
+            Some(i) => Err(Error::InvalidInput(format!("{name}[{i}] = {} is not finite", v[i]))),
+            None => Ok(()),
+        };
+        finite("ee_pos", self.ee_pos.as_slice())?;
+        finite("ee_quat", &self.ee_quat)?;
+        finite("target", self.target.as_slice())?;
+        finite("joint_vel", self.joint_vel)?;
+        if let Some(p) = &self.prev_ee_pos {
+            finite("prev_ee_pos", p.as_slice())?;
+        }
+        if self.joint_vel.is_empty() {
+            return Err(Error::InvalidInput("joint_vel is empty: need one value per joint".into()));
+        }
+        let norm = self.ee_quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if (norm - 1.0).abs() > 1e-6 {
+            return Err(Error::InvalidInput(format!(
+                "ee_quat has norm {norm}, expected a unit quaternion (|norm - 1| <= 1e-6)"
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Every term of the paper's rewards for one step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RewardTerms {
+    /// D_PT, Euclidean distance from end-effector to target, metres.
+    pub distance: f64,
+    /// J_reach of eq. 1: `D_PT < beta`.
+    pub reached: bool,
+    /// R_position = J_reach - D_PT (eq. 2).
+    pub position: f64,
+    /// phi of eq. 5, radians in [0, pi].
+    pub phi: f64,
+    /// R_direction = fold(phi) / 2 pi (eq. 6), in [0, 1/4].
+    pub direction: f64,
+    /// R_posture = R_position - R_direction (eq. 7).
+    pub posture: f64,
+    /// R_move = dt (V . V) / N (eq. 9).
+    pub movement: f64,
+    /// R_stride = R_position - R_move (eq. 10).
+    pub stride: f64,
+    /// gamma_posture of eq. 11 (1 in the fast approach area `D_PT > boundary`, else 0).
+    pub gamma_posture: f64,
+    /// R_HAR (eq. 12).
+    pub har: f64,
+    /// alpha1 = 1 - clamp(D_PT)^sigma1 (eq. 13).
+    pub alpha1: f64,
+    /// alpha2 = clamp(D_PT)^sigma2 (eq. 14).
+    pub alpha2: f64,
+    /// R_SAR = alpha1 R_stride + alpha2 R_posture (eq. 15).
+    pub sar: f64,
+    /// R_basic (eq. 18): 1 when reached, else 0.
+    pub basic: f64,
+    /// The configured function's value.
+    pub reward: f64,
+    /// The success bonus when reached, else 0.
+    pub bonus: f64,
+    /// `reward + bonus`: what the agent receives.
+    pub total: f64,
+}
+
+/// phi of eq. 5: the angle between `expected` and `actual`, in [0, pi]. 0 when either vector is
+/// degenerate (|V_PT| < 1e-12 or |V_PP'| < 1e-9), as the design notes fix.
+#[inline]
+pub fn angle_between(expected: &Vector3<f64>, actual: &Vector3<f64>) -> f64 {
+    let ne = expected.norm();
+    let na = actual.norm();
+    if ne < 1e-12 || na < 1e-9 {
+        return 0.0;
+    }
+    (expected.dot(actual) / (ne * na)).clamp(-1.0, 1.0).acos()
+}
+
+/// Eq. 6: R_direction = fold(phi) / 2 pi, where fold(phi) = phi when phi < pi/2, else pi - phi.
+#[inline]
+pub fn direction_reward(phi: f64, fold: bool) -> f64 {
+    let folded = if !fold || phi < FRAC_PI_2 { phi } else { PI - phi };
+    folded / TAU
+}
+
+/// Eq. 9: R_move = dt (V . V) / N, with dt in seconds and N = `joint_vel.len()`.
+#[inline]
+pub fn movement_reward(joint_vel: &[f64], dt_s: f64) -> f64 {
+    let vv: f64 = joint_vel.iter().map(|v| v * v).sum();
+    dt_s * vv / joint_vel.len() as f64
+}
+
+/// Eqs. 13-14: `(alpha1, alpha2)` with `c = clamp(D_PT / scale, 0, 1)`.
+#[inline]
+pub fn sar_weights(distance: f64, cfg: &RewardConfig) -> (f64, f64) {
+    let c = (distance / cfg.sar_scale_m).clamp(0.0, 1.0);
+    (1.0 - c.powf(cfg.sar_sigma1), c.powf(cfg.sar_sigma2))
+}
+
+impl RewardTerms {
+    /// Evaluate every term for one step. `dt_s` is the control period of eq. 9 (seconds).
+    ///
+    /// The input is trusted (see [`RewardInput::validate`] for outside input). With
+    /// [`DirectionSource::Displacement`] and no `prev_ee_pos`, phi is 0.
+    ///
+    /// Eq. 4's `temp = sin(acos(w))` is a positive scale of `(x, y, z)`, so it does not change
+    /// phi; it only matters where it vanishes, which is tested as `|(x, y, z)| < 1e-9` (equal
+    /// to `sin(acos(w))` for a unit quaternion, and free of its cancellation near w = 1).
+    #[inline]
+    pub fn compute(cfg: &RewardConfig, dt_s: f64, input: &RewardInput<'_>) -> RewardTerms {
+        // Eqs. 1-2.
+        let to_target = input.target - input.ee_pos;
+        let distance = to_target.norm();
+        let reached = distance < cfg.beta_m;
+        let position = f64::from(u8::from(reached)) - distance;
+
+        // Eqs. 3-6.
+        let phi = match cfg.direction {
+            DirectionSource::Quaternion => {
+                let [x, y, z, _w] = input.ee_quat;
+                angle_between(&to_target, &Vector3::new(x, y, z))
+            }
+            DirectionSource::Displacement => match input.prev_ee_pos {
+                Some(prev) => angle_between(&(input.target - prev), &(input.ee_pos - prev)),
+                None => 0.0,
+            },
+        };
+        let direction = direction_reward(phi, cfg.direction_fold);
+        let posture = position - direction; // eq. 7
+
+        // Eqs. 8-10.
+        let movement = movement_reward(input.joint_vel, dt_s);
+        let stride = position - movement;
+
+        // Eqs. 11-12.
+        let gamma_posture = if distance > cfg.har_boundary_m { 1.0 } else { 0.0 };
+        let har = gamma_posture * posture + (1.0 - gamma_posture) * stride;
+
+        // Eqs. 13-15.
+        let (alpha1, alpha2) = sar_weights(distance, cfg);
+        let sar = alpha1 * stride + alpha2 * posture;
+
+        // Eq. 18.
+        let basic = f64::from(u8::from(reached));
+
+        let reward = match cfg.function {
+            RewardFunction::Basic => basic,
+            RewardFunction::Posture => posture,
+            RewardFunction::Stride => stride,
+            RewardFunction::Har => har,
+            RewardFunction::Sar => sar,
+        };
+        let bonus = if reached { cfg.success_bonus } else { 0.0 };
+        RewardTerms {
+            distance,
+            reached,
+            position,
+            phi,
+            direction,
+            posture,
+            movement,
+            stride,
+            gamma_posture,
+            har,
+            alpha1,
+            alpha2,
+            sar,
+            basic,
+            reward,
+            bonus,
+            total: reward + bonus,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    const IDENTITY: [f64; 4] = [0.0, 0.0, 0.0, 1.0];
+
+    fn terms(
+        function: RewardFunction,
+        ee: [f64; 3],
+        quat: [f64; 4],
+        target: [f64; 3],
+        vel: &[f64],
+    ) -> RewardTerms {
+        let cfg = RewardConfig { function, ..RewardConfig::default() };
+        let input = RewardInput {
+            ee_pos: Vector3::from(ee),
+            ee_quat: quat,
+            target: Vector3::from(target),
+            joint_vel: vel,
+            prev_ee_pos: None,
+        };
+        input.validate().unwrap();
+        RewardTerms::compute(&cfg, 0.05, &input)
+    }
+
+    /// Quaternion of a rotation by `angle` about unit `axis`, as [x, y, z, w].
+    fn axis_angle(axis: [f64; 3], angle: f64) -> [f64; 4] {
+        let (s, c) = (angle / 2.0).sin_cos();
+        [axis[0] * s, axis[1] * s, axis[2] * s, c]
+    }
+
+    #[test]
+    fn position_eqs_1_2_at_and_around_beta() {
+        let zero = [0.0; 6];
+        // Exactly at beta = 0.01 m: not reached (J_reach needs D_PT < beta).
+        let t = terms(RewardFunction::Posture, [0.0; 3], IDENTITY, [0.01, 0.0, 0.0], &zero);
+        assert_eq!(t.distance, 0.01);
+        assert!(!t.reached);
+        assert_eq!(t.position, -0.01);
+        assert_eq!(t.bonus, 0.0);
+        // Just inside: J_reach = 1, position = 1 - D.
+        let t = terms(RewardFunction::Posture, [0.0; 3], IDENTITY, [0.0, 0.0, 0.009], &zero);
+        assert!(t.reached);
+        assert_relative_eq!(t.position, 1.0 - 0.009, epsilon = 1e-15);
+        assert_eq!(t.bonus, 20.0);
+        assert_relative_eq!(t.total, t.reward + 20.0, epsilon = 1e-15);
+        // 3-4-5 triangle: D = 0.5 exactly.
+        let t = terms(RewardFunction::Stride, [0.1, 0.1, 0.1], IDENTITY, [0.4, 0.5, 0.1], &zero);
+        assert_relative_eq!(t.distance, 0.5, epsilon = 1e-15);
+        assert_relative_eq!(t.position, -0.5, epsilon = 1e-15);
+    }
+
+    #[test]
+    fn direction_eqs_3_6_hand_computed() {
+        let zero = [0.0; 6];
+        // Rotation about +x, target along +x: phi = 0, direction 0.
+        let q = axis_angle([1.0, 0.0, 0.0], 0.7);
+        let t = terms(RewardFunction::Posture, [0.0; 3], q, [0.3, 0.0, 0.0], &zero);
+        assert_relative_eq!(t.phi, 0.0, epsilon = 1e-12);
+        assert_relative_eq!(t.direction, 0.0, epsilon = 1e-12);
+        // Axis +z, target along +x: phi = pi/2 -> fold gives pi - pi/2 = pi/2 -> 1/4.
+        let q = axis_angle([0.0, 0.0, 1.0], 1.0);
+        let t = terms(RewardFunction::Posture, [0.0; 3], q, [0.3, 0.0, 0.0], &zero);
+        assert_relative_eq!(t.phi, FRAC_PI_2, epsilon = 1e-12);
+        assert_relative_eq!(t.direction, 0.25, epsilon = 1e-12);
+        // Axis at 60 degrees from the target direction: phi = pi/3 -> (pi/3)/(2 pi) = 1/6.
+        let axis = [0.5, (3.0f64).sqrt() / 2.0, 0.0];
+        let q = axis_angle(axis, 0.4);
+        let t = terms(RewardFunction::Posture, [1.0, 1.0, 1.0], q, [1.2, 1.0, 1.0], &zero);
+        assert_relative_eq!(t.phi, PI / 3.0, epsilon = 1e-12);
+        assert_relative_eq!(t.direction, 1.0 / 6.0, epsilon = 1e-12);
+        // Opposite axis (120 degrees): fold gives pi - 2pi/3 = pi/3 -> the same 1/6.
+        let q = axis_angle([-axis[0], -axis[1], 0.0], 0.4);
+        let t = terms(RewardFunction::Posture, [1.0, 1.0, 1.0], q, [1.2, 1.0, 1.0], &zero);
+        assert_relative_eq!(t.phi, 2.0 * PI / 3.0, epsilon = 1e-12);
+        assert_relative_eq!(t.direction, 1.0 / 6.0, epsilon = 1e-12);
+        // Posture = position - direction (eq. 7).
+        assert_relative_eq!(t.posture, -0.2 - 1.0 / 6.0, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn direction_ignores_quaternion_sign() {
+        let q = axis_angle([0.3, -0.5, 0.8f64].map(|x| x / (0.98f64).sqrt()), 2.0);
+        let neg = q.map(|x| -x);
+        let a = terms(RewardFunction::Posture, [0.1, 0.2, 0.3], q, [0.4, -0.1, 0.5], &[0.0; 6]);
+        let b = terms(RewardFunction::Posture, [0.1, 0.2, 0.3], neg, [0.4, -0.1, 0.5], &[0.0; 6]);
+        assert_relative_eq!(a.direction, b.direction, epsilon = 1e-12);
+        assert_relative_eq!(a.phi + b.phi, PI, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn identity_quaternion_and_zero_distance_give_phi_zero() {
+        let t = terms(RewardFunction::Posture, [0.0; 3], IDENTITY, [0.3, 0.2, 0.1], &[0.0; 6]);
+        assert_eq!(t.phi, 0.0);
+        assert_eq!(t.direction, 0.0);
+        // Target exactly at the end-effector: V_PT = 0.
+        let q = axis_angle([0.0, 0.0, 1.0], 1.0);
+        let t = terms(RewardFunction::Posture, [0.2; 3], q, [0.2; 3], &[0.0; 6]);
+        assert_eq!(t.phi, 0.0);
+        assert!(t.reached);
+        assert!(t.posture.is_finite());
+    }
+
+    #[test]
+    fn movement_and_stride_eqs_9_10() {
+        // Zero velocity: no movement penalty, stride = position.
+        let t = terms(RewardFunction::Stride, [0.0; 3], IDENTITY, [0.2, 0.0, 0.0], &[0.0; 6]);
+        assert_eq!(t.movement, 0.0);
+        assert_eq!(t.stride, t.position);
+        // V = [1, 2, 0, 0, 0, 1]: V.V = 6, dt 0.05, N 6 -> 0.05.
+        let t = terms(
+            RewardFunction::Stride,
+            [0.0; 3],
+            IDENTITY,
+            [0.2, 0.0, 0.0],
+            &[1.0, 2.0, 0.0, 0.0, 0.0, 1.0],
+        );
+        assert_relative_eq!(t.movement, 0.05, epsilon = 1e-15);
+        assert_relative_eq!(t.stride, -0.2 - 0.05, epsilon = 1e-15);
+        assert_eq!(t.reward, t.stride);
+        // N is the velocity vector's length: 3 joints, V.V = 3 -> 0.05 * 3 / 3.
+        let t = terms(RewardFunction::Stride, [0.0; 3], IDENTITY, [0.2, 0.0, 0.0], &[1.0, 1.0, 1.0]);
+        assert_relative_eq!(t.movement, 0.05, epsilon = 1e-15);
+    }
+
+    #[test]
+    fn har_switches_at_half_a_metre_eqs_11_12() {
+        let q = axis_angle([0.0, 0.0, 1.0], 1.0); // direction 1/4 for targets along x
+        let vel = [1.0; 6]; // movement 0.05
+        let far = terms(RewardFunction::Har, [0.0; 3], q, [0.5 + 1e-9, 0.0, 0.0], &vel);
+        assert_eq!(far.gamma_posture, 1.0);
+        assert_eq!(far.reward, far.posture);
+        assert_relative_eq!(far.reward, -0.5 - 0.25, epsilon = 1e-8);
+        // Exactly 0.5 m is the slow adjustable area (posture only when D_PT > 0.5).
+        let at = terms(RewardFunction::Har, [0.0; 3], q, [0.5, 0.0, 0.0], &vel);
+        assert_eq!(at.gamma_posture, 0.0);
+        assert_eq!(at.reward, at.stride);
+        assert_relative_eq!(at.reward, -0.5 - 0.05, epsilon = 1e-12);
+        let near = terms(RewardFunction::Har, [0.0; 3], q, [0.3, 0.0, 0.0], &vel);
+        assert_eq!(near.reward, near.stride);
+    }
+
+    #[test]
+    fn sar_blend_eqs_13_15() {
+        let q = axis_angle([0.0, 0.0, 1.0], 1.0); // direction 1/4 along x
+        let vel = [1.0; 6]; // movement 0.05
+                            // D = 0.3: alpha1 0.7, alpha2 0.3; stride -0.35, posture -0.55.
+        let t = terms(RewardFunction::Sar, [0.0; 3], q, [0.3, 0.0, 0.0], &vel);
+        assert_relative_eq!(t.alpha1, 0.7, epsilon = 1e-12);
+        assert_relative_eq!(t.alpha2, 0.3, epsilon = 1e-12);
+        assert_relative_eq!(t.reward, 0.7 * -0.35 + 0.3 * -0.55, epsilon = 1e-12);
+        // D = 1 and beyond: clamp to 1 -> pure posture.
+        for d in [1.0, 1.7] {
+            let t = terms(RewardFunction::Sar, [0.0; 3], q, [d, 0.0, 0.0], &vel);
+            assert_eq!(t.alpha1, 0.0);
+            assert_eq!(t.alpha2, 1.0);
+            assert_relative_eq!(t.reward, t.posture, epsilon = 1e-12);
+        }
+        // D = 0: pure stride.
+        let t = terms(RewardFunction::Sar, [0.0; 3], q, [0.0; 3], &vel);
+        assert_eq!((t.alpha1, t.alpha2), (1.0, 0.0));
+        assert_relative_eq!(t.reward, t.stride, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn sar_sigmas_and_scale_are_used() {
+        let cfg =
+            RewardConfig { sar_sigma1: 2.0, sar_sigma2: 0.5, sar_scale_m: 0.5, ..RewardConfig::default() };
+        let (a1, a2) = sar_weights(0.2, &cfg); // c = 0.4
+        assert_relative_eq!(a1, 1.0 - 0.16, epsilon = 1e-12);
+        assert_relative_eq!(a2, 0.4f64.sqrt(), epsilon = 1e-12);
+    }
+
+    #[test]
+    fn basic_eq_18_and_bonus() {
+        let t = terms(RewardFunction::Basic, [0.0; 3], IDENTITY, [0.3, 0.0, 0.0], &[2.0; 6]);
+        assert_eq!((t.reward, t.bonus, t.total), (0.0, 0.0, 0.0));
+        let t = terms(RewardFunction::Basic, [0.0; 3], IDENTITY, [0.005, 0.0, 0.0], &[2.0; 6]);
+        assert_eq!((t.reward, t.bonus, t.total), (1.0, 20.0, 21.0));
+    }
+
+    #[test]
+    fn displacement_direction_source() {
+        let cfg = RewardConfig {
+            function: RewardFunction::Posture,
+            direction: DirectionSource::Displacement,
+            direction_fold: false,
+            ..RewardConfig::default()
+        };
+        let vel = [0.0; 6];
+        let mk = |ee: [f64; 3]| RewardInput {
+            ee_pos: Vector3::from(ee),
+            ee_quat: IDENTITY,
+            target: Vector3::new(1.0, 0.0, 0.0),
+            joint_vel: &vel,
+            prev_ee_pos: Some(Vector3::zeros()),
+        };
+        // Straight towards the target: phi 0.
+        let t = RewardTerms::compute(&cfg, 0.05, &mk([0.1, 0.0, 0.0]));
+        assert_relative_eq!(t.phi, 0.0, epsilon = 1e-12);
+        // Straight away without the fold: phi = pi, direction 1/2.
+        let t = RewardTerms::compute(&cfg, 0.05, &mk([-0.1, 0.0, 0.0]));
+        assert_relative_eq!(t.direction, 0.5, epsilon = 1e-12);
+        // Sideways: pi/2 -> 1/4.
+        let t = RewardTerms::compute(&cfg, 0.05, &mk([0.0, 0.1, 0.0]));
+        assert_relative_eq!(t.direction, 0.25, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn input_validation_names_the_problem() {
+        let vel = [0.0; 6];
+        let mut input = RewardInput {
+            ee_pos: Vector3::zeros(),
+            ee_quat: [0.0, 0.0, 0.0, 1.1],
+            target: Vector3::zeros(),
+            joint_vel: &vel,
+            prev_ee_pos: None,
+        };
+        let e = input.validate().unwrap_err().to_string();
+        assert!(e.contains("ee_quat") && e.contains("norm"), "{e}");
+        input.ee_quat = IDENTITY;
+        input.target = Vector3::new(0.0, f64::NAN, 0.0);
+        let e = input.validate().unwrap_err().to_string();
+        assert!(e.contains("target[1]"), "{e}");
+        input.target = Vector3::zeros();
+        input.joint_vel = &[];
+        assert!(input.validate().unwrap_err().to_string().contains("joint_vel"));
+    }
+
+    #[test]
+    fn config_validation_names_field_value_and_range() {
+        let bad = [
+            RewardConfig { beta_m: 0.0, ..Default::default() },
+            RewardConfig { beta_m: -0.01, ..Default::default() },
+            RewardConfig { sar_sigma1: -1.0, ..Default::default() },
+            RewardConfig { sar_sigma2: f64::NAN, ..Default::default() },
+            RewardConfig { har_boundary_m: -0.5, ..Default::default() },
+            RewardConfig { sar_scale_m: 0.0, ..Default::default() },
+            RewardConfig { success_bonus: f64::INFINITY, ..Default::default() },
+        ];
+        let fields = [
+            "reward.beta_m",
+            "reward.beta_m",
+            "reward.sar_sigma1",
+            "reward.sar_sigma2",
+            "reward.har_boundary_m",
+            "reward.sar_scale_m",
+            "reward.success_bonus",
+        ];
+        for (cfg, field) in bad.iter().zip(fields) {
+            let e = cfg.validate().unwrap_err().to_string();
+            assert!(e.contains(field), "{e} should name {field}");
+        }
+        RewardConfig::default().validate().unwrap();
+        assert!("sar".parse::<RewardFunction>().is_ok());
+        let e = "SAR2".parse::<RewardFunction>().unwrap_err().to_string();
+        assert!(e.contains("SAR2") && e.contains("basic, posture"), "{e}");
+    }
+}

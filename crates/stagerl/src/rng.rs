@@ -27,16 +27,8 @@ impl Rng {
     /// A generator seeded from `seed`; distinct seeds give unrelated streams.
     pub fn new(seed: u64) -> Self {
         let mut x = seed;
-        let s = [
-            splitmix64(&mut x),
-            splitmix64(&mut x),
-            splitmix64(&mut x),
-            splitmix64(&mut x),
-        ];
-        Rng {
-            s,
-            spare_normal: None,
-        }
+        let s = [splitmix64(&mut x), splitmix64(&mut x), splitmix64(&mut x), splitmix64(&mut x)];
+        Rng { s, spare_normal: None }
     }
 
     /// A generator for stream `index` derived from `seed` (e.g. one per vectorised environment).

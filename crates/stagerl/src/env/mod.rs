@@ -1,1 +1,442 @@
-//! (in progress)
+//! The random-target reaching task of the paper (section VI), as the design notes fix it.
+//!
+//! Every episode starts at the home pose with a new target drawn from the task's distribution.
+//! An action is one value per joint, clipped to [-1, 1] and scaled by the joint's speed limit to
+//! a joint-velocity command held for `dt`; the joint positions are integrated and clamped to their
+//! limits, and the velocity the reward sees is the one actually applied, `(q_new - q_old) / dt`.
+//! Reaching the target (`D_PT < beta`) ends the episode (terminated) and adds the success bonus;
+//! otherwise it is truncated after `max_steps` steps.
+//!
+//! [`ReachEnv::step`] allocates nothing.
+
+mod vec;
+
+pub use vec::VecEnv;
+
+use nalgebra::Vector3;
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+use crate::config::{Config, ObservationKind, ResolvedTask};
+use crate::reward::{RewardConfig, RewardInput, RewardTerms};
+use crate::rng::Rng;
+use crate::robot::{Chain, Pose};
+use crate::{Error, Result};
+
+/// The outcome of one step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// Every reward term; `terms.total` is what the agent receives.
+    pub terms: RewardTerms,
+    /// The target was reached: a terminal state.
+    pub terminated: bool,
+    /// The step limit was hit without reaching the target: not terminal, bootstrap through it.
+    pub truncated: bool,
+}
+
+impl Step {
+    /// What the agent receives: the configured reward plus the success bonus (`terms.total`).
+    pub fn total(&self) -> f64 {
+        self.terms.total
+    }
+    /// The episode is over (terminated or truncated).
+    pub fn done(&self) -> bool {
+        self.terminated || self.truncated
+    }
+}
+
+/// Number of observation values for an arm with `dof` joints.
+pub fn observation_dim(kind: ObservationKind, dof: usize) -> usize {
+    match kind {
+        ObservationKind::Standard => dof + 10,
+    }
+}
+
+/// The reaching environment.
+#[derive(Clone, Debug)]
+pub struct ReachEnv {
+    chain: Arc<Chain>,
+    task: ResolvedTask,
+    reward: RewardConfig,
+    rng: Rng,
+    q: Vec<f64>,
+    joint_vel: Vec<f64>,
+    scratch: Vec<f64>,
+    ee: Pose,
+    target: Vector3<f64>,
+    steps: u32,
+    done: bool,
+    obs: Vec<f32>,
+}
+
+impl ReachEnv {
+    /// An environment for `chain`, seeded; call [`ReachEnv::reset`] before stepping.
+    pub fn new(chain: Arc<Chain>, task: ResolvedTask, reward: RewardConfig, seed: u64) -> Result<ReachEnv> {
+        reward.validate()?;
+        let n = chain.dof();
+        if task.home_pose.len() != n || task.target_joint_range.len() != n {
+            return Err(Error::InvalidInput(format!(
+                "the task was resolved for {} joints, the arm has {n}",
+                task.home_pose.len()
+            )));
+        }
+        let obs_dim = observation_dim(task.observation, n);
+        let q = task.home_pose.clone();
+        let ee = chain.fk(&q);
+        let mut env = ReachEnv {
+            chain,
+            rng: Rng::new(seed),
+            joint_vel: vec![0.0; n],
+            scratch: vec![0.0; n],
+            ee,
+            target: ee.position,
+            steps: 0,
+            done: true,
+            obs: vec![0.0; obs_dim],
+            q,
+            task,
+            reward,
+        };
+        env.write_observation();
+        Ok(env)
+    }
+
+    /// Build the arm, resolve the task and create the environment from a whole config.
+    pub fn from_config(cfg: &Config, seed: u64) -> Result<ReachEnv> {
+        cfg.validate()?;
+        let chain = Arc::new(cfg.robot.load()?);
+        let task = cfg.task.resolve(&chain)?;
+        ReachEnv::new(chain, task, cfg.reward.clone(), seed)
+    }
+
+    /// Start a new episode: home pose, new target from the environment's random stream.
+    pub fn reset(&mut self) -> &[f32] {
+        self.q.copy_from_slice(&self.task.home_pose);
+        self.target = self.task.sample_target(&self.chain, &mut self.rng, &mut self.scratch);
+        self.begin_episode()
+    }
+
+    /// Reseed the random stream, then [`ReachEnv::reset`].
+    pub fn reset_with_seed(&mut self, seed: u64) -> &[f32] {
+        self.rng = Rng::new(seed);
+        self.reset()
+    }
+
+    /// Start a new episode at the home pose with a given target (metres, base frame).
+    pub fn reset_to_target(&mut self, target: Vector3<f64>) -> Result<&[f32]> {
+        if !target.iter().all(|x| x.is_finite()) {
+            return Err(Error::InvalidInput(format!("target {target:?} is not finite")));
+        }
+        self.q.copy_from_slice(&self.task.home_pose);
+        self.target = target;
+        Ok(self.begin_episode())
+    }
+
+    fn begin_episode(&mut self) -> &[f32] {
+        self.joint_vel.fill(0.0);
+        self.ee = self.chain.fk(&self.q);
+        self.steps = 0;
+        self.done = false;
+        self.write_observation();
+        &self.obs
+    }
+
+    /// Apply one action (one value per joint, nominally in [-1, 1]; clipped).
+    ///
+    /// Errors: a wrong length, a NaN or infinite value, or a step after the episode ended.
+    pub fn step(&mut self, action: &[f32]) -> Result<Step> {
+        let n = self.q.len();
+        if action.len() != n {
+            return Err(Error::InvalidInput(format!(
+                "action has {} values, the arm has {n} joints",
+                action.len()
+            )));
+        }
+        if let Some(i) = action.iter().position(|a| !a.is_finite()) {
+            return Err(Error::InvalidInput(format!("action[{i}] = {} is not finite", action[i])));
+        }
+        if self.done {
+            return Err(Error::InvalidInput("the episode is over: call reset() before step()".into()));
+        }
+        let dt = self.task.dt_s;
+        let (lo, hi, vmax) =
+            (self.chain.lower_limits(), self.chain.upper_limits(), self.chain.velocity_limits());
+        let prev_ee = self.ee.position;
+        for i in 0..n {
+            let command = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
+            let q_old = self.q[i];
+            let q_new = (q_old + command * dt).clamp(lo[i], hi[i]);
+            self.joint_vel[i] = (q_new - q_old) / dt;
+            self.q[i] = q_new;
+        }
+        self.ee = self.chain.fk(&self.q);
+        self.steps += 1;
+        let terms = RewardTerms::compute(
+            &self.reward,
+            dt,
+            &RewardInput {
+                ee_pos: self.ee.position,
+                ee_quat: self.ee.quaternion_xyzw(),
+                target: self.target,
+                joint_vel: &self.joint_vel,
+                prev_ee_pos: Some(prev_ee),
+            },
+        );
+        let terminated = terms.reached;
+        let truncated = !terminated && self.steps >= self.task.max_steps;
+        self.done = terminated || truncated;
+        self.write_observation();
+        Ok(Step { terms, terminated, truncated })
+    }
+
+    fn write_observation(&mut self) {
+        match self.task.observation {
+            ObservationKind::Standard => {
+                let n = self.q.len();
+                let (p, t) = (self.ee.position, self.target);
+                let d = t - p;
+                let obs = &mut self.obs;
+                for (o, q) in obs.iter_mut().zip(&self.q) {
+                    *o = (q / PI) as f32;
+                }
+                for k in 0..3 {
+                    obs[n + k] = p[k] as f32;
+                    obs[n + 3 + k] = t[k] as f32;
+                    obs[n + 6 + k] = d[k] as f32;
+                }
+                obs[n + 9] = d.norm() as f32;
+            }
+        }
+    }
+
+    /// The current observation.
+    pub fn observation(&self) -> &[f32] {
+        &self.obs
+    }
+    /// Observation length.
+    pub fn obs_dim(&self) -> usize {
+        self.obs.len()
+    }
+    /// Action length (the number of joints).
+    pub fn act_dim(&self) -> usize {
+        self.q.len()
+    }
+    /// Joint positions, radians (metres for prismatic joints).
+    pub fn joint_positions(&self) -> &[f64] {
+        &self.q
+    }
+    /// Joint velocities applied in the last step, rad/s.
+    pub fn joint_velocities(&self) -> &[f64] {
+        &self.joint_vel
+    }
+    /// End-effector pose after the last step or reset.
+    pub fn ee_pose(&self) -> &Pose {
+        &self.ee
+    }
+    /// The episode's target, metres.
+    pub fn target(&self) -> Vector3<f64> {
+        self.target
+    }
+    /// D_PT now, metres.
+    pub fn distance(&self) -> f64 {
+        (self.target - self.ee.position).norm()
+    }
+    /// Steps taken in this episode.
+    pub fn steps(&self) -> u32 {
+        self.steps
+    }
+    /// The episode has ended.
+    pub fn is_done(&self) -> bool {
+        self.done
+    }
+    /// The arm.
+    pub fn chain(&self) -> &Arc<Chain> {
+        &self.chain
+    }
+    /// The resolved task.
+    pub fn task(&self) -> &ResolvedTask {
+        &self.task
+    }
+    /// The reward settings.
+    pub fn reward_config(&self) -> &RewardConfig {
+        &self.reward
+    }
+    /// The random generator's state (for checkpoints).
+    pub fn rng(&self) -> &Rng {
+        &self.rng
+    }
+    /// Replace the random generator's state (when resuming).
+    pub fn set_rng(&mut self, rng: Rng) {
+        self.rng = rng;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reward::RewardFunction;
+
+    fn env(seed: u64) -> ReachEnv {
+        ReachEnv::from_config(&Config::default(), seed).unwrap()
+    }
+
+    #[test]
+    fn reset_starts_at_home_with_a_target_above_the_floor() {
+        let mut e = env(1);
+        let mut dists = Vec::new();
+        for _ in 0..300 {
+            e.reset();
+            assert_eq!(e.joint_positions(), &crate::config::UR5_HOME_POSE_RAD);
+            assert!(e.target().z > 0.05);
+            dists.push(e.distance());
+        }
+        let mean = dists.iter().sum::<f64>() / dists.len() as f64;
+        // Design notes: the mean start distance is about 0.44 m, so both HAR stages occur.
+        assert!((0.35..0.55).contains(&mean), "mean start distance {mean}");
+        assert!(dists.iter().any(|&d| d > 0.5) && dists.iter().any(|&d| d < 0.5));
+    }
+
+    #[test]
+    fn observation_layout() {
+        let mut e = env(2);
+        e.reset();
+        let o = e.observation().to_vec();
+        assert_eq!(o.len(), 16);
+        let (p, t) = (e.ee_pose().position, e.target());
+        for k in 0..6 {
+            assert_eq!(o[k], (e.joint_positions()[k] / PI) as f32);
+        }
+        for k in 0..3 {
+            assert_eq!(o[6 + k], p[k] as f32);
+            assert_eq!(o[9 + k], t[k] as f32);
+            assert_eq!(o[12 + k], (t[k] - p[k]) as f32);
+        }
+        assert_eq!(o[15], e.distance() as f32);
+    }
+
+    #[test]
+    fn action_is_clipped_scaled_and_applied_velocity_is_reported() {
+        let mut e = env(3);
+        e.reset();
+        let q0 = e.joint_positions().to_vec();
+        let s = e.step(&[5.0, -5.0, 0.5, 0.0, 0.0, -0.25]).unwrap();
+        let q1 = e.joint_positions();
+        let dt = 0.05;
+        let expect = [PI, -PI, 0.5 * PI, 0.0, 0.0, -0.25 * PI];
+        for i in 0..6 {
+            assert!((q1[i] - (q0[i] + expect[i] * dt)).abs() < 1e-12, "joint {i}");
+            assert!((e.joint_velocities()[i] - expect[i]).abs() < 1e-9, "joint {i}");
+        }
+        // The movement term sees the applied velocity (eq. 9).
+        let vv: f64 = expect.iter().map(|v| v * v).sum();
+        assert!((s.terms.movement - dt * vv / 6.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn joint_limits_clamp_and_the_reported_velocity_follows() {
+        let mut e = env(4);
+        e.reset();
+        // The elbow starts at pi/2 with limit pi: 20 full-speed steps would go to 3.5 pi/2.
+        for _ in 0..20 {
+            if e.step(&[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]).unwrap().done() {
+                break;
+            }
+        }
+        assert!(e.joint_positions()[2] <= PI);
+        assert!((e.joint_positions()[2] - PI).abs() < 1e-12);
+        // Once clamped, the applied velocity is zero.
+        assert!(e.joint_velocities()[2].abs() < 1e-9);
+    }
+
+    #[test]
+    fn truncates_at_max_steps_and_refuses_to_step_after() {
+        let mut e = env(5);
+        e.reset();
+        let mut last = None;
+        for k in 1..=50 {
+            let s = e.step(&[0.0; 6]).unwrap();
+            assert!(!s.terminated);
+            assert_eq!(s.truncated, k == 50);
+            last = Some(s);
+        }
+        assert!(last.unwrap().truncated);
+        let err = e.step(&[0.0; 6]).unwrap_err().to_string();
+        assert!(err.contains("reset"), "{err}");
+    }
+
+    #[test]
+    fn bad_actions_are_errors_not_clamps() {
+        let mut e = env(6);
+        e.reset();
+        assert!(e.step(&[0.0; 5]).unwrap_err().to_string().contains("6 joints"));
+        let err = e.step(&[0.0, f32::NAN, 0.0, 0.0, 0.0, 0.0]).unwrap_err().to_string();
+        assert!(err.contains("action[1]"), "{err}");
+        let err = e.step(&[0.0, 0.0, 0.0, f32::INFINITY, 0.0, 0.0]).unwrap_err().to_string();
+        assert!(err.contains("action[3]"), "{err}");
+        // The failed calls did not advance the episode.
+        assert_eq!(e.steps(), 0);
+    }
+
+    #[test]
+    fn success_terminates_with_the_bonus() {
+        let mut e = env(7);
+        e.reset();
+        // Put the target where one known action will take the end-effector.
+        let mut probe = e.clone();
+        probe.step(&[0.3, -0.2, 0.1, 0.0, 0.4, 0.0]).unwrap();
+        let reached_at = probe.ee_pose().position + Vector3::new(0.004, 0.0, 0.0);
+        e.reset_to_target(reached_at).unwrap();
+        let s = e.step(&[0.3, -0.2, 0.1, 0.0, 0.4, 0.0]).unwrap();
+        assert!(s.terminated && !s.truncated);
+        assert!((s.terms.distance - 0.004).abs() < 1e-12);
+        assert_eq!(s.terms.bonus, 20.0);
+        assert_eq!(s.total(), s.terms.reward + 20.0);
+        assert!(e.is_done());
+    }
+
+    #[test]
+    fn same_seed_same_episodes() {
+        let run = |seed| {
+            let mut e = env(seed);
+            let mut rng = Rng::new(99);
+            let mut out = Vec::new();
+            for _ in 0..5 {
+                e.reset();
+                out.push(e.target());
+                loop {
+                    let a: Vec<f32> = (0..6).map(|_| rng.uniform_range(-1.0, 1.0) as f32).collect();
+                    let s = e.step(&a).unwrap();
+                    out.push(Vector3::new(s.total(), s.terms.distance, 0.0));
+                    if s.done() {
+                        break;
+                    }
+                }
+            }
+            out
+        };
+        assert_eq!(run(11), run(11));
+        assert_ne!(run(11), run(12));
+    }
+
+    #[test]
+    fn reward_function_selects_the_reward() {
+        for f in RewardFunction::ALL {
+            let cfg = Config {
+                reward: RewardConfig { function: f, ..RewardConfig::default() },
+                ..Config::default()
+            };
+            let mut e = ReachEnv::from_config(&cfg, 8).unwrap();
+            e.reset();
+            let s = e.step(&[0.1; 6]).unwrap();
+            let t = s.terms;
+            let expect = match f {
+                RewardFunction::Basic => t.basic,
+                RewardFunction::Posture => t.posture,
+                RewardFunction::Stride => t.stride,
+                RewardFunction::Har => t.har,
+                RewardFunction::Sar => t.sar,
+            };
+            assert_eq!(t.reward, expect, "{f}");
+        }
+    }
+}

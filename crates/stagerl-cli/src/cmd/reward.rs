@@ -1,0 +1,82 @@
+use anyhow::Result;
+use serde::{Deserialize, Serialize};
+use stagerl::nalgebra::Vector3 as Vec3;
+use stagerl::reward::{RewardFunction, RewardInput, RewardTerms};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The reward whose value goes in `reward` (overrides the config's reward.function).
+    #[arg(long)]
+    function: RewardFunction,
+    /// A TOML config for the constants (beta, dt, boundary, sigmas, bonus); defaults otherwise.
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Input {
+    ee_pos: [f64; 3],
+    ee_quat: [f64; 4],
+    target: [f64; 3],
+    joint_vel: Vec<f64>,
+    /// Only for `reward.direction = "displacement"`: the end-effector position before the step.
+    #[serde(default)]
+    prev_ee_pos: Option<[f64; 3]>,
+}
+
+#[derive(Serialize)]
+struct Output {
+    distance: f64,
+    reached: bool,
+    position: f64,
+    direction: f64,
+    posture: f64,
+    #[serde(rename = "move")]
+    movement: f64,
+    stride: f64,
+    alpha1: f64,
+    alpha2: f64,
+    reward: f64,
+    bonus: f64,
+    total: f64,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mut cfg = super::load_config(args.config.as_deref())?;
+    cfg.reward.function = args.function;
+    let dt = cfg.task.dt_s;
+    let stdin = std::io::stdin().lock();
+    let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+    crate::jsonl::process(stdin, stdout, |i: Input| {
+        let input = RewardInput {
+            ee_pos: Vec3::from(i.ee_pos),
+            ee_quat: i.ee_quat,
+            target: Vec3::from(i.target),
+            joint_vel: &i.joint_vel,
+            prev_ee_pos: i.prev_ee_pos.map(Vec3::from),
+        };
+        input.validate()?;
+        if cfg.reward.direction == stagerl::reward::DirectionSource::Displacement
+            && input.prev_ee_pos.is_none()
+        {
+            anyhow::bail!("reward.direction = \"displacement\" needs the key `prev_ee_pos`");
+        }
+        let t = RewardTerms::compute(&cfg.reward, dt, &input);
+        Ok(Output {
+            distance: t.distance,
+            reached: t.reached,
+            position: t.position,
+            direction: t.direction,
+            posture: t.posture,
+            movement: t.movement,
+            stride: t.stride,
+            alpha1: t.alpha1,
+            alpha2: t.alpha2,
+            reward: t.reward,
+            bonus: t.bonus,
+            total: t.total,
+        })
+    })
+}

@@ -1,0 +1,228 @@
+//! End-to-end tests of the `stagerl` binary's fixed interfaces.
+
+use serde_json::Value;
+use std::io::Write;
+use std::process::{Command, Output, Stdio};
+
+fn stagerl(args: &[&str], stdin: &str) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn stagerl");
+    child.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
+    child.wait_with_output().unwrap()
+}
+
+fn lines(out: &Output) -> Vec<Value> {
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{l:?}: {e}")))
+        .collect()
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("{v} is not a number"))
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn fk_ur5_zero_pose_matches_dh() {
+    let out = stagerl(&["fk"], "{\"joints\":[0,0,0,0,0,0]}\n\n{\"joints\":[0,-1.5707963267948966,1.5707963267948966,-1.5707963267948966,-1.5707963267948966,0]}\n");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v = lines(&out);
+    assert_eq!(v.len(), 2, "one output line per input line, blank lines skipped");
+    let obj = v[0].as_object().unwrap();
+    assert_eq!(obj.keys().collect::<Vec<_>>(), ["position", "quaternion"]);
+    // Standard DH at q = 0: x = a2 + a3, y = -(d4 + d6), z = d1 - d5; R = Rx(pi/2).
+    let p: Vec<f64> = v[0]["position"].as_array().unwrap().iter().map(f).collect();
+    for (got, want) in p.iter().zip([-0.81725, -0.19145, -0.005491]) {
+        assert!((got - want).abs() < 1e-12, "{p:?}");
+    }
+    let q: Vec<f64> = v[0]["quaternion"].as_array().unwrap().iter().map(f).collect();
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    for (got, want) in q.iter().zip([h, 0.0, 0.0, h]) {
+        assert!((got - want).abs() < 1e-12, "{q:?}");
+    }
+    // Home pose: (-0.4869, -0.10915, 0.431859).
+    let p: Vec<f64> = v[1]["position"].as_array().unwrap().iter().map(f).collect();
+    for (got, want) in p.iter().zip([-0.4869, -0.10915, 0.431859]) {
+        assert!((got - want).abs() < 1e-12, "{p:?}");
+    }
+}
+
+#[test]
+fn fk_accepts_a_urdf_path_and_tip() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-fk-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("two.urdf");
+    std::fs::write(
+        &path,
+        r#"<robot name="two">
+  <link name="base"/><link name="l1"/><link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="prismatic"><parent link="l1"/><child link="tip"/>
+    <origin xyz="0.5 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.3" effort="1" velocity="0.2"/></joint>
+</robot>"#,
+    )
+    .unwrap();
+    let out = stagerl(
+        &["fk", "--robot", path.to_str().unwrap(), "--tip", "tip"],
+        "{\"joints\":[1.5707963267948966, 0.1]}\n",
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v = lines(&out);
+    let p: Vec<f64> = v[0]["position"].as_array().unwrap().iter().map(f).collect();
+    assert!(p[0].abs() < 1e-12 && (p[1] - 0.6).abs() < 1e-12 && p[2].abs() < 1e-12, "{p:?}");
+    let out = stagerl(&["fk", "--robot", path.to_str().unwrap(), "--tip", "nope"], "");
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("nope"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn fk_malformed_lines_report_their_number() {
+    let cases = [
+        ("{\"joints\":[0,0,0,0,0,0]}\n{\"joints\":[0,0,0]}\n", "line 2", "6"),
+        ("{\"joints\":[0,0,0,0,0,0]}\n\n{\"joint\":[0,0,0,0,0,0]}\n", "line 3", "joint"),
+        ("not json\n", "line 1", "malformed"),
+        ("{\"joints\":[0,0,0,0,0,\"x\"]}\n", "line 1", "malformed"),
+        ("{\"joints\":[0,0,0,0,0,1e999]}\n", "line 1", ""),
+    ];
+    for (input, where_, what) in cases {
+        let out = stagerl(&["fk"], input);
+        assert!(!out.status.success(), "{input:?} should fail");
+        let err = stderr(&out);
+        assert!(err.contains(where_) && err.contains(what), "{input:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let out = stagerl(&["fk", "--robot", "/no/such.urdf"], "");
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("/no/such.urdf"));
+}
+
+const REWARD_KEYS: [&str; 12] = [
+    "distance",
+    "reached",
+    "position",
+    "direction",
+    "posture",
+    "move",
+    "stride",
+    "alpha1",
+    "alpha2",
+    "reward",
+    "bonus",
+    "total",
+];
+
+#[test]
+fn reward_lines_hand_computed() {
+    // Axis +z, target 0.3 m along +x: phi = pi/2 -> direction 1/4. V = 1 rad/s each -> move 0.05.
+    let (s, c) = (0.5f64.sin(), 0.5f64.cos());
+    let line = format!(
+        "{{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,{s},{c}],\"target\":[0.3,0,0],\"joint_vel\":[1,1,1,1,1,1]}}\n"
+    );
+    let expect = [
+        ("basic", 0.0),
+        ("posture", -0.3 - 0.25),
+        ("stride", -0.3 - 0.05),
+        ("har", -0.3 - 0.05),
+        ("sar", 0.7 * -0.35 + 0.3 * -0.55),
+    ];
+    for (function, want) in expect {
+        let out = stagerl(&["reward", "--function", function], &line);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let v = lines(&out);
+        let obj = v[0].as_object().unwrap();
+        assert_eq!(obj.keys().map(String::as_str).collect::<Vec<_>>(), REWARD_KEYS);
+        assert!((f(&v[0]["reward"]) - want).abs() < 1e-12, "{function}: {}", v[0]);
+        assert!((f(&v[0]["total"]) - want).abs() < 1e-12);
+        assert_eq!(v[0]["reached"], Value::Bool(false));
+        assert!((f(&v[0]["direction"]) - 0.25).abs() < 1e-12);
+        assert!((f(&v[0]["move"]) - 0.05).abs() < 1e-12);
+        assert!((f(&v[0]["alpha1"]) - 0.7).abs() < 1e-12);
+    }
+    // Reached: bonus 20, total = reward + bonus.
+    let out = stagerl(
+        &["reward", "--function", "stride"],
+        "{\"ee_pos\":[0.1,0.2,0.3],\"ee_quat\":[0,0,0,1],\"target\":[0.1,0.2,0.305],\"joint_vel\":[0,0,0,0,0,0]}\n",
+    );
+    let v = lines(&out);
+    assert_eq!(v[0]["reached"], Value::Bool(true));
+    assert_eq!(f(&v[0]["bonus"]), 20.0);
+    assert!((f(&v[0]["total"]) - (1.0 - 0.005 + 20.0)).abs() < 1e-12);
+}
+
+#[test]
+fn reward_uses_the_config_constants() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-reward-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("c.toml");
+    std::fs::write(&cfg, "[task]\ndt_s = 0.1\n[reward]\nbeta_m = 0.05\nsuccess_bonus = 5\n").unwrap();
+    let out = stagerl(
+        &["reward", "--function", "stride", "--config", cfg.to_str().unwrap()],
+        "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.04,0,0],\"joint_vel\":[2,0,0,0,0,0]}\n",
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v = lines(&out);
+    assert_eq!(v[0]["reached"], Value::Bool(true));
+    assert_eq!(f(&v[0]["bonus"]), 5.0);
+    assert!((f(&v[0]["move"]) - 0.1 * 4.0 / 6.0).abs() < 1e-12);
+    std::fs::write(&cfg, "[reward]\nbeta_m = -1\n").unwrap();
+    let out = stagerl(&["reward", "--function", "sar", "--config", cfg.to_str().unwrap()], "");
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("reward.beta_m"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn reward_malformed_lines_report_their_number() {
+    let good =
+        "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n";
+    let cases = [
+        (format!("{good}{{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0]}}\n"), "line 2", "joint_vel"),
+        (format!("{good}{good}{{\"ee_pos\":[0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0]}}\n"), "line 3", "malformed"),
+        ("{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0.3,0,0],\"joint_vel\":[0]}\n".to_string(), "line 1", "norm"),
+        ("{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[]}\n".to_string(), "line 1", "joint_vel"),
+        ("[1,2,3]\n".to_string(), "line 1", "malformed"),
+    ];
+    for (input, where_, what) in &cases {
+        let out = stagerl(&["reward", "--function", "sar"], input);
+        assert!(!out.status.success(), "{input:?} should fail");
+        let err = stderr(&out);
+        assert!(err.contains(where_) && err.contains(what), "{input:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    // The lines before the bad one were answered.
+    let out = stagerl(&["reward", "--function", "sar"], &cases[1].0);
+    assert_eq!(lines(&out).len(), 2);
+    // Unknown reward function: clap error listing what is allowed.
+    let out = stagerl(&["reward", "--function", "sparse"], "");
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("basic, posture, stride, har, sar"), "{}", stderr(&out));
+}
+
+#[test]
+fn demo_runs_and_reaches() {
+    let out = stagerl(&["demo", "--trials", "50", "--seed", "3"], "");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("reached after"), "{text}");
+    assert!(text.contains("success 100.0 %"), "{text}");
+}
+
+#[test]
+fn bench_env_prints_a_json_line() {
+    let out = stagerl(&["bench", "env", "--steps", "20000"], "");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let last = String::from_utf8_lossy(&out.stdout).lines().last().unwrap().to_string();
+    let v: Value = serde_json::from_str(&last).unwrap();
+    assert!(f(&v["steps_per_sec"]) > 0.0);
+}
