@@ -17,11 +17,15 @@
 //!
 //! Units: metres, radians, seconds; quaternions are `(x, y, z, w)` on every interface.
 
+pub mod checkpoint;
 pub mod config;
 pub mod controller;
 pub mod env;
 pub mod error;
+pub mod io;
+pub mod log;
 pub mod nn;
+pub mod replay;
 pub mod reward;
 pub mod rng;
 pub mod robot;

@@ -1,0 +1,230 @@
+//! TensorBoard event files, written directly.
+//!
+//! The format is TFRecord: each record is `len: u64 LE`, `masked_crc32c(len bytes): u32 LE`,
+//! `data`, `masked_crc32c(data): u32 LE`, where `data` is a serialised `tensorflow.Event`
+//! protobuf. We encode the few fields we need by hand: `wall_time` (1, double), `step` (2, int64),
+//! `file_version` (3, string) and `summary` (5) holding `Summary.Value { tag (1), simple_value
+//! (2, float) }`.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use crate::{Error, Result};
+
+/// The CRC mask TFRecord applies: rotate right by 15 and add a constant.
+pub fn masked_crc32c(data: &[u8]) -> u32 {
+    let crc = crc32c::crc32c(data);
+    crc.rotate_right(15).wrapping_add(0xa282_ead8)
+}
+
+fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+fn put_len_delimited(out: &mut Vec<u8>, field: u32, bytes: &[u8]) {
+    put_varint(out, u64::from(field << 3 | 2));
+    put_varint(out, bytes.len() as u64);
+    out.extend_from_slice(bytes);
+}
+
+/// Encode an `Event` with a wall time, step, and either a file version or one scalar.
+fn encode_event(
+    wall_time: f64,
+    step: i64,
+    file_version: Option<&str>,
+    scalar: Option<(&str, f32)>,
+) -> Vec<u8> {
+    let mut ev = Vec::with_capacity(64);
+    ev.push(1 << 3 | 1); // wall_time, fixed64
+    ev.extend_from_slice(&wall_time.to_le_bytes());
+    ev.push(2 << 3); // step, varint
+    put_varint(&mut ev, step as u64);
+    if let Some(v) = file_version {
+        put_len_delimited(&mut ev, 3, v.as_bytes());
+    }
+    if let Some((tag, value)) = scalar {
+        let mut val = Vec::with_capacity(tag.len() + 8);
+        put_len_delimited(&mut val, 1, tag.as_bytes());
+        val.push(2 << 3 | 5); // simple_value, fixed32
+        val.extend_from_slice(&value.to_le_bytes());
+        let mut summary = Vec::with_capacity(val.len() + 4);
+        put_len_delimited(&mut summary, 1, &val);
+        put_len_delimited(&mut ev, 5, &summary);
+    }
+    ev
+}
+
+/// Frame `data` as one TFRecord.
+fn frame(data: &[u8]) -> Vec<u8> {
+    let len = (data.len() as u64).to_le_bytes();
+    let mut rec = Vec::with_capacity(data.len() + 16);
+    rec.extend_from_slice(&len);
+    rec.extend_from_slice(&masked_crc32c(&len).to_le_bytes());
+    rec.extend_from_slice(data);
+    rec.extend_from_slice(&masked_crc32c(data).to_le_bytes());
+    rec
+}
+
+/// Writes scalars to `events.out.tfevents.<unix seconds>.<host>.<pid>` in a directory.
+pub struct EventWriter {
+    out: BufWriter<File>,
+    path: PathBuf,
+}
+
+fn now() -> f64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0)
+}
+
+impl EventWriter {
+    /// A new event file in `dir` (which must exist).
+    pub fn create(dir: &Path) -> Result<EventWriter> {
+        let host = std::fs::read_to_string("/etc/hostname")
+            .ok()
+            .map(|h| h.trim().to_string())
+            .filter(|h| !h.is_empty())
+            .unwrap_or_else(|| "localhost".into());
+        let wall = now();
+        let path = dir.join(format!("events.out.tfevents.{}.{host}.{}", wall as u64, std::process::id()));
+        let file = File::create(&path).map_err(|e| Error::io(&path, e))?;
+        let mut w = EventWriter { out: BufWriter::new(file), path };
+        w.write_record(&encode_event(wall, 0, Some("brain.Event:2"), None))?;
+        Ok(w)
+    }
+
+    fn write_record(&mut self, data: &[u8]) -> Result<()> {
+        self.out.write_all(&frame(data)).map_err(|e| Error::io(&self.path, e))
+    }
+
+    /// Record `value` under `tag` at `step`.
+    pub fn scalar(&mut self, tag: &str, step: i64, value: f64) -> Result<()> {
+        self.write_record(&encode_event(now(), step, None, Some((tag, value as f32))))
+    }
+
+    /// Push buffered records to the file.
+    pub fn flush(&mut self) -> Result<()> {
+        self.out.flush().map_err(|e| Error::io(&self.path, e))
+    }
+
+    /// The event file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// Read back the scalars of an event file as `(tag, step, value)`, checking every CRC. Used by the
+/// tests and by tools that summarise runs.
+pub fn read_scalars(path: &Path) -> Result<Vec<(String, i64, f32)>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bad = |what: &str| Error::InvalidInput(format!("{}: {what}", path.display()));
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < bytes.len() {
+        if i + 12 > bytes.len() {
+            return Err(bad("truncated record header"));
+        }
+        let len_bytes = &bytes[i..i + 8];
+        let len = u64::from_le_bytes(len_bytes.try_into().unwrap()) as usize;
+        let crc = u32::from_le_bytes(bytes[i + 8..i + 12].try_into().unwrap());
+        if crc != masked_crc32c(len_bytes) {
+            return Err(bad("length CRC mismatch"));
+        }
+        let start = i + 12;
+        if start + len + 4 > bytes.len() {
+            return Err(bad("truncated record"));
+        }
+        let data = &bytes[start..start + len];
+        let crc = u32::from_le_bytes(bytes[start + len..start + len + 4].try_into().unwrap());
+        if crc != masked_crc32c(data) {
+            return Err(bad("data CRC mismatch"));
+        }
+        if let Some(s) = decode_scalar(data) {
+            out.push(s);
+        }
+        i = start + len + 4;
+    }
+    Ok(out)
+}
+
+fn get_varint(d: &[u8], i: &mut usize) -> Option<u64> {
+    let mut v = 0u64;
+    for shift in (0..64).step_by(7) {
+        let b = *d.get(*i)?;
+        *i += 1;
+        v |= u64::from(b & 0x7f) << shift;
+        if b < 0x80 {
+            return Some(v);
+        }
+    }
+    None
+}
+
+/// Decode the fields this module writes; `None` for events without a scalar.
+fn decode_scalar(d: &[u8]) -> Option<(String, i64, f32)> {
+    let (mut i, mut step, mut result) = (0, 0i64, None);
+    while i < d.len() {
+        let key = get_varint(d, &mut i)?;
+        match (key >> 3, key & 7) {
+            (1, 1) => i += 8,
+            (2, 0) => step = get_varint(d, &mut i)? as i64,
+            (_, 2) => {
+                let len = get_varint(d, &mut i)? as usize;
+                let body = d.get(i..i + len)?;
+                if key >> 3 == 5 {
+                    // Summary { value: Value { tag, simple_value } }
+                    let mut j = 0;
+                    get_varint(body, &mut j)?;
+                    let vlen = get_varint(body, &mut j)? as usize;
+                    let val = body.get(j..j + vlen)?;
+                    let mut k = 0;
+                    get_varint(val, &mut k)?;
+                    let tlen = get_varint(val, &mut k)? as usize;
+                    let tag = String::from_utf8(val.get(k..k + tlen)?.to_vec()).ok()?;
+                    k += tlen;
+                    get_varint(val, &mut k)?;
+                    let v = f32::from_le_bytes(val.get(k..k + 4)?.try_into().ok()?);
+                    result = Some((tag, v));
+                }
+                i += len;
+            }
+            _ => return None,
+        }
+    }
+    result.map(|(tag, v)| (tag, step, v))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32c_known_vector() {
+        // The standard check value of CRC-32C.
+        assert_eq!(crc32c::crc32c(b"123456789"), 0xE306_9283);
+        assert_eq!(masked_crc32c(b""), 0u32.rotate_right(15).wrapping_add(0xa282_ead8));
+    }
+
+    #[test]
+    fn write_then_read_back() {
+        let dir = std::env::temp_dir().join(format!("stagerl-tb-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut w = EventWriter::create(&dir).unwrap();
+        w.scalar("train/episode_reward", 1, 12.5).unwrap();
+        w.scalar("loss/critic", 300, -0.25).unwrap();
+        w.flush().unwrap();
+        let got = read_scalars(w.path()).unwrap();
+        assert_eq!(got, vec![("train/episode_reward".into(), 1, 12.5), ("loss/critic".into(), 300, -0.25)]);
+        // A flipped byte is caught by the CRC.
+        let mut bytes = std::fs::read(w.path()).unwrap();
+        let n = bytes.len();
+        bytes[n - 6] ^= 1;
+        std::fs::write(w.path(), &bytes).unwrap();
+        assert!(read_scalars(w.path()).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
