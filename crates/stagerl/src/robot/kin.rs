@@ -87,12 +87,44 @@ pub(crate) struct Step {
     pub after: Tf,
 }
 
+/// Two lanes, the unit of the hot loops (one SSE2 register on x86-64).
+type V2 = [f64; 2];
+
+#[inline(always)]
+fn splat(v: f64) -> V2 {
+    [v, v]
+}
+#[inline(always)]
+fn vadd(a: V2, b: V2) -> V2 {
+    [a[0] + b[0], a[1] + b[1]]
+}
+#[inline(always)]
+fn vsub(a: V2, b: V2) -> V2 {
+    [a[0] - b[0], a[1] - b[1]]
+}
+#[inline(always)]
+fn vmul(a: V2, b: V2) -> V2 {
+    [a[0] * b[0], a[1] * b[1]]
+}
+
+/// A 3x4 transform by columns for the hot loops: `cols[c] = [[m0c, m1c], [m2c, 0]]`. The lanes
+/// are rows, so every operation is lane-wise and needs no shuffles.
+type Cols = [[V2; 2]; 4];
+
+/// [`Step`] in hot-loop form: each constant element broadcast to both lanes.
+#[derive(Clone, Debug)]
+struct LaneStep {
+    prismatic: bool,
+    /// `after[4 * r + c]` is element `(r, c)` of [`Step::after`], in both lanes.
+    after: [V2; 12],
+}
+
 /// A chain compiled to `base * Z(q_1) * after_1 * ... * Z(q_n) * after_n`.
 #[derive(Clone, Debug)]
 pub(crate) struct Kinematics {
     /// From the root link to the first joint's z-aligned frame.
-    pub base: Tf,
-    pub steps: Vec<Step>,
+    base: Cols,
+    steps: Vec<LaneStep>,
 }
 
 // fdlibm's minimax kernels for sin and cos on [-pi/4, pi/4] (Sun Microsystems, freely usable;
@@ -121,16 +153,23 @@ const FAST_SIN_COS_MAX: f64 = 1.0e5;
 
 /// `(sin x, cos x)` sharing one argument reduction: Cody-Waite reduction by pi/2 (two-part
 /// constant; the reduced argument's absolute error is below `|x| * 2e-21` for `|x| <= 1e5`), the
-/// fdlibm kernels, and a branch-free quadrant fix-up. Within 2 ulp of `f64::sin_cos`; about three
-/// times faster than it on x86-64.
+/// fdlibm kernels, and a branch-free quadrant fix-up. Within 2 ulp of `f64::sin_cos`.
 #[inline(always)]
 pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
     // `!(a <= b)` is also true for NaN.
     if !(x.abs() <= FAST_SIN_COS_MAX) {
-        return x.sin_cos();
+        return sin_cos_std(x);
     }
-    let nf = (x * INV_PIO2 + TO_INT) - TO_INT;
-    let n = nf as i64 as u64;
+    sin_cos_kernel(x)
+}
+
+/// [`sin_cos`] for `|x| <= FAST_SIN_COS_MAX`, without a branch (so loops of it vectorise).
+#[inline(always)]
+fn sin_cos_kernel(x: f64) -> (f64, f64) {
+    // big = 1.5 * 2^52 + n with n = round(2x / pi): n's low bits are big's low mantissa bits.
+    let big = x * INV_PIO2 + TO_INT;
+    let n = big.to_bits();
+    let nf = big - TO_INT;
     let r = (x - nf * PIO2_1) - nf * PIO2_1T;
     let z = r * r;
     let w = z * z;
@@ -141,47 +180,128 @@ pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
     let one_minus_hz = 1.0 - hz;
     let c = one_minus_hz + (((1.0 - one_minus_hz) - hz) + z * pc);
     // Quadrant n mod 4: (s, c), (c, -s), (-s, -c), (-c, s).
-    let (a, b) = if n & 1 != 0 { (c, s) } else { (s, c) };
-    let sin = f64::from_bits(a.to_bits() ^ ((n & 2) << 62));
-    let cos = f64::from_bits(b.to_bits() ^ ((n.wrapping_add(1) & 2) << 62));
+    let swap = (n & 1).wrapping_neg();
+    let (sb, cb) = (s.to_bits(), c.to_bits());
+    let a = (sb & !swap) | (cb & swap);
+    let b = (cb & !swap) | (sb & swap);
+    let sin = f64::from_bits(a ^ ((n & 2) << 62));
+    let cos = f64::from_bits(b ^ ((n.wrapping_add(1) & 2) << 62));
     (sin, cos)
 }
 
-/// `m <- m * Rz(q)`: only the first two columns change.
-#[inline(always)]
-fn rotate_z(m: &mut Tf, q: f64) {
-    let (s, c) = sin_cos(q);
-    for r in 0..3 {
-        let x = m[4 * r];
-        let y = m[4 * r + 1];
-        m[4 * r] = c * x + s * y;
-        m[4 * r + 1] = c * y - s * x;
-    }
+/// The rare path of [`sin_cos`], kept out of line so it does not shape the hot loop.
+#[cold]
+#[inline(never)]
+fn sin_cos_std(x: f64) -> (f64, f64) {
+    x.sin_cos()
 }
 
-/// `m <- m * Tz(q)`: the translation moves along the third column.
+/// `m * Z(q) * after`, where `Z(q)` is `Rz(q)` (revolute, `sc = sin_cos(q)`) or `Tz(q)`
+/// (prismatic, `sc` unused), applied to the first two columns (or the translation) on the fly.
 #[inline(always)]
-fn translate_z(m: &mut Tf, q: f64) {
-    for r in 0..3 {
-        m[4 * r + 3] += q * m[4 * r + 2];
+fn advance(m: &Cols, prismatic: bool, q: f64, sc: (f64, f64), k: &[V2; 12]) -> Cols {
+    let [c0, c1, c2, mut t] = *m;
+    let (x, y) = if prismatic {
+        let vq = splat(q);
+        for h in 0..2 {
+            t[h] = vadd(t[h], vmul(vq, c2[h]));
+        }
+        (c0, c1)
+    } else {
+        let (vs, vc) = (splat(sc.0), splat(sc.1));
+        let mut x = [[0.0; 2]; 2];
+        let mut y = [[0.0; 2]; 2];
+        for h in 0..2 {
+            x[h] = vadd(vmul(vc, c0[h]), vmul(vs, c1[h]));
+            y[h] = vsub(vmul(vc, c1[h]), vmul(vs, c0[h]));
+        }
+        (x, y)
+    };
+    let mut o = [[[0.0; 2]; 2]; 4];
+    for (j, oj) in o.iter_mut().enumerate() {
+        for h in 0..2 {
+            oj[h] = vadd(
+                vadd(vmul(x[h], k[j]), vmul(y[h], k[4 + j])),
+                vmul(c2[h], k[8 + j]),
+            );
+        }
     }
+    for h in 0..2 {
+        o[3][h] = vadd(o[3][h], t[h]);
+    }
+    o
+}
+
+/// Joints per pass of the hot loops: the sines and cosines of a chunk are computed first, as
+/// independent work the CPU overlaps, instead of one long latency chain per joint.
+const CHUNK: usize = 8;
+
+/// `sin_cos` of up to [`CHUNK`] values (the rest of the array is `(0, 1)`). Computed for every
+/// joint, prismatic ones included (unused there), in one branch-free loop the compiler vectorises.
+#[inline(always)]
+fn sin_cos_chunk(q: &[f64]) -> [(f64, f64); CHUNK] {
+    let mut x = [0.0; CHUNK];
+    x[..q.len()].copy_from_slice(q);
+    let mut sc = [(0.0, 1.0); CHUNK];
+    if x.iter().all(|v| v.abs() <= FAST_SIN_COS_MAX) {
+        for (o, &xi) in sc.iter_mut().zip(&x) {
+            *o = sin_cos_kernel(xi);
+        }
+    } else {
+        for (o, &xi) in sc.iter_mut().zip(&x) {
+            *o = sin_cos(xi);
+        }
+    }
+    sc
+}
+
+fn to_cols(m: &Tf) -> Cols {
+    let mut c = [[[0.0; 2]; 2]; 4];
+    for (j, cj) in c.iter_mut().enumerate() {
+        *cj = [[m[j], m[4 + j]], [m[8 + j], 0.0]];
+    }
+    c
+}
+
+#[inline(always)]
+fn from_cols(c: &Cols) -> Tf {
+    let mut m = [0.0; 12];
+    for (j, cj) in c.iter().enumerate() {
+        m[j] = cj[0][0];
+        m[4 + j] = cj[0][1];
+        m[8 + j] = cj[1][0];
+    }
+    m
 }
 
 impl Kinematics {
+    /// The chain `base * Z(q_1) * steps[0].after * ... * Z(q_n) * steps[n-1].after`.
+    pub fn new(base: &Tf, steps: &[Step]) -> Self {
+        let steps = steps
+            .iter()
+            .map(|s| LaneStep {
+                prismatic: s.prismatic,
+                after: s.after.map(splat),
+            })
+            .collect();
+        Kinematics {
+            base: to_cols(base),
+            steps,
+        }
+    }
+
     /// The tip transform in the root frame. Joint values past `steps.len()` are ignored; missing
     /// ones leave the remaining joints out (callers check the length).
     #[inline]
     pub fn fk_tf(&self, q: &[f64]) -> Tf {
         let mut m = self.base;
-        for (s, &qi) in self.steps.iter().zip(q) {
-            if s.prismatic {
-                translate_z(&mut m, qi);
-            } else {
-                rotate_z(&mut m, qi);
+        for (steps, q) in self.steps.chunks(CHUNK).zip(q.chunks(CHUNK)) {
+            let sc = sin_cos_chunk(q);
+            for ((s, &qi), &sc) in steps.iter().zip(q).zip(&sc) {
+                m = advance(&m, s.prismatic, qi, sc, &s.after);
             }
-            m = mul(&m, &s.after);
         }
-        m
+        from_cols(&m)
     }
 
     /// Geometric Jacobian, row-major `6 x n` into `jac` (`jac.len() >= 6 n`), and the tip transform.
@@ -191,19 +311,22 @@ impl Kinematics {
         let jac = &mut jac[..6 * n];
         let mut m = self.base;
         // First pass: joint origins p_i into rows 0..3, joint axes z_i into rows 3..6.
+        let mut sc = [(0.0, 1.0); CHUNK];
         for (i, (s, &qi)) in self.steps.iter().zip(q).enumerate() {
-            for r in 0..3 {
-                jac[r * n + i] = m[4 * r + 3];
-                jac[(r + 3) * n + i] = m[4 * r + 2];
+            if i % CHUNK == 0 {
+                sc = sin_cos_chunk(&q[i..q.len().min(i + CHUNK)]);
             }
-            if s.prismatic {
-                translate_z(&mut m, qi);
-            } else {
-                rotate_z(&mut m, qi);
+            let (z, p) = (m[2], m[3]);
+            for (r, (zr, pr)) in [(z[0][0], p[0][0]), (z[0][1], p[0][1]), (z[1][0], p[1][0])]
+                .into_iter()
+                .enumerate()
+            {
+                jac[r * n + i] = pr;
+                jac[(r + 3) * n + i] = zr;
             }
-            m = mul(&m, &s.after);
+            m = advance(&m, s.prismatic, qi, sc[i % CHUNK], &s.after);
         }
-        let tip = [m[3], m[7], m[11]];
+        let tip = [m[3][0][0], m[3][0][1], m[3][1][0]];
         // Second pass: revolute [z x (p_tip - p); z], prismatic [z; 0].
         for (i, s) in self.steps.iter().enumerate() {
             let z = [jac[3 * n + i], jac[4 * n + i], jac[5 * n + i]];
@@ -223,7 +346,7 @@ impl Kinematics {
                 jac[2 * n + i] = z[0] * d[1] - z[1] * d[0];
             }
         }
-        m
+        from_cols(&m)
     }
 }
 

@@ -816,3 +816,66 @@ fn bench_fk_and_jacobian() {
     }
     black_box(acc);
 }
+
+#[test]
+#[ignore]
+fn scratch_components() {
+    use std::hint::black_box;
+    use std::time::Instant;
+    fn min_ns(mut f: impl FnMut(usize) -> f64) -> f64 {
+        let mut best = f64::INFINITY;
+        let mut acc = 0.0;
+        for _ in 0..300 {
+            let t = Instant::now();
+            for i in 0..4096 {
+                acc += f(i);
+            }
+            best = best.min(t.elapsed().as_nanos() as f64 / 4096.0);
+        }
+        black_box(acc);
+        best
+    }
+    let c = Chain::ur5();
+    let mut rng = Rng::new(1);
+    let qs: Vec<Vec<f64>> = (0..1024).map(|_| random_q(&c, &mut rng)).collect();
+    let tfs: Vec<[f64; 12]> = qs.iter().map(|q| c.fk_matrix(q)).collect();
+    for _ in 0..2 {
+        let fk = min_ns(|i| black_box(c.fk(black_box(&qs[i & 1023]))).position.x);
+        let fkm = min_ns(|i| black_box(c.fk_matrix(black_box(&qs[i & 1023])))[3]);
+        let mut jac = [0.0; 36];
+        let j = min_ns(|i| {
+            let p = black_box(c.jacobian(black_box(&qs[i & 1023]), &mut jac));
+            black_box(&mut jac);
+            p.position.x
+        });
+        let sc = min_ns(|i| {
+            black_box(&qs[i & 1023])
+                .iter()
+                .map(|&v| kin::sin_cos(v).0)
+                .sum()
+        });
+        let scs = min_ns(|i| {
+            black_box(&qs[i & 1023])
+                .iter()
+                .map(|&v| v.sin_cos().0)
+                .sum()
+        });
+        let quat = min_ns(|i| black_box(kin::quaternion_wxyz(black_box(&tfs[i & 1023])))[0]);
+        let mul7 = min_ns(|i| {
+            let mut m = tfs[i & 1023];
+            for _ in 0..7 {
+                m = kin::mul(&m, black_box(&tfs[(i + 1) & 1023]));
+            }
+            black_box(m)[3]
+        });
+        let sc1 = min_ns(|i| black_box(kin::sin_cos(black_box(qs[i & 1023][0]))).0);
+        let robot = urdf_rs::read_from_string(UR5_URDF).unwrap();
+        let kc = k::Chain::<f64>::from(&robot);
+        let ks = k::SerialChain::from_end(kc.find_link("tool0").unwrap());
+        let kns = min_ns(|i| {
+            ks.set_joint_positions_unchecked(black_box(&qs[i & 1023]));
+            black_box(ks.end_transform()).translation.vector.x
+        });
+        println!("k {kns:.1} 1 sincos {sc1:.1} fk {fk:.1} fk_matrix {fkm:.1} jac {j:.1} | 6 fast sincos {sc:.1} 6 std sincos {scs:.1} quat {quat:.1} 7 mul {mul7:.1}");
+    }
+}

@@ -266,6 +266,6 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
         joints,
         base_link: root.to_string(),
         tip_link: tip.to_string(),
-        kin: Kinematics { base, steps },
+        kin: Kinematics::new(&base, &steps),
     })
 }
