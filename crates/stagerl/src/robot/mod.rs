@@ -1,12 +1,23 @@
 //! Serial kinematic chains: loaded from URDF, compiled into flat arrays, evaluated by hand.
 //!
-//! INTERFACE STUB: the kinematics helper replaces the bodies; the signatures are what the rest of
-//! the crate codes against.
+//! A URDF is compiled ([`Chain::from_urdf_str`]) into a serial chain from its root link to a tip
+//! link: fixed joints are folded into constant transforms and every actuated joint is rotated so
+//! that it moves about (or along) its local z axis. Forward kinematics ([`Chain::fk`]) and the
+//! geometric Jacobian ([`Chain::jacobian`]) then run on plain `[f64; 12]` transforms without heap
+//! allocation.
+//!
+//! Units: metres and radians (joint values, positions, limits), metres or radians per second
+//! (velocity limits). Poses are expressed in the root (base) link's frame.
 
 use nalgebra::{UnitQuaternion, Vector3};
 use std::path::Path;
 
-use crate::Result;
+use crate::{Error, Result};
+
+mod kin;
+#[cfg(test)]
+mod tests;
+mod urdf;
 
 /// The bundled UR5 URDF (see `assets/robots/ur5.urdf`).
 pub const UR5_URDF: &str = include_str!("../../../../assets/robots/ur5.urdf");
@@ -40,7 +51,9 @@ pub enum JointKind {
 /// One actuated joint and its limits.
 #[derive(Clone, Debug, PartialEq)]
 pub struct JointInfo {
+    /// The URDF joint name.
     pub name: String,
+    /// Rotation or translation.
     pub kind: JointKind,
     /// Lower position limit (rad or m); `-inf` for a continuous joint.
     pub lower: f64,
@@ -59,71 +72,145 @@ pub struct Chain {
     velocity: Vec<f64>,
     base_link: String,
     tip_link: String,
+    kin: kin::Kinematics,
 }
 
 impl Chain {
-    /// The bundled UR5 (tip `tool0`).
+    /// The bundled UR5 (root `base_link`, tip `tool0`, 6 revolute joints).
     pub fn ur5() -> Chain {
-        todo!()
+        Chain::from_urdf_str(UR5_URDF, Some("tool0")).expect("the bundled UR5 URDF compiles")
     }
 
-    /// `"ur5"` for the bundled arm, otherwise a path to a URDF file.
+    /// `"ur5"` for the bundled arm, otherwise a path to a URDF file. `tip` as in
+    /// [`Chain::from_urdf_str`].
     pub fn load(robot: &str, tip: Option<&str>) -> Result<Chain> {
-        let _ = (robot, tip);
-        todo!()
+        if robot == "ur5" {
+            Chain::from_urdf_str(UR5_URDF, tip)
+        } else {
+            Chain::from_urdf_file(Path::new(robot), tip)
+        }
     }
 
     /// Parse a URDF document. `tip`: the tip link; `None` takes the only leaf link.
+    ///
+    /// The chain runs from the single root link to the tip; joints off that path are ignored.
+    /// Errors ([`Error::Urdf`], naming the joint or link at fault): a document that does not parse,
+    /// an unknown tip, several leaves and no tip given, more than one root, a link with no path to
+    /// the root, a joint naming a missing link, a floating/planar/spherical or mimic joint on the
+    /// chain, a revolute or prismatic joint without usable limits (finite `lower < upper`,
+    /// `velocity > 0`), a continuous joint without a positive velocity limit, a non-finite origin
+    /// or axis, a zero axis, or a chain with no actuated joint.
     pub fn from_urdf_str(xml: &str, tip: Option<&str>) -> Result<Chain> {
-        let _ = (xml, tip);
-        todo!()
+        let c = urdf::compile_str(xml, tip)?;
+        Ok(Chain {
+            lower: c.joints.iter().map(|j| j.lower).collect(),
+            upper: c.joints.iter().map(|j| j.upper).collect(),
+            velocity: c.joints.iter().map(|j| j.velocity).collect(),
+            joints: c.joints,
+            base_link: c.base_link,
+            tip_link: c.tip_link,
+            kin: c.kin,
+        })
     }
 
-    /// Read and parse a URDF file.
+    /// Read and parse a URDF file (see [`Chain::from_urdf_str`]); [`Error::Io`] if it cannot be
+    /// read, URDF errors prefixed with the path.
     pub fn from_urdf_file(path: &Path, tip: Option<&str>) -> Result<Chain> {
-        let _ = (path, tip);
-        todo!()
+        let xml = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Chain::from_urdf_str(&xml, tip).map_err(|e| match e {
+            Error::Urdf(m) => Error::Urdf(format!("{}: {m}", path.display())),
+            e => e,
+        })
     }
 
     /// Number of actuated joints.
     pub fn dof(&self) -> usize {
         self.joints.len()
     }
+    /// The actuated joints, root to tip.
     pub fn joints(&self) -> &[JointInfo] {
         &self.joints
     }
+    /// Lower position limits (rad or m), one per joint; `-inf` for continuous joints.
     pub fn lower_limits(&self) -> &[f64] {
         &self.lower
     }
+    /// Upper position limits (rad or m), one per joint; `+inf` for continuous joints.
     pub fn upper_limits(&self) -> &[f64] {
         &self.upper
     }
+    /// Speed limits (rad/s or m/s), one per joint, positive.
     pub fn velocity_limits(&self) -> &[f64] {
         &self.velocity
     }
+    /// The root link: the frame poses are expressed in.
     pub fn base_link(&self) -> &str {
         &self.base_link
     }
+    /// The tip link whose pose [`Chain::fk`] returns.
     pub fn tip_link(&self) -> &str {
         &self.tip_link
     }
 
-    /// Forward kinematics. `q.len()` must equal [`Chain::dof`] (checked in debug builds).
+    /// Forward kinematics: the tip pose in the base frame for joint values `q` (rad or m).
+    ///
+    /// `q.len()` must equal [`Chain::dof`] (checked in debug builds only; in release a longer `q`
+    /// has its extra values ignored and a shorter one gives a meaningless pose, without panicking). Use [`Chain::try_fk`] for untrusted input. No heap allocation.
+    #[inline]
     pub fn fk(&self, q: &[f64]) -> Pose {
-        let _ = q;
-        todo!()
+        debug_assert_eq!(q.len(), self.dof(), "fk: q.len() must equal dof");
+        kin::pose_of(&self.kin.fk_tf(q))
     }
 
-    /// Checked forward kinematics: errors on a wrong length or a non-finite joint value.
+    /// Checked forward kinematics: errors ([`Error::InvalidInput`]) on a wrong length or a
+    /// non-finite joint value.
     pub fn try_fk(&self, q: &[f64]) -> Result<Pose> {
-        let _ = q;
-        todo!()
+        self.check_q(q)?;
+        Ok(self.fk(q))
     }
 
     /// Geometric Jacobian of the tip, row-major 6 x dof into `jac` (rows: vx, vy, vz, wx, wy, wz,
     /// base frame). Returns the tip pose as a by-product.
+    ///
+    /// Column `i` is `[z_i x (p_tip - p_i); z_i]` for a revolute joint (m/rad, 1) and `[z_i; 0]` for
+    /// a prismatic one, with `z_i` the joint axis and `p_i` the joint origin in the base frame.
+    /// `q.len()` must equal [`Chain::dof`] and `jac.len()` must equal `6 * dof` (both checked in
+    /// debug builds only; in release a shorter `jac` panics, a longer one has its tail untouched).
+    /// No heap allocation.
+    #[inline]
     pub fn jacobian(&self, q: &[f64], jac: &mut [f64]) -> Pose {
-        let _ = (q, jac);
-        todo!()
+        debug_assert_eq!(q.len(), self.dof(), "jacobian: q.len() must equal dof");
+        debug_assert_eq!(
+            jac.len(),
+            6 * self.dof(),
+            "jacobian: jac.len() must be 6 * dof"
+        );
+        kin::pose_of(&self.kin.jacobian_tf(q, jac))
+    }
+
+    /// The tip transform as a row-major 3x4 `[R | t]` (for tests).
+    #[cfg(test)]
+    pub(crate) fn fk_matrix(&self, q: &[f64]) -> [f64; 12] {
+        self.kin.fk_tf(q)
+    }
+
+    fn check_q(&self, q: &[f64]) -> Result<()> {
+        if q.len() != self.dof() {
+            return Err(Error::InvalidInput(format!(
+                "q has {} values but the chain `{}` -> `{}` has {} joints; expected length {}",
+                q.len(),
+                self.base_link,
+                self.tip_link,
+                self.dof(),
+                self.dof()
+            )));
+        }
+        if let Some(i) = q.iter().position(|v| !v.is_finite()) {
+            return Err(Error::InvalidInput(format!(
+                "q[{i}] = {} (joint `{}`) is not finite",
+                q[i], self.joints[i].name
+            )));
+        }
+        Ok(())
     }
 }

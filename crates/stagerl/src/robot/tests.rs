@@ -1,0 +1,881 @@
+//! Unit tests of the robot module: UR5 against standard DH, a hand-checked pose, the Jacobian
+//! against finite differences, numerical properties and one test per URDF error.
+//! (The comparison with the `k` crate is in `tests/robot_k_oracle.rs`.)
+
+use std::f64::consts::{FRAC_PI_2, PI};
+
+use nalgebra::{Matrix3, Matrix4, Rotation3, UnitQuaternion, Vector3};
+
+use super::kin;
+use super::*;
+use crate::rng::Rng;
+use crate::Error;
+
+/// The test arm of `tests/robot_test_arm.urdf` (tip `tool`).
+const TEST_ARM: &str = include_str!("../../tests/robot_test_arm.urdf");
+
+fn test_arm() -> Chain {
+    Chain::from_urdf_str(TEST_ARM, Some("tool")).unwrap()
+}
+
+/// A random configuration within the limits (continuous joints: within +-2 pi).
+fn random_q(chain: &Chain, rng: &mut Rng) -> Vec<f64> {
+    chain
+        .lower_limits()
+        .iter()
+        .zip(chain.upper_limits())
+        .map(|(&lo, &hi)| {
+            let (lo, hi) = if lo.is_finite() {
+                (lo, hi)
+            } else {
+                (-2.0 * PI, 2.0 * PI)
+            };
+            rng.uniform_range(lo, hi)
+        })
+        .collect()
+}
+
+/// The URDF error message, or a panic naming what came instead.
+fn urdf_message<T: std::fmt::Debug>(r: Result<T>) -> String {
+    match r {
+        Err(Error::Urdf(m)) => m,
+        other => panic!("expected a URDF error, got {other:?}"),
+    }
+}
+
+fn rot_of(m: &[f64; 12]) -> Matrix3<f64> {
+    Matrix3::new(m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10])
+}
+
+// ---------------------------------------------------------------------------------------------
+// UR5
+
+/// Standard DH forward kinematics of the UR5, written independently of the URDF.
+fn ur5_dh(q: &[f64]) -> Matrix4<f64> {
+    let d = [0.089159, 0.0, 0.0, 0.10915, 0.09465, 0.0823];
+    let a = [0.0, -0.425, -0.39225, 0.0, 0.0, 0.0];
+    let alpha = [FRAC_PI_2, 0.0, 0.0, FRAC_PI_2, -FRAC_PI_2, 0.0];
+    let mut t = Matrix4::identity();
+    for i in 0..6 {
+        let (st, ct) = q[i].sin_cos();
+        let (sa, ca) = alpha[i].sin_cos();
+        // Rz(theta) Tz(d) Tx(a) Rx(alpha)
+        let ti = Matrix4::new(
+            ct,
+            -st * ca,
+            st * sa,
+            a[i] * ct,
+            st,
+            ct * ca,
+            -ct * sa,
+            a[i] * st,
+            0.0,
+            sa,
+            ca,
+            d[i],
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        );
+        t *= ti;
+    }
+    t
+}
+
+#[test]
+fn ur5_structure_and_limits() {
+    let c = Chain::ur5();
+    assert_eq!(c.dof(), 6);
+    assert_eq!(c.base_link(), "base_link");
+    assert_eq!(c.tip_link(), "tool0");
+    let names: Vec<&str> = c.joints().iter().map(|j| j.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "shoulder_pan_joint",
+            "shoulder_lift_joint",
+            "elbow_joint",
+            "wrist_1_joint",
+            "wrist_2_joint",
+            "wrist_3_joint"
+        ]
+    );
+    assert!(c.joints().iter().all(|j| j.kind == JointKind::Revolute));
+    let two_pi = 2.0 * PI;
+    assert_eq!(
+        c.lower_limits(),
+        [-two_pi, -two_pi, -PI, -two_pi, -two_pi, -two_pi]
+    );
+    assert_eq!(
+        c.upper_limits(),
+        [two_pi, two_pi, PI, two_pi, two_pi, two_pi]
+    );
+    assert_eq!(c.velocity_limits(), [PI; 6]);
+    for (j, (&lo, (&hi, &v))) in c.joints().iter().zip(
+        c.lower_limits()
+            .iter()
+            .zip(c.upper_limits().iter().zip(c.velocity_limits())),
+    ) {
+        assert_eq!((j.lower, j.upper, j.velocity), (lo, hi, v));
+    }
+}
+
+/// Hand check at q = 0 (see the derivation): the upper arm and forearm lie along base -x
+/// (a2 + a3 = -0.81725), d4 and d6 point along base -y (-0.10915 - 0.0823 = -0.19145), d5 along
+/// base -z (0.089159 - 0.09465 = -0.005491); the orientation is Rx(pi/2) (alphas pi/2 + pi/2 - pi/2).
+#[test]
+fn ur5_zero_configuration_hand_checked() {
+    let p = Chain::ur5().fk(&[0.0; 6]);
+    let expected = Vector3::new(-0.81725, -0.19145, -0.005491);
+    assert!((p.position - expected).amax() < 1e-12, "{:?}", p.position);
+    let s = (PI / 4.0).sin();
+    let q = p.quaternion_xyzw();
+    let e = [s, 0.0, 0.0, s];
+    for k in 0..4 {
+        assert!((q[k] - e[k]).abs() < 1e-12, "{q:?}");
+    }
+    // And the DH reference agrees with the hand values.
+    let t = ur5_dh(&[0.0; 6]);
+    assert!((t.fixed_view::<3, 1>(0, 3) - expected).amax() < 1e-12);
+}
+
+#[test]
+fn ur5_matches_standard_dh() {
+    let c = Chain::ur5();
+    let mut rng = Rng::new(11);
+    for _ in 0..2000 {
+        let q = random_q(&c, &mut rng);
+        let t = ur5_dh(&q);
+        let m = c.fk_matrix(&q);
+        let pose = c.fk(&q);
+        for r in 0..3 {
+            assert!((m[4 * r + 3] - t[(r, 3)]).abs() < 1e-12, "q = {q:?}");
+            assert!((pose.position[r] - t[(r, 3)]).abs() < 1e-12, "q = {q:?}");
+            for k in 0..3 {
+                assert!((m[4 * r + k] - t[(r, k)]).abs() < 1e-12, "q = {q:?}");
+            }
+        }
+        let r_dh = Rotation3::from_matrix_unchecked(t.fixed_view::<3, 3>(0, 0).into_owned());
+        let q_dh = UnitQuaternion::from_rotation_matrix(&r_dh);
+        assert!(
+            rotation_vector(&pose.orientation, &q_dh).norm() < 1e-12,
+            "q = {q:?}"
+        );
+    }
+}
+
+#[test]
+fn ur5_tip_choice() {
+    let tool = Chain::load("ur5", None).unwrap();
+    assert_eq!(tool.tip_link(), "tool0");
+    let wrist = Chain::load("ur5", Some("wrist_3_link")).unwrap();
+    assert_eq!(wrist.tip_link(), "wrist_3_link");
+    assert_eq!(wrist.dof(), 6);
+    let mut rng = Rng::new(5);
+    for _ in 0..100 {
+        let q = random_q(&tool, &mut rng);
+        let a = tool.fk(&q);
+        let b = wrist.fk(&q);
+        // tool0 is 0.0823 m along wrist_3_link's z, same orientation.
+        let expected = b.position + b.orientation * Vector3::new(0.0, 0.0, 0.0823);
+        assert!((a.position - expected).amax() < 1e-12);
+        assert!(rotation_vector(&a.orientation, &b.orientation).norm() < 1e-12);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Numerical properties
+
+#[test]
+fn quaternion_unit_canonical_and_rotation_orthonormal() {
+    let mut rng = Rng::new(3);
+    for chain in [Chain::ur5(), test_arm()] {
+        for _ in 0..2000 {
+            let q = random_q(&chain, &mut rng);
+            let pose = chain.fk(&q);
+            let [x, y, z, w] = pose.quaternion_xyzw();
+            assert!(w >= 0.0);
+            assert!(((x * x + y * y + z * z + w * w).sqrt() - 1.0).abs() < 1e-14);
+            let r = rot_of(&chain.fk_matrix(&q));
+            assert!((r * r.transpose() - Matrix3::identity()).amax() < 1e-13);
+            assert!((r.determinant() - 1.0).abs() < 1e-13);
+            let from_q = pose.orientation.to_rotation_matrix().into_inner();
+            assert!((from_q - r).amax() < 1e-14, "{q:?}");
+        }
+    }
+}
+
+#[test]
+fn shepperd_is_robust_near_half_turns() {
+    let mut rng = Rng::new(9);
+    for i in 0..4000 {
+        let axis = Vector3::new(
+            rng.uniform_range(-1.0, 1.0),
+            rng.uniform_range(-1.0, 1.0),
+            rng.uniform_range(-1.0, 1.0),
+        )
+        .normalize();
+        // Angles near pi (the hard case for the trace formula), near 0 and anywhere.
+        let angle = match i % 3 {
+            0 => PI - rng.uniform_range(0.0, 1e-6),
+            1 => rng.uniform_range(0.0, 1e-6),
+            _ => rng.uniform_range(0.0, PI),
+        };
+        let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle);
+        let m = r.matrix();
+        let tf = [
+            m[(0, 0)],
+            m[(0, 1)],
+            m[(0, 2)],
+            0.0,
+            m[(1, 0)],
+            m[(1, 1)],
+            m[(1, 2)],
+            0.0,
+            m[(2, 0)],
+            m[(2, 1)],
+            m[(2, 2)],
+            0.0,
+        ];
+        let pose = kin::pose_of(&tf);
+        assert!(pose.orientation.w >= 0.0);
+        let back = pose.orientation.to_rotation_matrix().into_inner();
+        assert!((back - m).amax() < 1e-14, "axis {axis:?} angle {angle}");
+    }
+    // Exact half turns about the coordinate axes.
+    for tf in [
+        [1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0],
+        [-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0],
+        [-1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+    ] {
+        let back = kin::pose_of(&tf)
+            .orientation
+            .to_rotation_matrix()
+            .into_inner();
+        assert!((back - rot_of(&tf)).amax() < 1e-15);
+    }
+}
+
+#[test]
+fn axis_basis_is_a_rotation_taking_z_to_the_axis() {
+    let mut rng = Rng::new(21);
+    let mut axes = vec![
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+        [1.0, 0.0, 0.0],
+        [0.0, -1.0, 0.0],
+    ];
+    for _ in 0..1000 {
+        let v = Vector3::new(
+            rng.uniform_range(-1.0, 1.0),
+            rng.uniform_range(-1.0, 1.0),
+            rng.uniform_range(-1.0, 1.0),
+        )
+        .normalize();
+        axes.push([v.x, v.y, v.z]);
+    }
+    for n in axes {
+        let a = kin::basis_for_axis(n);
+        let r = rot_of(&a);
+        assert!(
+            (r * r.transpose() - Matrix3::identity()).amax() < 1e-14,
+            "{n:?}"
+        );
+        assert!((r.determinant() - 1.0).abs() < 1e-14, "{n:?}");
+        assert!(
+            (r * Vector3::z() - Vector3::from(n)).amax() < 1e-15,
+            "{n:?}"
+        );
+    }
+    // Exact for +z (the UR5 case): no rounding introduced.
+    assert_eq!(kin::basis_for_axis([0.0, 0.0, 1.0]), kin::IDENTITY);
+}
+
+#[test]
+fn fast_sin_cos_matches_std() {
+    let mut rng = Rng::new(33);
+    let mut xs: Vec<f64> = vec![
+        0.0, -0.0, 1e-300, -1e-300, 5e-324, PI, -PI, 1e5, -1e5, 1.5e5,
+    ];
+    for _ in 0..200_000 {
+        xs.push(rng.uniform_range(-2.0 * PI, 2.0 * PI));
+        xs.push(rng.uniform_range(-1e5, 1e5));
+        // Near multiples of pi/4 (quadrant and kernel boundaries).
+        let k = rng.uniform_range(-4000.0, 4000.0).round();
+        xs.push(k * PI / 4.0 + rng.uniform_range(-1e-9, 1e-9));
+    }
+    let mut worst = 0.0f64;
+    for &x in &xs {
+        let (s, c) = kin::sin_cos(x);
+        let (s0, c0) = x.sin_cos();
+        worst = worst.max((s - s0).abs()).max((c - c0).abs());
+        assert!(
+            (s - s0).abs() <= 2.3e-16 && (c - c0).abs() <= 2.3e-16,
+            "x = {x:e}"
+        );
+        assert!(s.abs() <= 1.0 && c.abs() <= 1.0, "x = {x:e}");
+    }
+    assert!(worst <= 2.3e-16, "{worst:e}");
+    // Tiny arguments are returned exactly; large and non-finite ones go to the standard library.
+    assert_eq!(kin::sin_cos(1e-300), (1e-300, 1.0));
+    assert_eq!(kin::sin_cos(1e12), 1e12f64.sin_cos());
+    assert!(kin::sin_cos(f64::NAN).0.is_nan() && kin::sin_cos(f64::INFINITY).1.is_nan());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Jacobian
+
+/// The rotation vector of `a * b^-1` (exact for small angles, unlike an acos-based angle).
+fn rotation_vector(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> Vector3<f64> {
+    let rel = a * b.inverse();
+    let (w, v) = (rel.w, rel.imag());
+    let (w, v) = if w < 0.0 { (-w, -v) } else { (w, v) };
+    let s = v.norm();
+    if s == 0.0 {
+        return Vector3::zeros();
+    }
+    v * (2.0 * s.atan2(w) / s)
+}
+
+fn check_jacobian_against_finite_differences(chain: &Chain, seed: u64) {
+    let n = chain.dof();
+    let mut rng = Rng::new(seed);
+    let mut jac = vec![0.0; 6 * n];
+    let h = 1e-6;
+    for _ in 0..300 {
+        let q = random_q(chain, &mut rng);
+        let pose = chain.jacobian(&q, &mut jac);
+        assert_eq!(pose, chain.fk(&q));
+        for i in 0..n {
+            let mut qp = q.clone();
+            let mut qm = q.clone();
+            qp[i] += h;
+            qm[i] -= h;
+            let (pp, pm) = (chain.fk(&qp), chain.fk(&qm));
+            let dv = (pp.position - pm.position) / (2.0 * h);
+            let dw = rotation_vector(&pp.orientation, &pm.orientation) / (2.0 * h);
+            for r in 0..3 {
+                let (jv, jw) = (jac[r * n + i], jac[(r + 3) * n + i]);
+                assert!(
+                    (jv - dv[r]).abs() < 1e-7,
+                    "v row {r} col {i}: {jv} vs {}",
+                    dv[r]
+                );
+                assert!(
+                    (jw - dw[r]).abs() < 1e-7,
+                    "w row {r} col {i}: {jw} vs {}",
+                    dw[r]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn ur5_jacobian_matches_finite_differences() {
+    check_jacobian_against_finite_differences(&Chain::ur5(), 17);
+}
+
+#[test]
+fn test_arm_jacobian_matches_finite_differences() {
+    let c = test_arm();
+    assert_eq!(
+        c.joints().iter().map(|j| j.kind).collect::<Vec<_>>(),
+        [
+            JointKind::Revolute,
+            JointKind::Prismatic,
+            JointKind::Revolute,
+            JointKind::Revolute
+        ]
+    );
+    check_jacobian_against_finite_differences(&c, 18);
+}
+
+#[test]
+fn prismatic_column_is_the_unit_axis() {
+    // j2 translates along (1, 1, 0)/sqrt 2 in l1: its linear column has unit norm, angular zero.
+    let c = test_arm();
+    let mut jac = vec![0.0; 6 * c.dof()];
+    c.jacobian(&[0.3, 0.1, -1.0, 0.5], &mut jac);
+    let n = c.dof();
+    let v = Vector3::new(jac[1], jac[n + 1], jac[2 * n + 1]);
+    assert!((v.norm() - 1.0).abs() < 1e-14);
+    for r in 3..6 {
+        assert_eq!(jac[r * n + 1], 0.0);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Checked FK and loading
+
+#[test]
+fn try_fk_checks_length_and_finiteness() {
+    let c = Chain::ur5();
+    let q = [0.1, -0.2, 0.3, -0.4, 0.5, -0.6];
+    assert_eq!(c.try_fk(&q).unwrap(), c.fk(&q));
+    match c.try_fk(&q[..5]) {
+        Err(Error::InvalidInput(m)) => assert!(m.contains("expected length 6"), "{m}"),
+        other => panic!("{other:?}"),
+    }
+    match c.try_fk(&[0.0; 7]) {
+        Err(Error::InvalidInput(m)) => assert!(m.contains("7 values"), "{m}"),
+        other => panic!("{other:?}"),
+    }
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let mut q = q;
+        q[2] = bad;
+        match c.try_fk(&q) {
+            Err(Error::InvalidInput(m)) => {
+                assert!(m.contains("q[2]") && m.contains("elbow_joint"), "{m}")
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}
+
+#[test]
+fn load_reads_files_and_reports_io_errors() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/robot_test_arm.urdf");
+    let c = Chain::load(path, Some("tool")).unwrap();
+    assert_eq!(c.dof(), 4);
+    assert_eq!(c.base_link(), "world");
+    let q = [0.2, -0.1, 3.0, 1.0];
+    assert_eq!(c.fk(&q), test_arm().fk(&q));
+    match Chain::load("/nonexistent/dir/robot.urdf", None) {
+        Err(Error::Io { path, .. }) => assert!(path.ends_with("robot.urdf")),
+        other => panic!("{other:?}"),
+    }
+    // URDF errors from a file name the file.
+    let m = urdf_message(Chain::load(path, None));
+    assert!(
+        m.contains("robot_test_arm.urdf") && m.contains("`tool`"),
+        "{m}"
+    );
+}
+
+#[test]
+fn test_arm_limits() {
+    let c = test_arm();
+    assert_eq!(c.lower_limits(), [-2.5, -0.3, f64::NEG_INFINITY, -1.5]);
+    assert_eq!(c.upper_limits(), [2.8, 0.4, f64::INFINITY, 1.7]);
+    assert_eq!(c.velocity_limits(), [2.0, 0.5, 3.0, 1.5]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// URDF errors: one per case, each naming the joint or link at fault.
+
+const LIMIT: &str = r#"<limit lower="-1" upper="1" effort="1" velocity="1"/>"#;
+
+/// A robot from link names and joint XML snippets.
+fn robot(links: &[&str], joints: &[String]) -> String {
+    let mut s = String::from("<robot name=\"r\">\n");
+    for l in links {
+        s += &format!("  <link name=\"{l}\"/>\n");
+    }
+    for j in joints {
+        s += j;
+        s += "\n";
+    }
+    s + "</robot>\n"
+}
+
+/// A joint snippet; `extra` goes inside the element (origin, axis, limit, ...).
+fn joint(name: &str, kind: &str, parent: &str, child: &str, extra: &str) -> String {
+    format!(
+        "  <joint name=\"{name}\" type=\"{kind}\"><parent link=\"{parent}\"/>\
+         <child link=\"{child}\"/>{extra}</joint>"
+    )
+}
+
+fn rev(name: &str, parent: &str, child: &str) -> String {
+    joint(
+        name,
+        "revolute",
+        parent,
+        child,
+        &format!("<axis xyz=\"0 0 1\"/>{LIMIT}"),
+    )
+}
+
+#[test]
+fn error_unparseable_document() {
+    let m = urdf_message(Chain::from_urdf_str("<robot name=\"r\"><link", None));
+    assert!(m.contains("parse"), "{m}");
+}
+
+#[test]
+fn error_unknown_tip_link() {
+    let xml = robot(&["a", "b"], &[rev("j", "a", "b")]);
+    let m = urdf_message(Chain::from_urdf_str(&xml, Some("hand")));
+    assert!(m.contains("unknown tip link `hand`"), "{m}");
+}
+
+#[test]
+fn error_several_leaves_without_tip() {
+    let xml = robot(
+        &["a", "b", "c"],
+        &[rev("j1", "a", "b"), rev("j2", "a", "c")],
+    );
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(
+        m.contains("`b`") && m.contains("`c`") && m.contains("pass the tip"),
+        "{m}"
+    );
+    // With a tip it compiles.
+    assert_eq!(Chain::from_urdf_str(&xml, Some("c")).unwrap().dof(), 1);
+}
+
+#[test]
+fn error_link_with_no_path_to_root() {
+    // b and c are each other's parent: a cycle detached from the root a.
+    let xml = robot(
+        &["a", "x", "b", "c"],
+        &[
+            rev("j0", "a", "x"),
+            rev("jb", "c", "b"),
+            rev("jc", "b", "c"),
+        ],
+    );
+    let m = urdf_message(Chain::from_urdf_str(&xml, Some("c")));
+    assert!(
+        m.contains("link `c` has no path to the root link `a`"),
+        "{m}"
+    );
+    assert!(m.contains("`jb`") && m.contains("`jc`"), "{m}");
+}
+
+#[test]
+fn error_joint_with_missing_parent_or_child_link() {
+    let xml = robot(&["a", "b"], &[rev("j", "a", "b"), rev("k", "ghost", "b")]);
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(
+        m.contains("joint `k`") && m.contains("parent link `ghost`"),
+        "{m}"
+    );
+    let xml = robot(&["a", "b"], &[rev("j", "a", "b"), rev("k", "b", "phantom")]);
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(
+        m.contains("joint `k`") && m.contains("child link `phantom`"),
+        "{m}"
+    );
+}
+
+#[test]
+fn error_more_than_one_root() {
+    let xml = robot(
+        &["a", "b", "c", "d"],
+        &[rev("j1", "a", "b"), rev("j2", "c", "d")],
+    );
+    let m = urdf_message(Chain::from_urdf_str(&xml, Some("b")));
+    assert!(
+        m.contains("more than one root") && m.contains("`a`") && m.contains("`c`"),
+        "{m}"
+    );
+}
+
+#[test]
+fn error_link_with_two_parent_joints() {
+    let xml = robot(
+        &["a", "b", "c"],
+        &[rev("j1", "a", "b"), rev("j2", "c", "b")],
+    );
+    let m = urdf_message(Chain::from_urdf_str(&xml, Some("b")));
+    assert!(
+        m.contains("link `b`") && m.contains("`j1`") && m.contains("`j2`"),
+        "{m}"
+    );
+}
+
+#[test]
+fn error_unsupported_joint_types_on_chain() {
+    for kind in ["floating", "planar", "spherical"] {
+        let xml = robot(
+            &["a", "b", "c"],
+            &[rev("j1", "a", "b"), joint("odd", kind, "b", "c", "")],
+        );
+        let m = urdf_message(Chain::from_urdf_str(&xml, None));
+        assert!(
+            m.contains("joint `odd`") && m.contains("unsupported type"),
+            "{kind}: {m}"
+        );
+    }
+}
+
+#[test]
+fn error_mimic_joint_on_chain() {
+    let mimic = format!("<axis xyz=\"0 0 1\"/>{LIMIT}<mimic joint=\"j1\"/>");
+    let xml = robot(
+        &["a", "b", "c"],
+        &[
+            rev("j1", "a", "b"),
+            joint("m", "revolute", "b", "c", &mimic),
+        ],
+    );
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(m.contains("joint `m`") && m.contains("mimic"), "{m}");
+}
+
+#[test]
+fn error_revolute_or_prismatic_without_usable_limits() {
+    let cases = [
+        ("revolute", String::new()),
+        (
+            "revolute",
+            r#"<limit lower="1" upper="1" effort="1" velocity="1"/>"#.to_string(),
+        ),
+        (
+            "prismatic",
+            r#"<limit lower="0.5" upper="-0.5" effort="1" velocity="1"/>"#.to_string(),
+        ),
+        (
+            "prismatic",
+            r#"<limit lower="-1" upper="1" effort="1" velocity="0"/>"#.to_string(),
+        ),
+        (
+            "revolute",
+            r#"<limit lower="-1" upper="inf" effort="1" velocity="1"/>"#.to_string(),
+        ),
+        (
+            "revolute",
+            r#"<limit lower="nan" upper="1" effort="1" velocity="1"/>"#.to_string(),
+        ),
+    ];
+    for (kind, limit) in cases {
+        let extra = format!("<axis xyz=\"0 0 1\"/>{limit}");
+        let xml = robot(&["a", "b"], &[joint("lim", kind, "a", "b", &extra)]);
+        let m = urdf_message(Chain::from_urdf_str(&xml, None));
+        assert!(
+            m.contains("joint `lim`") && m.contains("no usable <limit>"),
+            "{limit}: {m}"
+        );
+    }
+}
+
+#[test]
+fn error_continuous_without_velocity_limit() {
+    let xml = robot(
+        &["a", "b"],
+        &[joint(
+            "spin",
+            "continuous",
+            "a",
+            "b",
+            "<axis xyz=\"0 0 1\"/>",
+        )],
+    );
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(m.contains("joint `spin`") && m.contains("velocity"), "{m}");
+    // With one it compiles, unbounded.
+    let xml = robot(
+        &["a", "b"],
+        &[joint(
+            "spin",
+            "continuous",
+            "a",
+            "b",
+            "<axis xyz=\"0 0 1\"/><limit effort=\"1\" velocity=\"2\"/>",
+        )],
+    );
+    let c = Chain::from_urdf_str(&xml, None).unwrap();
+    assert_eq!(c.lower_limits(), [f64::NEG_INFINITY]);
+    assert_eq!(c.upper_limits(), [f64::INFINITY]);
+    assert_eq!(c.velocity_limits(), [2.0]);
+}
+
+#[test]
+fn error_non_finite_origin_or_axis() {
+    for origin in [
+        r#"<origin xyz="0 nan 0" rpy="0 0 0"/>"#,
+        r#"<origin xyz="0 0 0" rpy="0 inf 0"/>"#,
+    ] {
+        // On a fixed joint in the middle of the chain as well as on an actuated one.
+        let xml = robot(
+            &["a", "b", "c"],
+            &[rev("j1", "a", "b"), joint("bad", "fixed", "b", "c", origin)],
+        );
+        let m = urdf_message(Chain::from_urdf_str(&xml, None));
+        assert!(
+            m.contains("joint `bad`") && m.contains("non-finite origin"),
+            "{m}"
+        );
+        let extra = format!("{origin}<axis xyz=\"0 0 1\"/>{LIMIT}");
+        let xml = robot(&["a", "b"], &[joint("bad", "revolute", "a", "b", &extra)]);
+        let m = urdf_message(Chain::from_urdf_str(&xml, None));
+        assert!(
+            m.contains("joint `bad`") && m.contains("non-finite origin"),
+            "{m}"
+        );
+    }
+    let extra = format!("<axis xyz=\"0 NaN 1\"/>{LIMIT}");
+    let xml = robot(&["a", "b"], &[joint("bad", "prismatic", "a", "b", &extra)]);
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(
+        m.contains("joint `bad`") && m.contains("non-finite axis"),
+        "{m}"
+    );
+}
+
+#[test]
+fn error_zero_axis() {
+    let extra = format!("<axis xyz=\"0 0 0\"/>{LIMIT}");
+    let xml = robot(&["a", "b"], &[joint("flat", "revolute", "a", "b", &extra)]);
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(m.contains("joint `flat`") && m.contains("zero axis"), "{m}");
+}
+
+#[test]
+fn error_chain_without_actuated_joint() {
+    let xml = robot(&["a", "b"], &[joint("weld", "fixed", "a", "b", "")]);
+    let m = urdf_message(Chain::from_urdf_str(&xml, None));
+    assert!(
+        m.contains("no actuated joint") && m.contains("`a`") && m.contains("`b`"),
+        "{m}"
+    );
+    // The root as tip: an empty chain.
+    let xml = robot(&["a", "b"], &[rev("j", "a", "b")]);
+    let m = urdf_message(Chain::from_urdf_str(&xml, Some("a")));
+    assert!(m.contains("no actuated joint"), "{m}");
+}
+
+#[test]
+fn joints_off_the_chain_are_ignored() {
+    // A floating joint, a limitless revolute joint and a NaN origin on a side branch.
+    let xml = robot(
+        &["a", "b", "c", "s1", "s2", "s3"],
+        &[
+            rev("j1", "a", "b"),
+            rev("j2", "b", "c"),
+            joint("float", "floating", "a", "s1", ""),
+            joint("nolim", "revolute", "b", "s2", "<axis xyz=\"0 0 1\"/>"),
+            joint(
+                "nan",
+                "fixed",
+                "c",
+                "s3",
+                r#"<origin xyz="nan 0 0" rpy="0 0 0"/>"#,
+            ),
+        ],
+    );
+    let c = Chain::from_urdf_str(&xml, Some("c")).unwrap();
+    assert_eq!(c.dof(), 2);
+    assert_eq!(c.joints()[1].name, "j2");
+}
+
+#[test]
+fn axes_are_normalised() {
+    // An unnormalised axis gives the same kinematics as the unit one.
+    let mk = |axis: &str| {
+        let extra = format!(
+            "<origin xyz=\"0.1 0.2 0.3\" rpy=\"0.3 0.2 0.1\"/><axis xyz=\"{axis}\"/>{LIMIT}"
+        );
+        let xml = robot(
+            &["a", "b", "c"],
+            &[
+                joint("j", "revolute", "a", "b", &extra),
+                joint("p", "prismatic", "b", "c", &extra),
+            ],
+        );
+        Chain::from_urdf_str(&xml, None).unwrap()
+    };
+    let (big, unit) = (mk("0 3 4"), mk("0 0.6 0.8"));
+    let q = [0.7, 0.4];
+    let (a, b) = (big.fk(&q), unit.fk(&q));
+    assert!((a.position - b.position).amax() < 1e-15);
+    assert!(rotation_vector(&a.orientation, &b.orientation).norm() < 1e-15);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Microbenchmark: `cargo test -p stagerl --lib robot::tests::bench -- --ignored --nocapture`
+
+#[test]
+#[ignore = "timing, run by hand"]
+fn bench_fk_and_jacobian() {
+    use std::hint::black_box;
+    use std::time::Instant;
+    let c = Chain::ur5();
+    let mut rng = Rng::new(1);
+    let qs: Vec<Vec<f64>> = (0..1024).map(|_| random_q(&c, &mut rng)).collect();
+    let n = 2_000_000;
+    let mut acc = 0.0;
+    for round in 0..2 {
+        let t = Instant::now();
+        for i in 0..n {
+            let p = c.fk(black_box(&qs[i & 1023]));
+            acc += p.position.x + p.orientation.w;
+        }
+        let fk_ns = t.elapsed().as_nanos() as f64 / n as f64;
+        let mut jac = [0.0; 36];
+        let t = Instant::now();
+        for i in 0..n {
+            let p = c.jacobian(black_box(&qs[i & 1023]), black_box(&mut jac));
+            acc += p.position.x + jac[7];
+        }
+        let jac_ns = t.elapsed().as_nanos() as f64 / n as f64;
+        println!("round {round}: UR5 fk {fk_ns:.1} ns/call, jacobian {jac_ns:.1} ns/call");
+    }
+    black_box(acc);
+}
+
+#[test]
+#[ignore]
+fn scratch_components() {
+    use std::hint::black_box;
+    use std::time::Instant;
+    fn min_ns(mut f: impl FnMut(usize) -> f64) -> f64 {
+        let mut best = f64::INFINITY;
+        let mut acc = 0.0;
+        for _ in 0..300 {
+            let t = Instant::now();
+            for i in 0..4096 {
+                acc += f(i);
+            }
+            best = best.min(t.elapsed().as_nanos() as f64 / 4096.0);
+        }
+        black_box(acc);
+        best
+    }
+    let c = Chain::ur5();
+    let mut rng = Rng::new(1);
+    let qs: Vec<Vec<f64>> = (0..1024).map(|_| random_q(&c, &mut rng)).collect();
+    let tfs: Vec<[f64; 12]> = qs.iter().map(|q| c.fk_matrix(q)).collect();
+    for _ in 0..2 {
+        let fk = min_ns(|i| black_box(c.fk(black_box(&qs[i & 1023]))).position.x);
+        let fkm = min_ns(|i| black_box(c.fk_matrix(black_box(&qs[i & 1023])))[3]);
+        let mut jac = [0.0; 36];
+        let j = min_ns(|i| {
+            let p = black_box(c.jacobian(black_box(&qs[i & 1023]), &mut jac));
+            black_box(&mut jac);
+            p.position.x
+        });
+        let sc = min_ns(|i| {
+            black_box(&qs[i & 1023])
+                .iter()
+                .map(|&v| kin::sin_cos(v).0)
+                .sum()
+        });
+        let scs = min_ns(|i| {
+            black_box(&qs[i & 1023])
+                .iter()
+                .map(|&v| v.sin_cos().0)
+                .sum()
+        });
+        let quat = min_ns(|i| black_box(kin::quaternion_wxyz(black_box(&tfs[i & 1023])))[0]);
+        let mul7 = min_ns(|i| {
+            let mut m = tfs[i & 1023];
+            for _ in 0..7 {
+                m = kin::mul(&m, black_box(&tfs[(i + 1) & 1023]));
+            }
+            black_box(m)[3]
+        });
+        let sc1 = min_ns(|i| black_box(kin::sin_cos(black_box(qs[i & 1023][0]))).0);
+        let robot = urdf_rs::read_from_string(UR5_URDF).unwrap();
+        let kc = k::Chain::<f64>::from(&robot);
+        let ks = k::SerialChain::from_end(kc.find_link("tool0").unwrap());
+        let kns = min_ns(|i| {
+            ks.set_joint_positions_unchecked(black_box(&qs[i & 1023]));
+            black_box(ks.end_transform()).translation.vector.x
+        });
+        println!("k {kns:.1} 1 sincos {sc1:.1} fk {fk:.1} fk_matrix {fkm:.1} jac {j:.1} | 6 fast sincos {sc:.1} 6 std sincos {scs:.1} quat {quat:.1} 7 mul {mul7:.1}");
+    }
+}

@@ -1,0 +1,271 @@
+//! URDF parsing and compilation into a flat serial chain.
+
+use std::collections::{HashMap, HashSet};
+
+use urdf_rs::JointType;
+
+use super::kin::{self, Kinematics, Step, Tf};
+use super::{JointInfo, JointKind};
+use crate::{Error, Result};
+
+/// A URDF compiled into a serial chain from its root link to a tip link.
+pub(crate) struct Compiled {
+    pub joints: Vec<JointInfo>,
+    pub base_link: String,
+    pub tip_link: String,
+    pub kin: Kinematics,
+}
+
+fn urdf_err(msg: impl Into<String>) -> Error {
+    Error::Urdf(msg.into())
+}
+
+/// `a`, `b`, `c` as "`a`, `b`, `c`".
+fn quoted_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
+    names
+        .into_iter()
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf).
+pub(crate) fn compile_str(xml: &str, tip: Option<&str>) -> Result<Compiled> {
+    let robot = urdf_rs::read_from_string(xml)
+        .map_err(|e| urdf_err(format!("cannot parse the URDF document: {e}")))?;
+    compile(&robot, tip)
+}
+
+/// Compile a parsed URDF into the chain from its root link to `tip`.
+pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compiled> {
+    if robot.links.is_empty() {
+        return Err(urdf_err(format!("robot `{}` has no links", robot.name)));
+    }
+
+    // Links, in document order, unique.
+    let mut links: HashSet<&str> = HashSet::new();
+    for l in &robot.links {
+        if !links.insert(l.name.as_str()) {
+            return Err(urdf_err(format!("link `{}` is defined twice", l.name)));
+        }
+    }
+
+    // Joints: unique names, existing links, at most one parent joint per link.
+    let mut joint_names: HashSet<&str> = HashSet::new();
+    let mut parent_joint: HashMap<&str, &urdf_rs::Joint> = HashMap::new();
+    let mut has_children: HashSet<&str> = HashSet::new();
+    for j in &robot.joints {
+        if !joint_names.insert(j.name.as_str()) {
+            return Err(urdf_err(format!("joint `{}` is defined twice", j.name)));
+        }
+        for (role, link) in [("parent", &j.parent.link), ("child", &j.child.link)] {
+            if !links.contains(link.as_str()) {
+                return Err(urdf_err(format!(
+                    "joint `{}` names {role} link `{link}`, which does not exist",
+                    j.name
+                )));
+            }
+        }
+        if let Some(other) = parent_joint.insert(j.child.link.as_str(), j) {
+            return Err(urdf_err(format!(
+                "link `{}` is the child of two joints, `{}` and `{}`; a URDF must be a tree",
+                j.child.link, other.name, j.name
+            )));
+        }
+        has_children.insert(j.parent.link.as_str());
+    }
+
+    // Exactly one root.
+    let roots: Vec<&str> = robot
+        .links
+        .iter()
+        .map(|l| l.name.as_str())
+        .filter(|l| !parent_joint.contains_key(l))
+        .collect();
+    let root = match roots.as_slice() {
+        [r] => *r,
+        [] => {
+            return Err(urdf_err(
+                "no root link: every link is the child of a joint, so the joints form a cycle",
+            ))
+        }
+        _ => {
+            return Err(urdf_err(format!(
+                "more than one root link ({}); a URDF must be a tree with a single root",
+                quoted_list(roots.iter().copied())
+            )))
+        }
+    };
+
+    // The tip.
+    let tip: &str = match tip {
+        Some(t) => {
+            if !links.contains(t) {
+                return Err(urdf_err(format!(
+                    "unknown tip link `{t}`; the links are {}",
+                    quoted_list(robot.links.iter().map(|l| l.name.as_str()))
+                )));
+            }
+            t
+        }
+        None => {
+            let leaves: Vec<&str> = robot
+                .links
+                .iter()
+                .map(|l| l.name.as_str())
+                .filter(|l| !has_children.contains(l))
+                .collect();
+            match leaves.as_slice() {
+                [leaf] => leaf,
+                [] => {
+                    return Err(urdf_err(
+                        "no leaf link: every link is the parent of a joint; pass the tip link",
+                    ))
+                }
+                _ => {
+                    return Err(urdf_err(format!(
+                        "several leaf links ({}); pass the tip link to use",
+                        quoted_list(leaves.iter().copied())
+                    )))
+                }
+            }
+        }
+    };
+
+    // Walk from the tip up to the root.
+    let mut path: Vec<&urdf_rs::Joint> = Vec::new();
+    let mut link = tip;
+    let mut seen: HashSet<&str> = HashSet::new();
+    while link != root {
+        if !seen.insert(link) {
+            let cycle: Vec<&str> = path
+                .iter()
+                .skip_while(|j| j.child.link != link)
+                .map(|j| j.name.as_str())
+                .collect();
+            return Err(urdf_err(format!(
+                "link `{tip}` has no path to the root link `{root}`: joints {} form a cycle",
+                quoted_list(cycle)
+            )));
+        }
+        // Every non-root link has a parent joint (the root is the only link without one).
+        let Some(j) = parent_joint.get(link) else {
+            return Err(urdf_err(format!(
+                "link `{link}` has no path to the root link `{root}`"
+            )));
+        };
+        path.push(j);
+        link = j.parent.link.as_str();
+    }
+    path.reverse();
+
+    // Compile: fold fixed joints and the axis-alignment rotations into the constants.
+    let mut joints = Vec::new();
+    let mut steps = Vec::new();
+    let mut base: Option<Tf> = None;
+    let mut pending: Tf = kin::IDENTITY;
+    for j in &path {
+        let xyz = j.origin.xyz.0;
+        let rpy = j.origin.rpy.0;
+        if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite()) {
+            return Err(urdf_err(format!(
+                "joint `{}` has a non-finite origin: xyz = {xyz:?}, rpy = {rpy:?}",
+                j.name
+            )));
+        }
+        pending = kin::mul(&pending, &kin::origin(xyz, rpy));
+        let kind = match j.joint_type {
+            JointType::Fixed => continue,
+            JointType::Revolute | JointType::Continuous => JointKind::Revolute,
+            JointType::Prismatic => JointKind::Prismatic,
+            JointType::Floating | JointType::Planar | JointType::Spherical => {
+                return Err(urdf_err(format!(
+                    "joint `{}` on the chain from `{root}` to `{tip}` has unsupported type {:?}; \
+                     only revolute, continuous, prismatic and fixed joints are supported",
+                    j.name, j.joint_type
+                )));
+            }
+        };
+        if let Some(m) = &j.mimic {
+            return Err(urdf_err(format!(
+                "joint `{}` on the chain from `{root}` to `{tip}` mimics joint `{}`; \
+                 mimic joints are not supported",
+                j.name, m.joint
+            )));
+        }
+        let axis = j.axis.xyz.0;
+        if axis.iter().any(|v| !v.is_finite()) {
+            return Err(urdf_err(format!(
+                "joint `{}` has a non-finite axis {axis:?}",
+                j.name
+            )));
+        }
+        let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+        if norm < 1e-9 {
+            return Err(urdf_err(format!(
+                "joint `{}` has a zero axis {axis:?}; an actuated joint needs a nonzero axis",
+                j.name
+            )));
+        }
+        let axis = [axis[0] / norm, axis[1] / norm, axis[2] / norm];
+        let lim = &j.limit;
+        let (lower, upper, velocity) = if j.joint_type == JointType::Continuous {
+            if !(lim.velocity.is_finite() && lim.velocity > 0.0) {
+                return Err(urdf_err(format!(
+                    "continuous joint `{}` has no usable velocity limit (velocity = {}); \
+                     a finite <limit velocity> > 0 is required",
+                    j.name, lim.velocity
+                )));
+            }
+            (f64::NEG_INFINITY, f64::INFINITY, lim.velocity)
+        } else {
+            let usable = lim.lower.is_finite()
+                && lim.upper.is_finite()
+                && lim.velocity.is_finite()
+                && lim.lower < lim.upper
+                && lim.velocity > 0.0;
+            if !usable {
+                return Err(urdf_err(format!(
+                    "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
+                     velocity = {}; finite lower < upper and velocity > 0 are required",
+                    j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
+                )));
+            }
+            (lim.lower, lim.upper, lim.velocity)
+        };
+        joints.push(JointInfo {
+            name: j.name.clone(),
+            kind,
+            lower,
+            upper,
+            velocity,
+        });
+
+        let a = kin::basis_for_axis(axis);
+        let before = kin::mul(&pending, &a);
+        match steps.last_mut() {
+            None => base = Some(before),
+            Some(Step { after, .. }) => *after = before,
+        }
+        steps.push(Step {
+            prismatic: kind == JointKind::Prismatic,
+            after: kin::IDENTITY,
+        });
+        pending = kin::rotation_transpose(&a);
+    }
+    let Some(base) = base else {
+        return Err(urdf_err(format!(
+            "the chain from root link `{root}` to tip link `{tip}` has no actuated joint"
+        )));
+    };
+    if let Some(last) = steps.last_mut() {
+        last.after = pending;
+    }
+
+    Ok(Compiled {
+        joints,
+        base_link: root.to_string(),
+        tip_link: tip.to_string(),
+        kin: Kinematics::new(&base, &steps),
+    })
+}
