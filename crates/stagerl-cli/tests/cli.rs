@@ -141,7 +141,15 @@ fn reward_lines_hand_computed() {
         assert!(out.status.success(), "{}", stderr(&out));
         let v = lines(&out);
         let obj = v[0].as_object().unwrap();
-        assert_eq!(obj.keys().map(String::as_str).collect::<Vec<_>>(), REWARD_KEYS);
+        let mut keys: Vec<&str> = obj.keys().map(String::as_str).collect();
+        keys.sort_unstable();
+        let mut want = REWARD_KEYS.to_vec();
+        want.sort_unstable();
+        assert_eq!(keys, want, "exactly the specified keys");
+        // And in the specified order on the wire.
+        let raw = String::from_utf8_lossy(&out.stdout).into_owned();
+        let pos: Vec<usize> = REWARD_KEYS.iter().map(|k| raw.find(&format!("\"{k}\":")).unwrap()).collect();
+        assert!(pos.windows(2).all(|w| w[0] < w[1]), "{raw}");
         assert!((f(&v[0]["reward"]) - want).abs() < 1e-12, "{function}: {}", v[0]);
         assert!((f(&v[0]["total"]) - want).abs() < 1e-12);
         assert_eq!(v[0]["reached"], Value::Bool(false));
