@@ -3,7 +3,7 @@
 //! A URDF is compiled ([`Chain::from_urdf_str`]) into a serial chain from its root link to a tip
 //! link: fixed joints are folded into constant transforms and every actuated joint is rotated so
 //! that it moves about (or along) its local z axis. Forward kinematics ([`Chain::fk`]) and the
-//! geometric Jacobian ([`Chain::jacobian`]) then run on plain `[f64; 12]` transforms without heap
+//! geometric Jacobian ([`Chain::jacobian`]) then run on flat arrays of constants without heap
 //! allocation.
 //!
 //! Units: metres and radians (joint values, positions, limits), metres or radians per second

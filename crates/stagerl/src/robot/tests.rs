@@ -785,97 +785,21 @@ fn axes_are_normalised() {
     assert!(rotation_vector(&a.orientation, &b.orientation).norm() < 1e-15);
 }
 
-// ---------------------------------------------------------------------------------------------
-// Microbenchmark: `cargo test -p stagerl --lib robot::tests::bench -- --ignored --nocapture`
-
 #[test]
-#[ignore = "timing, run by hand"]
-fn bench_fk_and_jacobian() {
-    use std::hint::black_box;
-    use std::time::Instant;
-    let c = Chain::ur5();
-    let mut rng = Rng::new(1);
-    let qs: Vec<Vec<f64>> = (0..1024).map(|_| random_q(&c, &mut rng)).collect();
-    let n = 2_000_000;
-    let mut acc = 0.0;
-    for round in 0..2 {
-        let t = Instant::now();
-        for i in 0..n {
-            let p = c.fk(black_box(&qs[i & 1023]));
-            acc += p.position.x + p.orientation.w;
+fn sin_cos_chunk_matches_scalar() {
+    let mut rng = Rng::new(44);
+    for len in 0..=kin::CHUNK {
+        let mut q: Vec<f64> = (0..len).map(|_| rng.uniform_range(-10.0, 10.0)).collect();
+        if len == 5 {
+            q[2] = 3e7; // one value past the fast range: the whole chunk takes the scalar path
         }
-        let fk_ns = t.elapsed().as_nanos() as f64 / n as f64;
-        let mut jac = [0.0; 36];
-        let t = Instant::now();
-        for i in 0..n {
-            let p = c.jacobian(black_box(&qs[i & 1023]), black_box(&mut jac));
-            acc += p.position.x + jac[7];
+        let sc = kin::sin_cos_chunk(&q);
+        for (i, &(s, c)) in sc.iter().enumerate() {
+            let expected = q.get(i).map_or((0.0, 1.0), |&v| kin::sin_cos(v));
+            assert_eq!(
+                (s.to_bits(), c.to_bits()),
+                (expected.0.to_bits(), expected.1.to_bits())
+            );
         }
-        let jac_ns = t.elapsed().as_nanos() as f64 / n as f64;
-        println!("round {round}: UR5 fk {fk_ns:.1} ns/call, jacobian {jac_ns:.1} ns/call");
-    }
-    black_box(acc);
-}
-
-#[test]
-#[ignore]
-fn scratch_components() {
-    use std::hint::black_box;
-    use std::time::Instant;
-    fn min_ns(mut f: impl FnMut(usize) -> f64) -> f64 {
-        let mut best = f64::INFINITY;
-        let mut acc = 0.0;
-        for _ in 0..300 {
-            let t = Instant::now();
-            for i in 0..4096 {
-                acc += f(i);
-            }
-            best = best.min(t.elapsed().as_nanos() as f64 / 4096.0);
-        }
-        black_box(acc);
-        best
-    }
-    let c = Chain::ur5();
-    let mut rng = Rng::new(1);
-    let qs: Vec<Vec<f64>> = (0..1024).map(|_| random_q(&c, &mut rng)).collect();
-    let tfs: Vec<[f64; 12]> = qs.iter().map(|q| c.fk_matrix(q)).collect();
-    for _ in 0..2 {
-        let fk = min_ns(|i| black_box(c.fk(black_box(&qs[i & 1023]))).position.x);
-        let fkm = min_ns(|i| black_box(c.fk_matrix(black_box(&qs[i & 1023])))[3]);
-        let mut jac = [0.0; 36];
-        let j = min_ns(|i| {
-            let p = black_box(c.jacobian(black_box(&qs[i & 1023]), &mut jac));
-            black_box(&mut jac);
-            p.position.x
-        });
-        let sc = min_ns(|i| {
-            black_box(&qs[i & 1023])
-                .iter()
-                .map(|&v| kin::sin_cos(v).0)
-                .sum()
-        });
-        let scs = min_ns(|i| {
-            black_box(&qs[i & 1023])
-                .iter()
-                .map(|&v| v.sin_cos().0)
-                .sum()
-        });
-        let quat = min_ns(|i| black_box(kin::quaternion_wxyz(black_box(&tfs[i & 1023])))[0]);
-        let mul7 = min_ns(|i| {
-            let mut m = tfs[i & 1023];
-            for _ in 0..7 {
-                m = kin::mul(&m, black_box(&tfs[(i + 1) & 1023]));
-            }
-            black_box(m)[3]
-        });
-        let sc1 = min_ns(|i| black_box(kin::sin_cos(black_box(qs[i & 1023][0]))).0);
-        let robot = urdf_rs::read_from_string(UR5_URDF).unwrap();
-        let kc = k::Chain::<f64>::from(&robot);
-        let ks = k::SerialChain::from_end(kc.find_link("tool0").unwrap());
-        let kns = min_ns(|i| {
-            ks.set_joint_positions_unchecked(black_box(&qs[i & 1023]));
-            black_box(ks.end_transform()).translation.vector.x
-        });
-        println!("k {kns:.1} 1 sincos {sc1:.1} fk {fk:.1} fk_matrix {fkm:.1} jac {j:.1} | 6 fast sincos {sc:.1} 6 std sincos {scs:.1} quat {quat:.1} 7 mul {mul7:.1}");
     }
 }
