@@ -8,7 +8,7 @@
 //! - [`robot`]: serial kinematic chains loaded from URDF (UR5 bundled), forward kinematics and the
 //!   geometric Jacobian.
 //! - [`reward`]: the paper's reward functions, eqs. 1-15 and 18, with every term exposed.
-//! - [`env`]: the random-target reaching task (single and vectorised).
+//! - [`env`](mod@env): the random-target reaching task (single and vectorised).
 //! - [`config`]: the TOML schema, its defaults (the paper's where it gives them) and validation.
 //! - [`controller`]: a scripted Jacobian controller, the reference the learned policies are
 //!   measured against.

@@ -265,7 +265,19 @@ pub fn movement_reward(joint_vel: &[f64], dt_s: f64) -> f64 {
 #[inline]
 pub fn sar_weights(distance: f64, cfg: &RewardConfig) -> (f64, f64) {
     let c = (distance / cfg.sar_scale_m).clamp(0.0, 1.0);
-    (1.0 - c.powf(cfg.sar_sigma1), c.powf(cfg.sar_sigma2))
+    (1.0 - pow(c, cfg.sar_sigma1), pow(c, cfg.sar_sigma2))
+}
+
+/// `c^s` for `c` in [0, 1], exact and cheap for the common exponents 1 and 2.
+#[inline]
+fn pow(c: f64, s: f64) -> f64 {
+    if s == 1.0 {
+        c
+    } else if s == 2.0 {
+        c * c
+    } else {
+        c.powf(s)
+    }
 }
 
 impl RewardTerms {

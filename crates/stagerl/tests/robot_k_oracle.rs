@@ -25,13 +25,15 @@ fn random_q(chain: &Chain, rng: &mut Rng) -> Vec<f64> {
         .lower_limits()
         .iter()
         .zip(chain.upper_limits())
-        .map(|(&lo, &hi)| {
-            if lo.is_finite() {
-                rng.uniform_range(lo, hi)
-            } else {
-                rng.uniform_range(-2.0 * PI, 2.0 * PI)
-            }
-        })
+        .map(
+            |(&lo, &hi)| {
+                if lo.is_finite() {
+                    rng.uniform_range(lo, hi)
+                } else {
+                    rng.uniform_range(-2.0 * PI, 2.0 * PI)
+                }
+            },
+        )
         .collect()
 }
 
@@ -58,9 +60,7 @@ fn compare_with_k(ours: &Chain, theirs: &k::SerialChain<f64>, seed: u64) -> (f64
         let t = theirs.end_transform();
         let pose = ours.fk(&q);
         let kq = t.rotation.quaternion();
-        let ep = (0..3)
-            .map(|i| (pose.position[i] - t.translation.vector[i]).abs())
-            .fold(0.0, f64::max);
+        let ep = (0..3).map(|i| (pose.position[i] - t.translation.vector[i]).abs()).fold(0.0, f64::max);
         let er = angle_between(pose.quaternion_xyzw(), [kq.i, kq.j, kq.k, kq.w]);
         assert!(ep <= 1e-12, "position differs by {ep} m at q = {q:?}");
         assert!(er <= 1e-12, "orientation differs by {er} rad at q = {q:?}");
@@ -148,10 +148,7 @@ fn long_chain_urdf(seed: u64) -> String {
             links.push(child);
         }
     }
-    let links: String = links
-        .iter()
-        .map(|l| format!("<link name=\"{l}\"/>\n"))
-        .collect();
+    let links: String = links.iter().map(|l| format!("<link name=\"{l}\"/>\n")).collect();
     format!("<robot name=\"long\">\n{links}{joints}</robot>\n")
 }
 

@@ -232,10 +232,7 @@ fn advance(m: &Cols, prismatic: bool, q: f64, sc: (f64, f64), k: &[V2; 12]) -> C
     let mut o = [[[0.0; 2]; 2]; 4];
     for (j, oj) in o.iter_mut().enumerate() {
         for h in 0..2 {
-            oj[h] = vadd(
-                vadd(vmul(x[h], k[j]), vmul(y[h], k[4 + j])),
-                vmul(c2[h], k[8 + j]),
-            );
+            oj[h] = vadd(vadd(vmul(x[h], k[j]), vmul(y[h], k[4 + j])), vmul(c2[h], k[8 + j]));
         }
     }
     for h in 0..2 {
@@ -289,17 +286,9 @@ fn from_cols(c: &Cols) -> Tf {
 impl Kinematics {
     /// The chain `base * Z(q_1) * steps[0].after * ... * Z(q_n) * steps[n-1].after`.
     pub fn new(base: &Tf, steps: &[Step]) -> Self {
-        let steps = steps
-            .iter()
-            .map(|s| LaneStep {
-                prismatic: s.prismatic,
-                after: s.after.map(splat),
-            })
-            .collect();
-        Kinematics {
-            base: to_cols(base),
-            steps,
-        }
+        let steps =
+            steps.iter().map(|s| LaneStep { prismatic: s.prismatic, after: s.after.map(splat) }).collect();
+        Kinematics { base: to_cols(base), steps }
     }
 
     /// The tip transform in the root frame. Joint values past `steps.len()` are ignored; missing
@@ -329,9 +318,8 @@ impl Kinematics {
                 sc = sin_cos_chunk(&q[i..q.len().min(i + CHUNK)]);
             }
             let (z, p) = (m[2], m[3]);
-            for (r, (zr, pr)) in [(z[0][0], p[0][0]), (z[0][1], p[0][1]), (z[1][0], p[1][0])]
-                .into_iter()
-                .enumerate()
+            for (r, (zr, pr)) in
+                [(z[0][0], p[0][0]), (z[0][1], p[0][1]), (z[1][0], p[1][0])].into_iter().enumerate()
             {
                 jac[r * n + i] = pr;
                 jac[(r + 3) * n + i] = zr;
@@ -348,11 +336,7 @@ impl Kinematics {
                     jac[(r + 3) * n + i] = 0.0;
                 }
             } else {
-                let d = [
-                    tip[0] - jac[i],
-                    tip[1] - jac[n + i],
-                    tip[2] - jac[2 * n + i],
-                ];
+                let d = [tip[0] - jac[i], tip[1] - jac[n + i], tip[2] - jac[2 * n + i]];
                 jac[i] = z[1] * d[2] - z[2] * d[1];
                 jac[n + i] = z[2] * d[0] - z[0] * d[2];
                 jac[2 * n + i] = z[0] * d[1] - z[1] * d[0];

@@ -180,11 +180,7 @@ impl Chain {
     #[inline]
     pub fn jacobian(&self, q: &[f64], jac: &mut [f64]) -> Pose {
         debug_assert_eq!(q.len(), self.dof(), "jacobian: q.len() must equal dof");
-        debug_assert_eq!(
-            jac.len(),
-            6 * self.dof(),
-            "jacobian: jac.len() must be 6 * dof"
-        );
+        debug_assert_eq!(jac.len(), 6 * self.dof(), "jacobian: jac.len() must be 6 * dof");
         kin::pose_of(&self.kin.jacobian_tf(q, jac))
     }
 

@@ -25,11 +25,7 @@ fn random_q(chain: &Chain, rng: &mut Rng) -> Vec<f64> {
         .iter()
         .zip(chain.upper_limits())
         .map(|(&lo, &hi)| {
-            let (lo, hi) = if lo.is_finite() {
-                (lo, hi)
-            } else {
-                (-2.0 * PI, 2.0 * PI)
-            };
+            let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (-2.0 * PI, 2.0 * PI) };
             rng.uniform_range(lo, hi)
         })
         .collect()
@@ -103,20 +99,12 @@ fn ur5_structure_and_limits() {
     );
     assert!(c.joints().iter().all(|j| j.kind == JointKind::Revolute));
     let two_pi = 2.0 * PI;
-    assert_eq!(
-        c.lower_limits(),
-        [-two_pi, -two_pi, -PI, -two_pi, -two_pi, -two_pi]
-    );
-    assert_eq!(
-        c.upper_limits(),
-        [two_pi, two_pi, PI, two_pi, two_pi, two_pi]
-    );
+    assert_eq!(c.lower_limits(), [-two_pi, -two_pi, -PI, -two_pi, -two_pi, -two_pi]);
+    assert_eq!(c.upper_limits(), [two_pi, two_pi, PI, two_pi, two_pi, two_pi]);
     assert_eq!(c.velocity_limits(), [PI; 6]);
-    for (j, (&lo, (&hi, &v))) in c.joints().iter().zip(
-        c.lower_limits()
-            .iter()
-            .zip(c.upper_limits().iter().zip(c.velocity_limits())),
-    ) {
+    for (j, (&lo, (&hi, &v))) in
+        c.joints().iter().zip(c.lower_limits().iter().zip(c.upper_limits().iter().zip(c.velocity_limits())))
+    {
         assert_eq!((j.lower, j.upper, j.velocity), (lo, hi, v));
     }
 }
@@ -158,10 +146,7 @@ fn ur5_matches_standard_dh() {
         }
         let r_dh = Rotation3::from_matrix_unchecked(t.fixed_view::<3, 3>(0, 0).into_owned());
         let q_dh = UnitQuaternion::from_rotation_matrix(&r_dh);
-        assert!(
-            rotation_vector(&pose.orientation, &q_dh).norm() < 1e-12,
-            "q = {q:?}"
-        );
+        assert!(rotation_vector(&pose.orientation, &q_dh).norm() < 1e-12, "q = {q:?}");
     }
 }
 
@@ -249,10 +234,7 @@ fn shepperd_is_robust_near_half_turns() {
         [-1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0],
         [-1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0],
     ] {
-        let back = kin::pose_of(&tf)
-            .orientation
-            .to_rotation_matrix()
-            .into_inner();
+        let back = kin::pose_of(&tf).orientation.to_rotation_matrix().into_inner();
         assert!((back - rot_of(&tf)).amax() < 1e-15);
     }
 }
@@ -260,12 +242,7 @@ fn shepperd_is_robust_near_half_turns() {
 #[test]
 fn axis_basis_is_a_rotation_taking_z_to_the_axis() {
     let mut rng = Rng::new(21);
-    let mut axes = vec![
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-        [1.0, 0.0, 0.0],
-        [0.0, -1.0, 0.0],
-    ];
+    let mut axes = vec![[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
     for _ in 0..1000 {
         let v = Vector3::new(
             rng.uniform_range(-1.0, 1.0),
@@ -278,15 +255,9 @@ fn axis_basis_is_a_rotation_taking_z_to_the_axis() {
     for n in axes {
         let a = kin::basis_for_axis(n);
         let r = rot_of(&a);
-        assert!(
-            (r * r.transpose() - Matrix3::identity()).amax() < 1e-14,
-            "{n:?}"
-        );
+        assert!((r * r.transpose() - Matrix3::identity()).amax() < 1e-14, "{n:?}");
         assert!((r.determinant() - 1.0).abs() < 1e-14, "{n:?}");
-        assert!(
-            (r * Vector3::z() - Vector3::from(n)).amax() < 1e-15,
-            "{n:?}"
-        );
+        assert!((r * Vector3::z() - Vector3::from(n)).amax() < 1e-15, "{n:?}");
     }
     // Exact for +z (the UR5 case): no rounding introduced.
     assert_eq!(kin::basis_for_axis([0.0, 0.0, 1.0]), kin::IDENTITY);
@@ -295,9 +266,7 @@ fn axis_basis_is_a_rotation_taking_z_to_the_axis() {
 #[test]
 fn fast_sin_cos_matches_std() {
     let mut rng = Rng::new(33);
-    let mut xs: Vec<f64> = vec![
-        0.0, -0.0, 1e-300, -1e-300, 5e-324, PI, -PI, 1e5, -1e5, 1.5e5,
-    ];
+    let mut xs: Vec<f64> = vec![0.0, -0.0, 1e-300, -1e-300, 5e-324, PI, -PI, 1e5, -1e5, 1.5e5];
     for _ in 0..200_000 {
         xs.push(rng.uniform_range(-2.0 * PI, 2.0 * PI));
         xs.push(rng.uniform_range(-1e5, 1e5));
@@ -310,10 +279,7 @@ fn fast_sin_cos_matches_std() {
         let (s, c) = kin::sin_cos(x);
         let (s0, c0) = x.sin_cos();
         worst = worst.max((s - s0).abs()).max((c - c0).abs());
-        assert!(
-            (s - s0).abs() <= 2.3e-16 && (c - c0).abs() <= 2.3e-16,
-            "x = {x:e}"
-        );
+        assert!((s - s0).abs() <= 2.3e-16 && (c - c0).abs() <= 2.3e-16, "x = {x:e}");
         assert!(s.abs() <= 1.0 && c.abs() <= 1.0, "x = {x:e}");
     }
     assert!(worst <= 2.3e-16, "{worst:e}");
@@ -357,16 +323,8 @@ fn check_jacobian_against_finite_differences(chain: &Chain, seed: u64) {
             let dw = rotation_vector(&pp.orientation, &pm.orientation) / (2.0 * h);
             for r in 0..3 {
                 let (jv, jw) = (jac[r * n + i], jac[(r + 3) * n + i]);
-                assert!(
-                    (jv - dv[r]).abs() < 1e-7,
-                    "v row {r} col {i}: {jv} vs {}",
-                    dv[r]
-                );
-                assert!(
-                    (jw - dw[r]).abs() < 1e-7,
-                    "w row {r} col {i}: {jw} vs {}",
-                    dw[r]
-                );
+                assert!((jv - dv[r]).abs() < 1e-7, "v row {r} col {i}: {jv} vs {}", dv[r]);
+                assert!((jw - dw[r]).abs() < 1e-7, "w row {r} col {i}: {jw} vs {}", dw[r]);
             }
         }
     }
@@ -382,12 +340,7 @@ fn test_arm_jacobian_matches_finite_differences() {
     let c = test_arm();
     assert_eq!(
         c.joints().iter().map(|j| j.kind).collect::<Vec<_>>(),
-        [
-            JointKind::Revolute,
-            JointKind::Prismatic,
-            JointKind::Revolute,
-            JointKind::Revolute
-        ]
+        [JointKind::Revolute, JointKind::Prismatic, JointKind::Revolute, JointKind::Revolute]
     );
     check_jacobian_against_finite_differences(&c, 18);
 }
@@ -448,10 +401,7 @@ fn load_reads_files_and_reports_io_errors() {
     }
     // URDF errors from a file name the file.
     let m = urdf_message(Chain::load(path, None));
-    assert!(
-        m.contains("robot_test_arm.urdf") && m.contains("`tool`"),
-        "{m}"
-    );
+    assert!(m.contains("robot_test_arm.urdf") && m.contains("`tool`"), "{m}");
 }
 
 #[test]
@@ -489,13 +439,7 @@ fn joint(name: &str, kind: &str, parent: &str, child: &str, extra: &str) -> Stri
 }
 
 fn rev(name: &str, parent: &str, child: &str) -> String {
-    joint(
-        name,
-        "revolute",
-        parent,
-        child,
-        &format!("<axis xyz=\"0 0 1\"/>{LIMIT}"),
-    )
+    joint(name, "revolute", parent, child, &format!("<axis xyz=\"0 0 1\"/>{LIMIT}"))
 }
 
 #[test]
@@ -513,15 +457,9 @@ fn error_unknown_tip_link() {
 
 #[test]
 fn error_several_leaves_without_tip() {
-    let xml = robot(
-        &["a", "b", "c"],
-        &[rev("j1", "a", "b"), rev("j2", "a", "c")],
-    );
+    let xml = robot(&["a", "b", "c"], &[rev("j1", "a", "b"), rev("j2", "a", "c")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, None));
-    assert!(
-        m.contains("`b`") && m.contains("`c`") && m.contains("pass the tip"),
-        "{m}"
-    );
+    assert!(m.contains("`b`") && m.contains("`c`") && m.contains("pass the tip"), "{m}");
     // With a tip it compiles.
     assert_eq!(Chain::from_urdf_str(&xml, Some("c")).unwrap().dof(), 1);
 }
@@ -529,19 +467,9 @@ fn error_several_leaves_without_tip() {
 #[test]
 fn error_link_with_no_path_to_root() {
     // b and c are each other's parent: a cycle detached from the root a.
-    let xml = robot(
-        &["a", "x", "b", "c"],
-        &[
-            rev("j0", "a", "x"),
-            rev("jb", "c", "b"),
-            rev("jc", "b", "c"),
-        ],
-    );
+    let xml = robot(&["a", "x", "b", "c"], &[rev("j0", "a", "x"), rev("jb", "c", "b"), rev("jc", "b", "c")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, Some("c")));
-    assert!(
-        m.contains("link `c` has no path to the root link `a`"),
-        "{m}"
-    );
+    assert!(m.contains("link `c` has no path to the root link `a`"), "{m}");
     assert!(m.contains("`jb`") && m.contains("`jc`"), "{m}");
 }
 
@@ -549,69 +477,39 @@ fn error_link_with_no_path_to_root() {
 fn error_joint_with_missing_parent_or_child_link() {
     let xml = robot(&["a", "b"], &[rev("j", "a", "b"), rev("k", "ghost", "b")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, None));
-    assert!(
-        m.contains("joint `k`") && m.contains("parent link `ghost`"),
-        "{m}"
-    );
+    assert!(m.contains("joint `k`") && m.contains("parent link `ghost`"), "{m}");
     let xml = robot(&["a", "b"], &[rev("j", "a", "b"), rev("k", "b", "phantom")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, None));
-    assert!(
-        m.contains("joint `k`") && m.contains("child link `phantom`"),
-        "{m}"
-    );
+    assert!(m.contains("joint `k`") && m.contains("child link `phantom`"), "{m}");
 }
 
 #[test]
 fn error_more_than_one_root() {
-    let xml = robot(
-        &["a", "b", "c", "d"],
-        &[rev("j1", "a", "b"), rev("j2", "c", "d")],
-    );
+    let xml = robot(&["a", "b", "c", "d"], &[rev("j1", "a", "b"), rev("j2", "c", "d")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, Some("b")));
-    assert!(
-        m.contains("more than one root") && m.contains("`a`") && m.contains("`c`"),
-        "{m}"
-    );
+    assert!(m.contains("more than one root") && m.contains("`a`") && m.contains("`c`"), "{m}");
 }
 
 #[test]
 fn error_link_with_two_parent_joints() {
-    let xml = robot(
-        &["a", "b", "c"],
-        &[rev("j1", "a", "b"), rev("j2", "c", "b")],
-    );
+    let xml = robot(&["a", "b", "c"], &[rev("j1", "a", "b"), rev("j2", "c", "b")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, Some("b")));
-    assert!(
-        m.contains("link `b`") && m.contains("`j1`") && m.contains("`j2`"),
-        "{m}"
-    );
+    assert!(m.contains("link `b`") && m.contains("`j1`") && m.contains("`j2`"), "{m}");
 }
 
 #[test]
 fn error_unsupported_joint_types_on_chain() {
     for kind in ["floating", "planar", "spherical"] {
-        let xml = robot(
-            &["a", "b", "c"],
-            &[rev("j1", "a", "b"), joint("odd", kind, "b", "c", "")],
-        );
+        let xml = robot(&["a", "b", "c"], &[rev("j1", "a", "b"), joint("odd", kind, "b", "c", "")]);
         let m = urdf_message(Chain::from_urdf_str(&xml, None));
-        assert!(
-            m.contains("joint `odd`") && m.contains("unsupported type"),
-            "{kind}: {m}"
-        );
+        assert!(m.contains("joint `odd`") && m.contains("unsupported type"), "{kind}: {m}");
     }
 }
 
 #[test]
 fn error_mimic_joint_on_chain() {
     let mimic = format!("<axis xyz=\"0 0 1\"/>{LIMIT}<mimic joint=\"j1\"/>");
-    let xml = robot(
-        &["a", "b", "c"],
-        &[
-            rev("j1", "a", "b"),
-            joint("m", "revolute", "b", "c", &mimic),
-        ],
-    );
+    let xml = robot(&["a", "b", "c"], &[rev("j1", "a", "b"), joint("m", "revolute", "b", "c", &mimic)]);
     let m = urdf_message(Chain::from_urdf_str(&xml, None));
     assert!(m.contains("joint `m`") && m.contains("mimic"), "{m}");
 }
@@ -620,62 +518,29 @@ fn error_mimic_joint_on_chain() {
 fn error_revolute_or_prismatic_without_usable_limits() {
     let cases = [
         ("revolute", String::new()),
-        (
-            "revolute",
-            r#"<limit lower="1" upper="1" effort="1" velocity="1"/>"#.to_string(),
-        ),
-        (
-            "prismatic",
-            r#"<limit lower="0.5" upper="-0.5" effort="1" velocity="1"/>"#.to_string(),
-        ),
-        (
-            "prismatic",
-            r#"<limit lower="-1" upper="1" effort="1" velocity="0"/>"#.to_string(),
-        ),
-        (
-            "revolute",
-            r#"<limit lower="-1" upper="inf" effort="1" velocity="1"/>"#.to_string(),
-        ),
-        (
-            "revolute",
-            r#"<limit lower="nan" upper="1" effort="1" velocity="1"/>"#.to_string(),
-        ),
+        ("revolute", r#"<limit lower="1" upper="1" effort="1" velocity="1"/>"#.to_string()),
+        ("prismatic", r#"<limit lower="0.5" upper="-0.5" effort="1" velocity="1"/>"#.to_string()),
+        ("prismatic", r#"<limit lower="-1" upper="1" effort="1" velocity="0"/>"#.to_string()),
+        ("revolute", r#"<limit lower="-1" upper="inf" effort="1" velocity="1"/>"#.to_string()),
+        ("revolute", r#"<limit lower="nan" upper="1" effort="1" velocity="1"/>"#.to_string()),
     ];
     for (kind, limit) in cases {
         let extra = format!("<axis xyz=\"0 0 1\"/>{limit}");
         let xml = robot(&["a", "b"], &[joint("lim", kind, "a", "b", &extra)]);
         let m = urdf_message(Chain::from_urdf_str(&xml, None));
-        assert!(
-            m.contains("joint `lim`") && m.contains("no usable <limit>"),
-            "{limit}: {m}"
-        );
+        assert!(m.contains("joint `lim`") && m.contains("no usable <limit>"), "{limit}: {m}");
     }
 }
 
 #[test]
 fn error_continuous_without_velocity_limit() {
-    let xml = robot(
-        &["a", "b"],
-        &[joint(
-            "spin",
-            "continuous",
-            "a",
-            "b",
-            "<axis xyz=\"0 0 1\"/>",
-        )],
-    );
+    let xml = robot(&["a", "b"], &[joint("spin", "continuous", "a", "b", "<axis xyz=\"0 0 1\"/>")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, None));
     assert!(m.contains("joint `spin`") && m.contains("velocity"), "{m}");
     // With one it compiles, unbounded.
     let xml = robot(
         &["a", "b"],
-        &[joint(
-            "spin",
-            "continuous",
-            "a",
-            "b",
-            "<axis xyz=\"0 0 1\"/><limit effort=\"1\" velocity=\"2\"/>",
-        )],
+        &[joint("spin", "continuous", "a", "b", "<axis xyz=\"0 0 1\"/><limit effort=\"1\" velocity=\"2\"/>")],
     );
     let c = Chain::from_urdf_str(&xml, None).unwrap();
     assert_eq!(c.lower_limits(), [f64::NEG_INFINITY]);
@@ -685,35 +550,20 @@ fn error_continuous_without_velocity_limit() {
 
 #[test]
 fn error_non_finite_origin_or_axis() {
-    for origin in [
-        r#"<origin xyz="0 nan 0" rpy="0 0 0"/>"#,
-        r#"<origin xyz="0 0 0" rpy="0 inf 0"/>"#,
-    ] {
+    for origin in [r#"<origin xyz="0 nan 0" rpy="0 0 0"/>"#, r#"<origin xyz="0 0 0" rpy="0 inf 0"/>"#] {
         // On a fixed joint in the middle of the chain as well as on an actuated one.
-        let xml = robot(
-            &["a", "b", "c"],
-            &[rev("j1", "a", "b"), joint("bad", "fixed", "b", "c", origin)],
-        );
+        let xml = robot(&["a", "b", "c"], &[rev("j1", "a", "b"), joint("bad", "fixed", "b", "c", origin)]);
         let m = urdf_message(Chain::from_urdf_str(&xml, None));
-        assert!(
-            m.contains("joint `bad`") && m.contains("non-finite origin"),
-            "{m}"
-        );
+        assert!(m.contains("joint `bad`") && m.contains("non-finite origin"), "{m}");
         let extra = format!("{origin}<axis xyz=\"0 0 1\"/>{LIMIT}");
         let xml = robot(&["a", "b"], &[joint("bad", "revolute", "a", "b", &extra)]);
         let m = urdf_message(Chain::from_urdf_str(&xml, None));
-        assert!(
-            m.contains("joint `bad`") && m.contains("non-finite origin"),
-            "{m}"
-        );
+        assert!(m.contains("joint `bad`") && m.contains("non-finite origin"), "{m}");
     }
     let extra = format!("<axis xyz=\"0 NaN 1\"/>{LIMIT}");
     let xml = robot(&["a", "b"], &[joint("bad", "prismatic", "a", "b", &extra)]);
     let m = urdf_message(Chain::from_urdf_str(&xml, None));
-    assert!(
-        m.contains("joint `bad`") && m.contains("non-finite axis"),
-        "{m}"
-    );
+    assert!(m.contains("joint `bad`") && m.contains("non-finite axis"), "{m}");
 }
 
 #[test]
@@ -728,10 +578,7 @@ fn error_zero_axis() {
 fn error_chain_without_actuated_joint() {
     let xml = robot(&["a", "b"], &[joint("weld", "fixed", "a", "b", "")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, None));
-    assert!(
-        m.contains("no actuated joint") && m.contains("`a`") && m.contains("`b`"),
-        "{m}"
-    );
+    assert!(m.contains("no actuated joint") && m.contains("`a`") && m.contains("`b`"), "{m}");
     // The root as tip: an empty chain.
     let xml = robot(&["a", "b"], &[rev("j", "a", "b")]);
     let m = urdf_message(Chain::from_urdf_str(&xml, Some("a")));
@@ -748,13 +595,7 @@ fn joints_off_the_chain_are_ignored() {
             rev("j2", "b", "c"),
             joint("float", "floating", "a", "s1", ""),
             joint("nolim", "revolute", "b", "s2", "<axis xyz=\"0 0 1\"/>"),
-            joint(
-                "nan",
-                "fixed",
-                "c",
-                "s3",
-                r#"<origin xyz="nan 0 0" rpy="0 0 0"/>"#,
-            ),
+            joint("nan", "fixed", "c", "s3", r#"<origin xyz="nan 0 0" rpy="0 0 0"/>"#),
         ],
     );
     let c = Chain::from_urdf_str(&xml, Some("c")).unwrap();
@@ -766,15 +607,10 @@ fn joints_off_the_chain_are_ignored() {
 fn axes_are_normalised() {
     // An unnormalised axis gives the same kinematics as the unit one.
     let mk = |axis: &str| {
-        let extra = format!(
-            "<origin xyz=\"0.1 0.2 0.3\" rpy=\"0.3 0.2 0.1\"/><axis xyz=\"{axis}\"/>{LIMIT}"
-        );
+        let extra = format!("<origin xyz=\"0.1 0.2 0.3\" rpy=\"0.3 0.2 0.1\"/><axis xyz=\"{axis}\"/>{LIMIT}");
         let xml = robot(
             &["a", "b", "c"],
-            &[
-                joint("j", "revolute", "a", "b", &extra),
-                joint("p", "prismatic", "b", "c", &extra),
-            ],
+            &[joint("j", "revolute", "a", "b", &extra), joint("p", "prismatic", "b", "c", &extra)],
         );
         Chain::from_urdf_str(&xml, None).unwrap()
     };
@@ -796,10 +632,7 @@ fn sin_cos_chunk_matches_scalar() {
         let sc = kin::sin_cos_chunk(&q);
         for (i, &(s, c)) in sc.iter().enumerate() {
             let expected = q.get(i).map_or((0.0, 1.0), |&v| kin::sin_cos(v));
-            assert_eq!(
-                (s.to_bits(), c.to_bits()),
-                (expected.0.to_bits(), expected.1.to_bits())
-            );
+            assert_eq!((s.to_bits(), c.to_bits()), (expected.0.to_bits(), expected.1.to_bits()));
         }
     }
 }

@@ -22,11 +22,7 @@ fn urdf_err(msg: impl Into<String>) -> Error {
 
 /// `a`, `b`, `c` as "`a`, `b`, `c`".
 fn quoted_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
-    names
-        .into_iter()
-        .map(|n| format!("`{n}`"))
-        .collect::<Vec<_>>()
-        .join(", ")
+    names.into_iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
 }
 
 /// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf).
@@ -76,12 +72,8 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     }
 
     // Exactly one root.
-    let roots: Vec<&str> = robot
-        .links
-        .iter()
-        .map(|l| l.name.as_str())
-        .filter(|l| !parent_joint.contains_key(l))
-        .collect();
+    let roots: Vec<&str> =
+        robot.links.iter().map(|l| l.name.as_str()).filter(|l| !parent_joint.contains_key(l)).collect();
     let root = match roots.as_slice() {
         [r] => *r,
         [] => {
@@ -109,12 +101,8 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
             t
         }
         None => {
-            let leaves: Vec<&str> = robot
-                .links
-                .iter()
-                .map(|l| l.name.as_str())
-                .filter(|l| !has_children.contains(l))
-                .collect();
+            let leaves: Vec<&str> =
+                robot.links.iter().map(|l| l.name.as_str()).filter(|l| !has_children.contains(l)).collect();
             match leaves.as_slice() {
                 [leaf] => leaf,
                 [] => {
@@ -138,11 +126,8 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     let mut seen: HashSet<&str> = HashSet::new();
     while link != root {
         if !seen.insert(link) {
-            let cycle: Vec<&str> = path
-                .iter()
-                .skip_while(|j| j.child.link != link)
-                .map(|j| j.name.as_str())
-                .collect();
+            let cycle: Vec<&str> =
+                path.iter().skip_while(|j| j.child.link != link).map(|j| j.name.as_str()).collect();
             return Err(urdf_err(format!(
                 "link `{tip}` has no path to the root link `{root}`: joints {} form a cycle",
                 quoted_list(cycle)
@@ -150,9 +135,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
         }
         // Every non-root link has a parent joint (the root is the only link without one).
         let Some(j) = parent_joint.get(link) else {
-            return Err(urdf_err(format!(
-                "link `{link}` has no path to the root link `{root}`"
-            )));
+            return Err(urdf_err(format!("link `{link}` has no path to the root link `{root}`")));
         };
         path.push(j);
         link = j.parent.link.as_str();
@@ -195,10 +178,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
         }
         let axis = j.axis.xyz.0;
         if axis.iter().any(|v| !v.is_finite()) {
-            return Err(urdf_err(format!(
-                "joint `{}` has a non-finite axis {axis:?}",
-                j.name
-            )));
+            return Err(urdf_err(format!("joint `{}` has a non-finite axis {axis:?}", j.name)));
         }
         let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
         if norm < 1e-9 {
@@ -233,13 +213,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
             }
             (lim.lower, lim.upper, lim.velocity)
         };
-        joints.push(JointInfo {
-            name: j.name.clone(),
-            kind,
-            lower,
-            upper,
-            velocity,
-        });
+        joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity });
 
         let a = kin::basis_for_axis(axis);
         let before = kin::mul(&pending, &a);
@@ -247,10 +221,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
             None => base = Some(before),
             Some(Step { after, .. }) => *after = before,
         }
-        steps.push(Step {
-            prismatic: kind == JointKind::Prismatic,
-            after: kin::IDENTITY,
-        });
+        steps.push(Step { prismatic: kind == JointKind::Prismatic, after: kin::IDENTITY });
         pending = kin::rotation_transpose(&a);
     }
     let Some(base) = base else {
