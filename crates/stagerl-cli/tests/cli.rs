@@ -143,9 +143,9 @@ fn reward_lines_hand_computed() {
         let obj = v[0].as_object().unwrap();
         let mut keys: Vec<&str> = obj.keys().map(String::as_str).collect();
         keys.sort_unstable();
-        let mut want = REWARD_KEYS.to_vec();
-        want.sort_unstable();
-        assert_eq!(keys, want, "exactly the specified keys");
+        let mut want_keys = REWARD_KEYS.to_vec();
+        want_keys.sort_unstable();
+        assert_eq!(keys, want_keys, "exactly the specified keys");
         // And in the specified order on the wire.
         let raw = String::from_utf8_lossy(&out.stdout).into_owned();
         let pos: Vec<usize> = REWARD_KEYS.iter().map(|k| raw.find(&format!("\"{k}\":")).unwrap()).collect();
