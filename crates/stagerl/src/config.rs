@@ -1,5 +1,5 @@
-//! The TOML configuration: one schema for the arm, the task and the reward (agent and training
-//! settings join it later). Unknown fields are rejected; every value is validated with an error
+//! The TOML configuration: one schema for the arm, the task, the reward, the agent and the
+//! training run. Unknown fields are rejected; every value is validated with an error
 //! that names the field, the value and what is allowed.
 //!
 //! Defaults are the paper's where it gives a value, and the design notes' choices elsewhere.
@@ -8,7 +8,9 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
+use crate::agent::AgentConfig;
 use crate::reward::RewardConfig;
+use crate::train::TrainConfig;
 use crate::rng::Rng;
 use crate::robot::{Chain, JointKind};
 use crate::{Error, Result};
@@ -20,6 +22,8 @@ pub struct Config {
     pub robot: RobotConfig,
     pub task: TaskConfig,
     pub reward: RewardConfig,
+    pub agent: AgentConfig,
+    pub train: TrainConfig,
 }
 
 /// Which arm.
@@ -277,6 +281,8 @@ impl Config {
         }
         self.task.validate()?;
         self.reward.validate()?;
+        self.agent.validate()?;
+        self.train.validate()?;
         Ok(())
     }
 }

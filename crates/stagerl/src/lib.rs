@@ -14,9 +14,12 @@
 //!   measured against.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
+//! - [`agent`]: DDPG, TD3 and SAC; [`replay`]: their replay buffer; [`train`]: the off-policy
+//!   loop, evaluation and the run directory; [`checkpoint`], [`log`], [`io`]: what runs write.
 //!
 //! Units: metres, radians, seconds; quaternions are `(x, y, z, w)` on every interface.
 
+pub mod agent;
 pub mod checkpoint;
 pub mod config;
 pub mod controller;
@@ -29,6 +32,7 @@ pub mod replay;
 pub mod reward;
 pub mod rng;
 pub mod robot;
+pub mod train;
 
 pub use error::{Error, Result};
 /// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).

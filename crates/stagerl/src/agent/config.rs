@@ -1,0 +1,190 @@
+//! Agent hyper-parameters (the `[agent]` section).
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+use crate::{Error, Result};
+
+/// The learning algorithm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Algo {
+    /// Deep Deterministic Policy Gradient (Lillicrap et al. 2015), the paper's first method.
+    Ddpg,
+    /// Twin Delayed DDPG (Fujimoto et al. 2018).
+    Td3,
+    /// Soft Actor-Critic with automatic entropy tuning (Haarnoja et al. 2018), the paper's second.
+    Sac,
+}
+
+impl Algo {
+    pub const ALL: [Algo; 3] = [Algo::Ddpg, Algo::Td3, Algo::Sac];
+    pub fn name(self) -> &'static str {
+        match self {
+            Algo::Ddpg => "ddpg",
+            Algo::Td3 => "td3",
+            Algo::Sac => "sac",
+        }
+    }
+}
+
+impl fmt::Display for Algo {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Algo {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        Algo::ALL
+            .into_iter()
+            .find(|a| a.name() == s)
+            .ok_or_else(|| Error::config("agent.algo", s, "one of ddpg, td3, sac"))
+    }
+}
+
+/// Exploration noise of DDPG and TD3.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NoiseKind {
+    /// Independent N(0, sigma^2) per step and joint.
+    Gaussian,
+    /// Ornstein-Uhlenbeck process, reset every episode.
+    Ou,
+}
+
+/// Hyper-parameters of the agents; each algorithm reads the ones it uses.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AgentConfig {
+    pub algo: Algo,
+    /// Hidden layer widths of every network (actor and critics).
+    pub hidden: Vec<usize>,
+    pub actor_lr: f64,
+    pub critic_lr: f64,
+    /// Discount factor.
+    pub gamma: f64,
+    /// Polyak coefficient of the target networks.
+    pub tau: f64,
+    pub batch_size: usize,
+    /// Replay capacity, transitions.
+    pub buffer_size: usize,
+    /// Environment steps of uniform random actions before learning starts.
+    pub learning_starts: u64,
+    /// Gradient updates per environment step (update-to-data ratio).
+    pub updates_per_step: u32,
+    /// Clip each network's gradient to this global L2 norm; 0 disables.
+    pub max_grad_norm: f64,
+    /// DDPG/TD3 exploration noise kind.
+    pub noise: NoiseKind,
+    /// DDPG/TD3 exploration noise scale (action units, actions in [-1, 1]).
+    pub noise_sigma: f64,
+    /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
+    pub ou_theta: f64,
+    /// TD3: actor and target updates every this many critic updates.
+    pub policy_delay: u32,
+    /// TD3: target policy smoothing noise sigma.
+    pub target_noise: f64,
+    /// TD3: clip of the smoothing noise.
+    pub target_noise_clip: f64,
+    /// SAC: learning rate of log(alpha).
+    pub alpha_lr: f64,
+    /// SAC: initial entropy coefficient alpha.
+    pub init_alpha: f64,
+    /// SAC: target entropy per action dimension (the usual choice: -1, i.e. -act_dim in total).
+    pub target_entropy_per_dim: f64,
+    /// SAC: fix alpha at `init_alpha` instead of tuning it.
+    pub fixed_alpha: bool,
+}
+
+impl Default for AgentConfig {
+    fn default() -> Self {
+        AgentConfig {
+            algo: Algo::Sac,
+            hidden: vec![256, 256],
+            actor_lr: 3e-4,
+            critic_lr: 3e-4,
+            gamma: 0.99,
+            tau: 0.005,
+            batch_size: 256,
+            buffer_size: 1_000_000,
+            learning_starts: 1000,
+            updates_per_step: 1,
+            max_grad_norm: 0.0,
+            noise: NoiseKind::Gaussian,
+            noise_sigma: 0.1,
+            ou_theta: 0.15,
+            policy_delay: 2,
+            target_noise: 0.2,
+            target_noise_clip: 0.5,
+            alpha_lr: 3e-4,
+            init_alpha: 1.0,
+            target_entropy_per_dim: -1.0,
+            fixed_alpha: false,
+        }
+    }
+}
+
+impl AgentConfig {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        let pos = |field: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::config(field, v, "a finite number > 0"))
+            }
+        };
+        let nonneg = |field: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(Error::config(field, v, "a finite number >= 0"))
+            }
+        };
+        if self.hidden.is_empty() || self.hidden.iter().any(|&h| h == 0 || h > 16384) {
+            return Err(Error::config(
+                "agent.hidden",
+                format!("{:?}", self.hidden),
+                "one or more layer widths, each in 1..=16384",
+            ));
+        }
+        pos("agent.actor_lr", self.actor_lr)?;
+        pos("agent.critic_lr", self.critic_lr)?;
+        if !(self.gamma.is_finite() && (0.0..=1.0).contains(&self.gamma)) {
+            return Err(Error::config("agent.gamma", self.gamma, "a number in [0, 1]"));
+        }
+        if !(self.tau.is_finite() && self.tau > 0.0 && self.tau <= 1.0) {
+            return Err(Error::config("agent.tau", self.tau, "a number in (0, 1]"));
+        }
+        if self.batch_size == 0 {
+            return Err(Error::config("agent.batch_size", 0, "an integer >= 1"));
+        }
+        if self.buffer_size == 0 {
+            return Err(Error::config("agent.buffer_size", 0, "an integer >= 1"));
+        }
+        if self.updates_per_step == 0 {
+            return Err(Error::config("agent.updates_per_step", 0, "an integer >= 1"));
+        }
+        nonneg("agent.max_grad_norm", self.max_grad_norm)?;
+        nonneg("agent.noise_sigma", self.noise_sigma)?;
+        nonneg("agent.ou_theta", self.ou_theta)?;
+        if self.policy_delay == 0 {
+            return Err(Error::config("agent.policy_delay", 0, "an integer >= 1"));
+        }
+        nonneg("agent.target_noise", self.target_noise)?;
+        nonneg("agent.target_noise_clip", self.target_noise_clip)?;
+        pos("agent.alpha_lr", self.alpha_lr)?;
+        pos("agent.init_alpha", self.init_alpha)?;
+        if !self.target_entropy_per_dim.is_finite() {
+            return Err(Error::config(
+                "agent.target_entropy_per_dim",
+                self.target_entropy_per_dim,
+                "a finite number",
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,254 @@
+//! Soft Actor-Critic with automatic entropy tuning (Haarnoja et al. 2018), as in CleanRL and
+//! Stable-Baselines3.
+//!
+//! Networks: a tanh-squashed Gaussian actor `obs -> [mean | s]` (log-std `l = -5 + 3.5 (tanh s + 1)`,
+//! in [-5, 2]), twin critics `Q1, Q2: [obs | act] -> 1` and their Polyak-averaged targets.
+//!
+//! One update on a batch `(s, a, r, s', d)`:
+//! 1. critic target `y = r + gamma (1 - d) (min(Q1', Q2')(s', a') - alpha log pi(a'|s'))`,
+//!    `a' ~ pi(.|s')`; each critic minimises `mean (Q_i(s, a) - y)^2`;
+//! 2. actor minimises `mean (alpha log pi(a~|s) - min(Q1, Q2)(s, a~))`, `a~ ~ pi(.|s)`,
+//!    reparameterised, so the gradient flows through dQ/da and the squashed Gaussian;
+//! 3. `log alpha` minimises `-log alpha * mean(log pi(a~|s) + H_target)`, `H_target = -act_dim`
+//!    (times `target_entropy_per_dim`);
+//! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
+
+use super::{find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo, UpdateStats};
+use crate::checkpoint::Checkpoint;
+use crate::nn::{concat_cols, mse_loss, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
+use crate::replay::Batch;
+use crate::rng::Rng;
+use crate::Result;
+
+/// The log-std range of the actor (CleanRL's).
+const LOG_STD: LogStdBound = LogStdBound::Tanh { min: -5.0, max: 2.0 };
+
+pub struct Sac {
+    cfg: AgentConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    actor: Mlp<f32>,
+    head: SquashedGaussian<f32>,
+    q1: Mlp<f32>,
+    q2: Mlp<f32>,
+    q1_target: Mlp<f32>,
+    q2_target: Mlp<f32>,
+    actor_opt: Adam<f32>,
+    q1_opt: Adam<f32>,
+    q2_opt: Adam<f32>,
+    log_alpha: [f32; 1],
+    alpha_opt: Adam<f32>,
+    target_entropy: f32,
+    rng: Rng,
+    // Scratch, grown once to the batch size.
+    eps: Vec<f32>,
+    critic_in: Vec<f32>,
+    next_act: Vec<f32>,
+    next_logp: Vec<f32>,
+    y: Vec<f32>,
+    dq: Vec<f32>,
+    q1v: Vec<f32>,
+    g1: Vec<f32>,
+    g2: Vec<f32>,
+    da: Vec<f32>,
+    dlogp: Vec<f32>,
+}
+
+impl Sac {
+    pub fn new(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Sac {
+        let mut init = Rng::derived(seed, 0x5AC);
+        let actor = Mlp::new(&sizes(obs_dim, &cfg.hidden, 2 * act_dim), Activation::Relu, Activation::Identity, &mut init);
+        let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
+        let q1 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
+        let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
+        let (q1_target, q2_target) = (q1.clone(), q2.clone());
+        let b = cfg.batch_size;
+        Sac {
+            actor_opt: Adam::new(actor.num_params(), cfg.actor_lr),
+            q1_opt: Adam::new(q1.num_params(), cfg.critic_lr),
+            q2_opt: Adam::new(q2.num_params(), cfg.critic_lr),
+            log_alpha: [cfg.init_alpha.ln() as f32],
+            alpha_opt: Adam::new(1, cfg.alpha_lr),
+            target_entropy: (cfg.target_entropy_per_dim * act_dim as f64) as f32,
+            head: SquashedGaussian::new(act_dim, LOG_STD),
+            rng: Rng::derived(seed, 0x5AC1),
+            eps: vec![0.0; b * act_dim],
+            critic_in: vec![0.0; b * (obs_dim + act_dim)],
+            next_act: vec![0.0; b * act_dim],
+            next_logp: vec![0.0; b],
+            y: vec![0.0; b],
+            dq: vec![0.0; b],
+            q1v: vec![0.0; b],
+            g1: vec![0.0; b],
+            g2: vec![0.0; b],
+            da: vec![0.0; b * act_dim],
+            dlogp: vec![0.0; b],
+            cfg: cfg.clone(),
+            obs_dim,
+            act_dim,
+            actor,
+            q1,
+            q2,
+            q1_target,
+            q2_target,
+        }
+    }
+
+    /// The entropy coefficient alpha.
+    pub fn alpha(&self) -> f32 {
+        self.log_alpha[0].exp()
+    }
+
+    fn fill_normal(rng: &mut Rng, out: &mut [f32]) {
+        for e in out.iter_mut() {
+            *e = rng.normal() as f32;
+        }
+    }
+}
+
+impl Agent for Sac {
+    fn algo(&self) -> Algo {
+        Algo::Sac
+    }
+    fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+    fn act_dim(&self) -> usize {
+        self.act_dim
+    }
+
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        let raw = self.actor.predict(obs, 1);
+        let eps = &mut self.eps[..self.act_dim];
+        Self::fill_normal(&mut self.rng, eps);
+        let (a, _) = self.head.forward(raw, eps, 1);
+        action.copy_from_slice(a);
+    }
+
+    fn predict(&mut self, obs: &[f32], action: &mut [f32]) {
+        let raw = self.actor.predict(obs, 1);
+        self.head.deterministic(raw, 1, action);
+    }
+
+    fn update(&mut self, batch: &Batch) -> UpdateStats {
+        let (b, od, ad) = (batch.size, self.obs_dim, self.act_dim);
+        let alpha = self.alpha();
+        let gamma = self.cfg.gamma as f32;
+
+        // 1. Critics.
+        let raw_next = self.actor.predict(&batch.next_obs, b);
+        Self::fill_normal(&mut self.rng, &mut self.eps[..b * ad]);
+        let (a_next, logp_next) = self.head.forward(raw_next, &self.eps[..b * ad], b);
+        self.next_act[..b * ad].copy_from_slice(a_next);
+        self.next_logp[..b].copy_from_slice(logp_next);
+        concat_cols(&batch.next_obs, od, &self.next_act[..b * ad], ad, b, &mut self.critic_in);
+        let q1n = self.q1_target.predict(&self.critic_in, b);
+        self.y[..b].copy_from_slice(q1n);
+        let q2n = self.q2_target.predict(&self.critic_in, b);
+        for i in 0..b {
+            let soft_v = self.y[i].min(q2n[i]) - alpha * self.next_logp[i];
+            self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * soft_v;
+        }
+        concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
+        let mut critic_loss = 0.0;
+        for (q, opt) in [(&mut self.q1, &mut self.q1_opt), (&mut self.q2, &mut self.q2_opt)] {
+            let pred = q.forward(&self.critic_in, b);
+            critic_loss += f64::from(mse_loss(pred, &self.y[..b], &mut self.dq[..b]));
+            q.zero_grad();
+            q.backward(&self.dq[..b]);
+            step(q, opt, self.cfg.max_grad_norm);
+        }
+
+        // 2. Actor, through the reparameterised sample and dQ/da of the smaller critic.
+        let raw = self.actor.forward(&batch.obs, b);
+        Self::fill_normal(&mut self.rng, &mut self.eps[..b * ad]);
+        let (a, logp) = self.head.forward(raw, &self.eps[..b * ad], b);
+        self.next_logp[..b].copy_from_slice(logp); // reuse: log pi(a~|s)
+        concat_cols(&batch.obs, od, a, ad, b, &mut self.critic_in);
+        let q1v = self.q1.forward(&self.critic_in, b);
+        self.q1v[..b].copy_from_slice(q1v);
+        let q2v = self.q2.forward(&self.critic_in, b);
+        let inv_b = 1.0 / b as f32;
+        let mut actor_loss = 0.0f64;
+        for i in 0..b {
+            let first = self.q1v[i] <= q2v[i];
+            let qmin = if first { self.q1v[i] } else { q2v[i] };
+            actor_loss += f64::from(alpha * self.next_logp[i] - qmin);
+            self.g1[i] = if first { -inv_b } else { 0.0 };
+            self.g2[i] = if first { 0.0 } else { -inv_b };
+            self.dlogp[i] = alpha * inv_b;
+        }
+        actor_loss /= b as f64;
+        let d1 = self.q1.input_grad_cols(&self.g1[..b], od..od + ad);
+        self.da[..b * ad].copy_from_slice(d1);
+        let d2 = self.q2.input_grad_cols(&self.g2[..b], od..od + ad);
+        for (x, y) in self.da[..b * ad].iter_mut().zip(d2) {
+            *x += y;
+        }
+        let d_raw = self.head.backward(&self.da[..b * ad], &self.dlogp[..b]);
+        self.actor.zero_grad();
+        self.actor.backward(d_raw);
+        step(&mut self.actor, &mut self.actor_opt, self.cfg.max_grad_norm);
+
+        // 3. Entropy coefficient.
+        let mean_logp = self.next_logp[..b].iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64;
+        if !self.cfg.fixed_alpha {
+            let grad = [-(mean_logp as f32 + self.target_entropy)];
+            self.alpha_opt.step(&mut self.log_alpha, &grad);
+        }
+
+        // 4. Targets.
+        let tau = self.cfg.tau as f32;
+        self.q1_target.polyak_from(&self.q1, tau);
+        self.q2_target.polyak_from(&self.q2, tau);
+
+        UpdateStats {
+            critic_loss: critic_loss / 2.0,
+            actor_loss: Some(actor_loss),
+            alpha: Some(f64::from(alpha)),
+            entropy: Some(-mean_logp),
+        }
+    }
+
+    fn save(&self, ck: &mut Checkpoint) {
+        save_mlp(ck, "actor", &self.actor);
+        save_mlp(ck, "q1", &self.q1);
+        save_mlp(ck, "q2", &self.q2);
+        save_mlp(ck, "q1_target", &self.q1_target);
+        save_mlp(ck, "q2_target", &self.q2_target);
+        save_adam(ck, "actor_opt", &self.actor_opt);
+        save_adam(ck, "q1_opt", &self.q1_opt);
+        save_adam(ck, "q2_opt", &self.q2_opt);
+        save_adam(ck, "alpha_opt", &self.alpha_opt);
+        ck.put_tensor("log_alpha", &[1], &self.log_alpha);
+        ck.put_json("agent_rng", &self.rng);
+    }
+
+    fn load(&mut self, ck: &Checkpoint) -> Result<()> {
+        load_mlp(ck, "actor", &mut self.actor)?;
+        load_mlp(ck, "q1", &mut self.q1)?;
+        load_mlp(ck, "q2", &mut self.q2)?;
+        load_mlp(ck, "q1_target", &mut self.q1_target)?;
+        load_mlp(ck, "q2_target", &mut self.q2_target)?;
+        load_adam(ck, "actor_opt", &mut self.actor_opt)?;
+        load_adam(ck, "q1_opt", &mut self.q1_opt)?;
+        load_adam(ck, "q2_opt", &mut self.q2_opt)?;
+        load_adam(ck, "alpha_opt", &mut self.alpha_opt)?;
+        ck.read_tensor_into("log_alpha", &mut self.log_alpha)?;
+        self.rng = ck.json("agent_rng")?;
+        Ok(())
+    }
+
+    fn first_non_finite(&self) -> Option<String> {
+        if !self.log_alpha[0].is_finite() {
+            return Some(format!("log_alpha = {}", self.log_alpha[0]));
+        }
+        find_non_finite(&[
+            ("actor", &self.actor),
+            ("q1", &self.q1),
+            ("q2", &self.q2),
+            ("q1_target", &self.q1_target),
+            ("q2_target", &self.q2_target),
+        ])
+    }
+}

@@ -1,0 +1,117 @@
+//! Evaluation: the deterministic policy on random targets (the paper's 500 trials).
+
+use std::path::Path;
+
+use crate::agent::Agent;
+use crate::env::ReachEnv;
+use crate::Result;
+
+/// One evaluation episode.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrialRecord {
+    pub trial: u32,
+    /// Eq. 16 episode reward (bonus included).
+    pub reward: f64,
+    pub steps: u32,
+    pub success: bool,
+    /// D_PT at the start, metres.
+    pub start_distance_m: f64,
+    /// D_PT at the end, metres.
+    pub final_distance_m: f64,
+    /// The target, metres.
+    pub target: [f64; 3],
+}
+
+/// What an evaluation measured.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct EvalSummary {
+    pub trials: u32,
+    /// Fraction of trials that reached the target, in [0, 1].
+    pub success_rate: f64,
+    /// Mean eq. 16 episode reward over all trials.
+    pub mean_reward: f64,
+    /// Mean steps of the successful trials (`None` when none succeeded).
+    pub mean_steps: Option<f64>,
+    /// Median final distance, metres.
+    pub median_final_distance_m: f64,
+    /// Mean final distance, metres.
+    pub mean_final_distance_m: f64,
+}
+
+/// Run `trials` episodes of `agent`'s deterministic policy. The environment's target stream is
+/// reseeded with `seed`, so the same seed gives the same targets whatever ran before.
+pub fn evaluate(agent: &mut dyn Agent, env: &mut ReachEnv, trials: u32, seed: u64) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    let saved_rng = env.rng().clone();
+    env.reset_with_seed(seed);
+    let mut action = vec![0.0f32; env.act_dim()];
+    let mut records = Vec::with_capacity(trials as usize);
+    for trial in 0..trials {
+        if trial > 0 {
+            env.reset();
+        }
+        let start = env.distance();
+        let target = env.target();
+        let mut reward = 0.0;
+        let success = loop {
+            agent.predict(env.observation(), &mut action);
+            let s = env.step(&action)?;
+            reward += s.total();
+            if s.done() {
+                break s.terminated;
+            }
+        };
+        records.push(TrialRecord {
+            trial: trial + 1,
+            reward,
+            steps: env.steps(),
+            success,
+            start_distance_m: start,
+            final_distance_m: env.distance(),
+            target: [target.x, target.y, target.z],
+        });
+    }
+    env.set_rng(saved_rng);
+    Ok((summarize(&records), records))
+}
+
+/// Summary statistics of evaluation trials.
+pub fn summarize(records: &[TrialRecord]) -> EvalSummary {
+    let n = records.len().max(1) as f64;
+    let successes: Vec<&TrialRecord> = records.iter().filter(|r| r.success).collect();
+    let mut d: Vec<f64> = records.iter().map(|r| r.final_distance_m).collect();
+    d.sort_by(f64::total_cmp);
+    let median = match d.len() {
+        0 => f64::NAN,
+        k if k % 2 == 1 => d[k / 2],
+        k => 0.5 * (d[k / 2 - 1] + d[k / 2]),
+    };
+    EvalSummary {
+        trials: records.len() as u32,
+        success_rate: successes.len() as f64 / n,
+        mean_reward: records.iter().map(|r| r.reward).sum::<f64>() / n,
+        mean_steps: (!successes.is_empty())
+            .then(|| successes.iter().map(|r| f64::from(r.steps)).sum::<f64>() / successes.len() as f64),
+        median_final_distance_m: median,
+        mean_final_distance_m: d.iter().sum::<f64>() / n,
+    }
+}
+
+/// Write trial records as CSV (atomically).
+pub fn write_trials_csv(path: &Path, records: &[TrialRecord]) -> Result<()> {
+    let mut s = String::from("trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m\n");
+    for r in records {
+        s.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{}\n",
+            r.trial,
+            r.reward,
+            r.steps,
+            u8::from(r.success),
+            r.start_distance_m,
+            r.final_distance_m,
+            r.target[0],
+            r.target[1],
+            r.target[2]
+        ));
+    }
+    crate::io::write_atomic(path, s.as_bytes())
+}
