@@ -63,6 +63,11 @@ fn time(mut f: impl FnMut()) -> f64 {
 }
 
 fn main() {
+    // `cargo bench` passes `--bench`; under `cargo test --all-targets` there is nothing to check.
+    if !std::env::args().any(|a| a == "--bench") {
+        println!("nn_gemm: timings only, run with `cargo bench -p stagerl --bench nn_gemm`");
+        return;
+    }
     let b = 256;
     println!("batch {b}, f32, best of 7 means (us) and GFLOP/s");
     for (n_in, n_out) in [

@@ -8,7 +8,9 @@
 //!    regressions with Adam, the actor update through both critics and the squashed Gaussian
 //!    with Adam, and the Polyak updates, i.e. the workload of the 0.6 ms / 3.5 ms targets.
 
+use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use stagerl::nn::{
@@ -17,6 +19,28 @@ use stagerl::nn::{
 use stagerl::rng::Rng;
 
 const BATCH: usize = 256;
+
+/// The system allocator, counting allocations (to check that a warmed-up update allocates
+/// nothing in stagerl itself).
+struct CountingAlloc;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator unchanged.
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: same contract as ours.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as ours.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAlloc = CountingAlloc;
 
 fn randn(rng: &mut Rng, n: usize) -> Vec<f32> {
     (0..n).map(|_| rng.normal() as f32).collect()
@@ -71,6 +95,10 @@ fn time(mut f: impl FnMut(), iters: usize, reps: usize) -> (f64, f64) {
 }
 
 fn forward_backward(hidden: usize) -> (f64, f64) {
+    forward_backward_with(hidden, 20, 41)
+}
+
+fn forward_backward_with(hidden: usize, iters: usize, reps: usize) -> (f64, f64) {
     let (obs, act) = (16, 6);
     let mut rng = Rng::new(0);
     let mut q1 = Mlp::<f32>::new(
@@ -102,8 +130,8 @@ fn forward_backward(hidden: usize) -> (f64, f64) {
             actor.backward(&g_a);
             black_box((q1.grads()[0], q2.grads()[0], actor.grads()[0]));
         },
-        20,
-        41,
+        iters,
+        reps,
     )
 }
 
@@ -235,6 +263,18 @@ impl Sac {
 }
 
 fn main() {
+    // `cargo bench` passes `--bench`; under `cargo test --all-targets` run each workload once as
+    // a smoke test instead of timing it.
+    if !std::env::args().any(|a| a == "--bench") {
+        for hidden in [64, 256] {
+            let (fb, _) = forward_backward_with(hidden, 1, 1);
+            let mut sac = Sac::new(18, 6, hidden);
+            sac.update();
+            assert!(fb.is_finite() && sac.actor.params().iter().all(|p| p.is_finite()));
+        }
+        println!("nn_sac: smoke run done (timings with `cargo bench -p stagerl --bench nn_sac`)");
+        return;
+    }
     // Optional hidden sizes on the command line (`cargo bench --bench nn_sac -- 64`).
     let mut hiddens: Vec<usize> = std::env::args()
         .skip(1)
@@ -251,7 +291,12 @@ fn main() {
     for &hidden in &hiddens {
         let mut sac = Sac::new(18, 6, hidden);
         let (best, med) = time(|| sac.update(), 20, 41);
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        for _ in 0..10 {
+            sac.update();
+        }
+        let allocs = (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / 10.0;
         black_box(sac.actor.params()[0]);
-        println!("  full SAC update (obs 18, act 6, hidden {hidden}):               {best:.3} / {med:.3}");
+        println!("  full SAC update (obs 18, act 6, hidden {hidden}):               {best:.3} / {med:.3}  ({allocs} heap allocations per update)");
     }
 }

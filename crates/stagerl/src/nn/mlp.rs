@@ -64,11 +64,13 @@ pub struct Workspace<T> {
 /// (layer 0 weight `[out, in]` row-major, layer 0 bias, layer 1 weight, ...) and one gradient
 /// vector of the same layout; see [`Mlp::tensors`].
 ///
-/// Training: [`Mlp::forward`] caches what the backward pass needs, then one of
-/// [`Mlp::backward`], [`Mlp::backward_with_input_grad`] or [`Mlp::input_grad`] back-propagates
-/// an upstream gradient dL/d(output). Parameter gradients accumulate until [`Mlp::zero_grad`].
-/// Inference ([`Mlp::predict`], [`Mlp::predict_with`]) uses other buffers and leaves the
-/// training cache as it was.
+/// Training: [`Mlp::forward`] caches what the backward pass needs, then one or more of
+/// [`Mlp::backward`], [`Mlp::backward_with_input_grad`], [`Mlp::input_grad`] or
+/// [`Mlp::input_grad_cols`] back-propagate an upstream gradient dL/d(output). Parameter
+/// gradients accumulate until [`Mlp::zero_grad`]. Inference ([`Mlp::predict`],
+/// [`Mlp::predict_with`]) uses other buffers and leaves the training cache as it was.
+///
+/// Buffers grow to the largest batch seen and are then reused; [`Mlp::reserve`] grows them ahead.
 #[derive(Clone, Debug)]
 pub struct Mlp<T: Scalar> {
     sizes: Vec<usize>,
@@ -118,6 +120,22 @@ impl<T: Scalar> Mlp<T> {
             train: workspace.clone(),
             infer: workspace,
         }
+    }
+
+    /// Grows the training and inference buffers for batches up to `batch`, so that later passes
+    /// at such batches allocate nothing in this crate's code.
+    pub fn reserve(&mut self, batch: usize) {
+        let widest = self.sizes.iter().copied().max().unwrap_or(0);
+        for ws in [&mut self.train, &mut self.infer] {
+            for (acts, layer) in ws.acts.iter_mut().zip(&self.layers) {
+                grow(acts, batch * layer.out_features);
+            }
+        }
+        let ws = &mut self.train;
+        grow(&mut ws.input, batch * self.sizes[0]);
+        grow(&mut ws.grad_a, batch * widest);
+        grow(&mut ws.grad_b, batch * widest);
+        grow(&mut ws.grad_in, batch * self.sizes[0]);
     }
 
     /// Layer widths, input first.
