@@ -19,6 +19,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Train an agent (DDPG, TD3, SAC) on the reaching task; ends with an evaluation.
+    Train(cmd::train::Args),
+    /// Evaluate a trained run's deterministic policy on random targets.
+    Eval(cmd::eval::Args),
     /// Run the scripted Jacobian controller on the reaching task, printing every reward term
     /// step by step, then its success rate over many random targets.
     Demo(cmd::demo::Args),
@@ -38,6 +42,8 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Train(a) => cmd::train::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
         Command::Demo(a) => cmd::demo::run(a),
         Command::Fk(a) => cmd::fk::run(a),
         Command::Reward(a) => cmd::reward::run(a),

@@ -10,9 +10,9 @@ use std::path::Path;
 
 use crate::agent::AgentConfig;
 use crate::reward::RewardConfig;
-use crate::train::TrainConfig;
 use crate::rng::Rng;
 use crate::robot::{Chain, JointKind};
+use crate::train::TrainConfig;
 use crate::{Error, Result};
 
 /// The whole configuration.

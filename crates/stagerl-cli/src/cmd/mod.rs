@@ -1,7 +1,9 @@
 pub mod bench;
 pub mod demo;
+pub mod eval;
 pub mod fk;
 pub mod reward;
+pub mod train;
 
 use anyhow::{Context, Result};
 use stagerl::config::Config;

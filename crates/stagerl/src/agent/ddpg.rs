@@ -13,7 +13,10 @@
 //! Exploration: Gaussian or Ornstein-Uhlenbeck noise added to `mu(s)`, clipped to [-1, 1].
 
 use super::noise::ActionNoise;
-use super::{find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo, UpdateStats};
+use super::{
+    find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo,
+    UpdateStats,
+};
 use crate::checkpoint::Checkpoint;
 use crate::nn::{concat_cols, mse_loss, Activation, Adam, Mlp};
 use crate::replay::Batch;
@@ -40,9 +43,14 @@ pub struct Ddpg {
 impl Ddpg {
     pub fn new(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Ddpg {
         let mut init = Rng::derived(seed, 0xDD96);
-        let actor = Mlp::new(&sizes(obs_dim, &cfg.hidden, act_dim), Activation::Relu, Activation::Tanh, &mut init);
-        let critic =
-            Mlp::new(&sizes(obs_dim + act_dim, &cfg.hidden, 1), Activation::Relu, Activation::Identity, &mut init);
+        let actor =
+            Mlp::new(&sizes(obs_dim, &cfg.hidden, act_dim), Activation::Relu, Activation::Tanh, &mut init);
+        let critic = Mlp::new(
+            &sizes(obs_dim + act_dim, &cfg.hidden, 1),
+            Activation::Relu,
+            Activation::Identity,
+            &mut init,
+        );
         let b = cfg.batch_size;
         Ddpg {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr),
@@ -121,7 +129,12 @@ impl Agent for Ddpg {
         self.actor_target.polyak_from(&self.actor, tau);
         self.critic_target.polyak_from(&self.critic, tau);
 
-        UpdateStats { critic_loss: f64::from(critic_loss), actor_loss: Some(actor_loss), alpha: None, entropy: None }
+        UpdateStats {
+            critic_loss: f64::from(critic_loss),
+            actor_loss: Some(actor_loss),
+            alpha: None,
+            entropy: None,
+        }
     }
 
     fn save(&self, ck: &mut Checkpoint) {

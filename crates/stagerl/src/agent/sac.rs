@@ -13,7 +13,10 @@
 //!    (times `target_entropy_per_dim`);
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
 
-use super::{find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo, UpdateStats};
+use super::{
+    find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo,
+    UpdateStats,
+};
 use crate::checkpoint::Checkpoint;
 use crate::nn::{concat_cols, mse_loss, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
 use crate::replay::Batch;
@@ -57,7 +60,12 @@ pub struct Sac {
 impl Sac {
     pub fn new(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Sac {
         let mut init = Rng::derived(seed, 0x5AC);
-        let actor = Mlp::new(&sizes(obs_dim, &cfg.hidden, 2 * act_dim), Activation::Relu, Activation::Identity, &mut init);
+        let actor = Mlp::new(
+            &sizes(obs_dim, &cfg.hidden, 2 * act_dim),
+            Activation::Relu,
+            Activation::Identity,
+            &mut init,
+        );
         let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
         let q1 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
         let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);

@@ -10,7 +10,10 @@
 //!    network is Polyak-averaged.
 
 use super::noise::ActionNoise;
-use super::{find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo, UpdateStats};
+use super::{
+    find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo,
+    UpdateStats,
+};
 use crate::checkpoint::Checkpoint;
 use crate::nn::{concat_cols, mse_loss, Activation, Adam, Mlp};
 use crate::replay::Batch;
@@ -42,7 +45,8 @@ pub struct Td3 {
 impl Td3 {
     pub fn new(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Td3 {
         let mut init = Rng::derived(seed, 0x7D3);
-        let actor = Mlp::new(&sizes(obs_dim, &cfg.hidden, act_dim), Activation::Relu, Activation::Tanh, &mut init);
+        let actor =
+            Mlp::new(&sizes(obs_dim, &cfg.hidden, act_dim), Activation::Relu, Activation::Tanh, &mut init);
         let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
         let q1 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
         let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);

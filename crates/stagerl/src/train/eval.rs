@@ -40,7 +40,12 @@ pub struct EvalSummary {
 
 /// Run `trials` episodes of `agent`'s deterministic policy. The environment's target stream is
 /// reseeded with `seed`, so the same seed gives the same targets whatever ran before.
-pub fn evaluate(agent: &mut dyn Agent, env: &mut ReachEnv, trials: u32, seed: u64) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+pub fn evaluate(
+    agent: &mut dyn Agent,
+    env: &mut ReachEnv,
+    trials: u32,
+    seed: u64,
+) -> Result<(EvalSummary, Vec<TrialRecord>)> {
     let saved_rng = env.rng().clone();
     env.reset_with_seed(seed);
     let mut action = vec![0.0f32; env.act_dim()];
@@ -98,7 +103,9 @@ pub fn summarize(records: &[TrialRecord]) -> EvalSummary {
 
 /// Write trial records as CSV (atomically).
 pub fn write_trials_csv(path: &Path, records: &[TrialRecord]) -> Result<()> {
-    let mut s = String::from("trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m\n");
+    let mut s = String::from(
+        "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m\n",
+    );
     for r in records {
         s.push_str(&format!(
             "{},{},{},{},{},{},{},{},{}\n",

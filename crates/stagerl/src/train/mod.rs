@@ -190,7 +190,8 @@ pub fn train(cfg: &Config, out: &Path, mut on_episode: impl FnMut(&Progress<'_>)
     let mut warmup_rng = Rng::derived(seed, 2);
 
     let mut csv = EpisodeCsv::create(&dir.episodes())?;
-    let mut eval_csv = String::from("episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m\n");
+    let mut eval_csv =
+        String::from("episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m\n");
     let mut tb = EventWriter::create(&dir.tb())?;
     let start = Instant::now();
     let (mut env_steps, mut updates) = (0u64, 0u64);
@@ -235,7 +236,9 @@ pub fn train(cfg: &Config, out: &Path, mut on_episode: impl FnMut(&Progress<'_>)
                     buffer.sample_into(&mut replay_rng, &mut batch);
                     let stats = agent.update(&batch);
                     updates += 1;
-                    for (what, v) in [("critic loss", Some(stats.critic_loss)), ("actor loss", stats.actor_loss)] {
+                    for (what, v) in
+                        [("critic loss", Some(stats.critic_loss)), ("actor loss", stats.actor_loss)]
+                    {
                         if let Some(v) = v.filter(|v| !v.is_finite()) {
                             return Err(Error::InvalidInput(format!(
                                 "numerical fault: {what} = {v} at episode {episode}, step {} (update {updates}); \
@@ -286,7 +289,8 @@ pub fn train(cfg: &Config, out: &Path, mut on_episode: impl FnMut(&Progress<'_>)
         }
         let every = cfg.train.eval_every_episodes;
         let eval = if every > 0 && (episode % every == 0 || episode == cfg.train.episodes) {
-            let (summary, _) = evaluate(agent.as_mut(), &mut eval_env, cfg.train.eval_trials, cfg.train.eval_seed)?;
+            let (summary, _) =
+                evaluate(agent.as_mut(), &mut eval_env, cfg.train.eval_trials, cfg.train.eval_seed)?;
             eval_csv.push_str(&format!(
                 "{episode},{env_steps},{},{},{},{}\n",
                 summary.success_rate,
@@ -306,7 +310,12 @@ pub fn train(cfg: &Config, out: &Path, mut on_episode: impl FnMut(&Progress<'_>)
         if k > 0 && episode % k == 0 {
             save(agent.as_ref(), &dir.latest(), episode, env_steps, updates)?;
         }
-        on_episode(&Progress { record: &record, stats: last_stats, eval: eval.as_ref(), episodes: cfg.train.episodes });
+        on_episode(&Progress {
+            record: &record,
+            stats: last_stats,
+            eval: eval.as_ref(),
+            episodes: cfg.train.episodes,
+        });
         if episode % 50 == 0 {
             tb.flush()?;
         }

@@ -1,0 +1,74 @@
+use anyhow::{Context, Result};
+use stagerl::env::ReachEnv;
+use stagerl::train::{self, evaluate, EvalSummary, RunDir};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The run directory (holds config.toml and checkpoints/).
+    #[arg(long)]
+    run: PathBuf,
+    /// Checkpoint to evaluate (default: the run's final, else latest).
+    #[arg(long)]
+    checkpoint: Option<PathBuf>,
+    /// Random targets.
+    #[arg(long, default_value_t = 500)]
+    trials: u32,
+    /// Seed of the targets.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Print one JSON line instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let dir = RunDir::new(&args.run);
+    let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.display()))?;
+    let checkpoint = match args.checkpoint {
+        Some(c) => c,
+        None => dir
+            .best_available_checkpoint()
+            .with_context(|| format!("{} holds no checkpoint yet", dir.checkpoints().display()))?,
+    };
+    let mut env = ReachEnv::from_config(&cfg, 0)?;
+    let mut agent = train::load_agent(&cfg, &env, &checkpoint)?;
+    let (s, trials) = evaluate(agent.as_mut(), &mut env, args.trials, args.seed)?;
+    let csv = args.run.join(format!("eval-seed{}.csv", args.seed));
+    train::eval::write_trials_csv(&csv, &trials)?;
+    if !args.json {
+        println!(
+            "{} on {} trials (seed {}), per-trial CSV {}",
+            checkpoint.display(),
+            args.trials,
+            args.seed,
+            csv.display()
+        );
+    }
+    print_summary(&s, args.json);
+    Ok(())
+}
+
+pub fn print_summary(s: &EvalSummary, json: bool) {
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "success_rate": s.success_rate,
+                "mean_reward": s.mean_reward,
+                "mean_steps": s.mean_steps,
+                "trials": s.trials,
+                "median_final_distance_m": s.median_final_distance_m,
+            })
+        );
+    } else {
+        println!(
+            "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m",
+            100.0 * s.success_rate,
+            s.trials,
+            s.mean_reward,
+            s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into()),
+            s.median_final_distance_m
+        );
+    }
+}

@@ -1,0 +1,173 @@
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use stagerl::agent::Algo;
+use stagerl::reward::RewardFunction;
+use stagerl::train::{self, evaluate, Progress, RunDir};
+use std::collections::VecDeque;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Algorithm (overrides agent.algo).
+    #[arg(long)]
+    algo: Option<Algo>,
+    /// Reward function (overrides reward.function).
+    #[arg(long)]
+    reward: Option<RewardFunction>,
+    /// Seed (overrides train.seed).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Training episodes (overrides train.episodes).
+    #[arg(long)]
+    episodes: Option<u64>,
+    /// Run directory (default: runs/<algo>-<reward>-seed<seed>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// A TOML config; defaults otherwise.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Replace a run already in the output directory.
+    #[arg(long)]
+    force: bool,
+    /// Trials of the closing evaluation (deterministic policy); 0 skips it.
+    #[arg(long, default_value_t = 500)]
+    eval_trials: u32,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mut cfg = super::load_config(args.config.as_deref())?;
+    if let Some(a) = args.algo {
+        cfg.agent.algo = a;
+    }
+    if let Some(r) = args.reward {
+        cfg.reward.function = r;
+    }
+    if let Some(s) = args.seed {
+        cfg.train.seed = s;
+    }
+    if let Some(e) = args.episodes {
+        cfg.train.episodes = e;
+    }
+    cfg.validate()?;
+    let out = args.out.unwrap_or_else(|| {
+        PathBuf::from("runs")
+            .join(format!("{}-{}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed))
+    });
+    let dir = RunDir::new(&out);
+    if dir.config().exists() && !args.force {
+        bail!(
+            "{} already holds a run (its config.toml exists): pass --force to replace it, or choose another --out",
+            out.display()
+        );
+    }
+    std::fs::create_dir_all(&out).with_context(|| format!("creating the run directory {}", out.display()))?;
+    let probe = out.join(".write-test");
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("the run directory {} is not writable", out.display()))?;
+    std::fs::remove_file(&probe).ok();
+
+    println!(
+        "training {} with reward {} on `{}`, seed {}, {} episodes -> {}",
+        cfg.agent.algo,
+        cfg.reward.function,
+        cfg.robot.urdf,
+        cfg.train.seed,
+        cfg.train.episodes,
+        out.display()
+    );
+    let mut reporter = Reporter::new(cfg.train.episodes);
+    let summary = train::train(&cfg, &out, |p| reporter.episode(p)).context("training")?;
+    reporter.finish();
+    println!(
+        "trained {} episodes, {} env steps, {} updates in {:.1} s ({:.0} env steps/s)",
+        summary.episodes,
+        summary.env_steps,
+        summary.updates,
+        summary.wall_s,
+        summary.env_steps as f64 / summary.wall_s
+    );
+    if args.eval_trials > 0 {
+        let mut env = stagerl::env::ReachEnv::from_config(&cfg, 0)?;
+        let mut agent = train::load_agent(&cfg, &env, &summary.final_checkpoint)?;
+        let seed = cfg.train.eval_seed;
+        let (s, trials) = evaluate(agent.as_mut(), &mut env, args.eval_trials, seed)?;
+        let csv = out.join(format!("eval-final-seed{seed}.csv"));
+        train::eval::write_trials_csv(&csv, &trials)?;
+        super::eval::print_summary(&s, false);
+    }
+    Ok(())
+}
+
+/// A progress bar on a terminal; plain log lines every 10 s otherwise.
+struct Reporter {
+    bar: Option<ProgressBar>,
+    last_log: Instant,
+    recent: VecDeque<(f64, bool)>,
+    last_eval: Option<(u64, f64)>,
+}
+
+impl Reporter {
+    fn new(episodes: u64) -> Reporter {
+        let bar = std::io::stdout().is_terminal().then(|| {
+            let b = ProgressBar::new(episodes);
+            b.set_style(
+                ProgressStyle::with_template(
+                    "{bar:30} {pos}/{len} episodes {elapsed_precise} (eta {eta}) {msg}",
+                )
+                .expect("valid template"),
+            );
+            b
+        });
+        Reporter { bar, last_log: Instant::now(), recent: VecDeque::new(), last_eval: None }
+    }
+
+    fn episode(&mut self, p: &Progress<'_>) {
+        let r = p.record;
+        self.recent.push_back((r.reward, r.success));
+        if self.recent.len() > 100 {
+            self.recent.pop_front();
+        }
+        if let Some(e) = p.eval {
+            self.last_eval = Some((r.episode, e.success_rate));
+        }
+        let n = self.recent.len() as f64;
+        let mean_r = self.recent.iter().map(|x| x.0).sum::<f64>() / n;
+        let succ = self.recent.iter().filter(|x| x.1).count() as f64 / n;
+        let mut msg = format!("reward(100) {mean_r:.2} success(100) {:.0}%", 100.0 * succ);
+        if let Some((ep, s)) = self.last_eval {
+            msg.push_str(&format!(" eval@{ep} {:.0}%", 100.0 * s));
+        }
+        if let Some(st) = &p.stats {
+            msg.push_str(&format!(" critic {:.3}", st.critic_loss));
+            if let Some(a) = st.alpha {
+                msg.push_str(&format!(" alpha {a:.3}"));
+            }
+        }
+        match &self.bar {
+            Some(b) => {
+                b.set_position(r.episode);
+                b.set_message(msg);
+            }
+            None => {
+                if self.last_log.elapsed() >= Duration::from_secs(10)
+                    || p.eval.is_some()
+                    || r.episode == p.episodes
+                {
+                    println!(
+                        "episode {}/{} env steps {} {:.0} s {msg}",
+                        r.episode, p.episodes, r.env_steps, r.wall_s
+                    );
+                    self.last_log = Instant::now();
+                }
+            }
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish();
+        }
+    }
+}

@@ -1,0 +1,113 @@
+//! Hand-run timing of the single-threaded `gemm` products behind one dense layer
+//! (batch 256), for the layouts the engine uses and their alternatives.
+//!
+//! `cargo bench -p stagerl --bench nn_gemm`
+
+use std::hint::black_box;
+use std::time::Instant;
+
+/// `dst (m x n) = [dst +] lhs (m x k) rhs (k x n)`; strides as (row, column).
+#[allow(clippy::too_many_arguments)]
+fn mm(
+    m: usize,
+    n: usize,
+    k: usize,
+    dst: &mut [f32],
+    ds: (usize, usize),
+    acc: bool,
+    lhs: &[f32],
+    ls: (usize, usize),
+    rhs: &[f32],
+    rs: (usize, usize),
+) {
+    assert!(dst.len() >= m * n && lhs.len() >= m * k && rhs.len() >= k * n);
+    // SAFETY: every view is an m x n, m x k or k x n matrix inside a slice at least that long.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            ds.1 as isize,
+            ds.0 as isize,
+            acc,
+            lhs.as_ptr(),
+            ls.1 as isize,
+            ls.0 as isize,
+            rhs.as_ptr(),
+            rs.1 as isize,
+            rs.0 as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        )
+    }
+}
+
+fn time(mut f: impl FnMut()) -> f64 {
+    for _ in 0..50 {
+        f();
+    }
+    let mut best = f64::INFINITY;
+    for _ in 0..7 {
+        let t = Instant::now();
+        for _ in 0..200 {
+            f();
+        }
+        best = best.min(t.elapsed().as_secs_f64() * 1e6 / 200.0);
+    }
+    best
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; under `cargo test --all-targets` there is nothing to check.
+    if !std::env::args().any(|a| a == "--bench") {
+        println!("nn_gemm: timings only, run with `cargo bench -p stagerl --bench nn_gemm`");
+        return;
+    }
+    let b = 256;
+    println!("batch {b}, f32, best of 7 means (us) and GFLOP/s");
+    for (n_in, n_out) in [(24, 64), (64, 64), (64, 1), (24, 256), (256, 256), (256, 12)] {
+        let x = vec![0.5f32; b * n_in];
+        let w = vec![0.25f32; n_out * n_in];
+        let dy = vec![0.1f32; b * n_out];
+        let mut y = vec![0.0f32; b * n_out];
+        let mut gw = vec![0.0f32; n_out * n_in];
+        let mut dx = vec![0.0f32; b * n_in];
+        let flop = 2.0 * (b * n_in * n_out) as f64;
+        let report = |name: &str, us: f64| {
+            println!("  {n_in:>3}->{n_out:<3} {name:<34} {us:8.2} us {:6.1} GFLOP/s", flop / us * 1e-3)
+        };
+        // Forward y = x W^T, W stored [out, in] (PyTorch) or [in, out].
+        report(
+            "fwd  W[out,in]",
+            time(|| mm(b, n_out, n_in, &mut y, (n_out, 1), true, &x, (n_in, 1), &w, (1, n_in))),
+        );
+        report(
+            "fwd  W[in,out]",
+            time(|| mm(b, n_out, n_in, &mut y, (n_out, 1), true, &x, (n_in, 1), &w, (n_out, 1))),
+        );
+        // Weight gradient dW += dy^T x, stored [out, in] or [in, out].
+        report(
+            "dW   [out,in] += dy^T x",
+            time(|| mm(n_out, n_in, b, &mut gw, (n_in, 1), true, &dy, (1, n_out), &x, (n_in, 1))),
+        );
+        report(
+            "dW   [in,out] += x^T dy",
+            time(|| mm(n_in, n_out, b, &mut gw, (n_out, 1), true, &x, (1, n_in), &dy, (n_out, 1))),
+        );
+        // Input gradient dx = dy W.
+        report(
+            "dx   W[out,in]",
+            time(|| mm(b, n_in, n_out, &mut dx, (n_in, 1), false, &dy, (n_out, 1), &w, (n_in, 1))),
+        );
+        report(
+            "dx   W[in,out]",
+            time(|| mm(b, n_in, n_out, &mut dx, (n_in, 1), false, &dy, (n_out, 1), &w, (1, n_out))),
+        );
+        black_box((&y, &gw, &dx));
+    }
+}

@@ -1,0 +1,154 @@
+//! The fully connected layer y = x W^T + b, operating on a slice of a network's flat parameters.
+
+use std::ops::Range;
+
+use super::matmul::{matmul, Strides};
+use super::{Activation, Scalar};
+use crate::rng::Rng;
+
+/// A fully connected layer: `y = x W^T + b`.
+///
+/// Shapes (row-major, PyTorch's convention): input `x` is `batch x in_features`, weight `W` is
+/// `out_features x in_features`, bias `b` is `out_features`, output `y` is `batch x out_features`.
+///
+/// The layer owns no storage: its weight and bias live in a network's flat parameter vector at
+/// `offset` (weight first, `out * in` values, then bias, `out` values), and its gradients at the
+/// same offset of the flat gradient vector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Linear {
+    /// Input features.
+    pub in_features: usize,
+    /// Output features.
+    pub out_features: usize,
+    /// Index of the first weight in the flat parameter (and gradient) vector.
+    pub offset: usize,
+}
+
+impl Linear {
+    /// A layer `in_features -> out_features` whose parameters start at `offset`.
+    pub fn new(in_features: usize, out_features: usize, offset: usize) -> Self {
+        Linear { in_features, out_features, offset }
+    }
+
+    /// Number of parameters: `out * in + out`.
+    #[inline]
+    pub fn param_len(&self) -> usize {
+        self.out_features * (self.in_features + 1)
+    }
+
+    /// Range of the weight (row-major `out x in`) in the flat vector.
+    #[inline]
+    pub fn weight_range(&self) -> Range<usize> {
+        self.offset..self.offset + self.out_features * self.in_features
+    }
+
+    /// Range of the bias (`out`) in the flat vector.
+    #[inline]
+    pub fn bias_range(&self) -> Range<usize> {
+        let start = self.offset + self.out_features * self.in_features;
+        start..start + self.out_features
+    }
+
+    /// PyTorch's default initialisation (`nn.Linear.reset_parameters`): every weight and bias
+    /// drawn from U(-1/sqrt(in), 1/sqrt(in)), weights first in row-major order, then biases.
+    pub fn init<T: Scalar>(&self, params: &mut [T], rng: &mut Rng) {
+        let bound = 1.0 / (self.in_features as f64).sqrt();
+        for p in &mut params[self.offset..self.offset + self.param_len()] {
+            *p = T::from_f64(rng.uniform_range(-bound, bound));
+        }
+    }
+
+    /// Forward pass: `y = x W^T + b`.
+    ///
+    /// `params` is the whole flat parameter vector; `x` holds at least `batch * in` values,
+    /// `y` at least `batch * out` values (extra values are left untouched).
+    pub fn forward<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
+        self.forward_no_bias(params, x, batch, y);
+        let bias = &params[self.bias_range()];
+        Activation::Identity.add_bias_apply(&mut y[..batch * self.out_features], bias);
+    }
+
+    /// The product alone, `y = x W^T` (the caller adds the bias, possibly fused with an
+    /// activation: see [`Activation::add_bias_apply`]).
+    pub fn forward_no_bias<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
+        let (n_in, n_out) = (self.in_features, self.out_features);
+        matmul(
+            batch,
+            n_out,
+            n_in,
+            &mut y[..batch * n_out],
+            Strides::row_major(n_out),
+            false,
+            &x[..batch * n_in],
+            Strides::row_major(n_in),
+            &params[self.weight_range()],
+            Strides::transposed(n_in),
+        );
+    }
+
+    /// Accumulates the parameter gradients for upstream gradient `dy = dL/dy` (`batch x out`):
+    /// `dW += dy^T x` and `db += sum over the batch of dy`.
+    ///
+    /// `grads` is the whole flat gradient vector, `x` the input the forward pass saw.
+    pub fn backward_params<T: Scalar>(&self, grads: &mut [T], x: &[T], dy: &[T], batch: usize) {
+        let dy = &dy[..batch * self.out_features];
+        let gb = &mut grads[self.bias_range()];
+        for row in dy.chunks_exact(self.out_features) {
+            gb.iter_mut().zip(row).for_each(|(g, &d)| *g += d);
+        }
+        self.backward_weight(grads, x, dy, batch);
+    }
+
+    /// The weight part of [`Linear::backward_params`] alone: `dW += dy^T x`.
+    pub fn backward_weight<T: Scalar>(&self, grads: &mut [T], x: &[T], dy: &[T], batch: usize) {
+        let (n_in, n_out) = (self.in_features, self.out_features);
+        matmul(
+            n_out,
+            n_in,
+            batch,
+            &mut grads[self.weight_range()],
+            Strides::row_major(n_in),
+            true,
+            &dy[..batch * n_out],
+            Strides::transposed(n_out),
+            &x[..batch * n_in],
+            Strides::row_major(n_in),
+        );
+    }
+
+    /// Gradient with respect to the input: `dx = dy W` (`batch x in`), overwriting `dx`.
+    pub fn backward_input<T: Scalar>(&self, params: &[T], dy: &[T], batch: usize, dx: &mut [T]) {
+        self.backward_input_cols(params, dy, batch, 0..self.in_features, dx);
+    }
+
+    /// Gradient with respect to the input columns `cols` only: `dx = dy W[:, cols]`
+    /// (`batch x cols.len()`), overwriting `dx`; e.g. dQ/da when the input is `[obs | action]`.
+    ///
+    /// # Panics
+    /// If `cols` is not inside `0..in_features`.
+    pub fn backward_input_cols<T: Scalar>(
+        &self,
+        params: &[T],
+        dy: &[T],
+        batch: usize,
+        cols: Range<usize>,
+        dx: &mut [T],
+    ) {
+        let (n_in, n_out) = (self.in_features, self.out_features);
+        assert!(cols.start <= cols.end && cols.end <= n_in, "Linear: input columns out of range");
+        let width = cols.len();
+        let w = &params[self.weight_range()];
+        matmul(
+            batch,
+            width,
+            n_out,
+            &mut dx[..batch * width],
+            Strides::row_major(width),
+            false,
+            &dy[..batch * n_out],
+            Strides::row_major(n_out),
+            &w[cols.start..],
+            Strides::row_major(n_in),
+        );
+    }
+}

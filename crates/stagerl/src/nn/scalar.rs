@@ -1,0 +1,243 @@
+//! The floating-point element type of the engine: [`Scalar`], implemented for `f32` and `f64`.
+//!
+//! Training runs in `f32`; the gradient checks run in `f64`. The trait is sealed because the
+//! matrix products go through `gemm::gemm`, which supports only these two real types.
+
+use std::fmt::{Debug, Display};
+use std::iter::Sum;
+use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
+
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for f32 {}
+    impl Sealed for f64 {}
+}
+
+/// A real floating-point type the engine computes in (`f32` or `f64`).
+pub trait Scalar:
+    sealed::Sealed
+    + Copy
+    + Debug
+    + Display
+    + Default
+    + PartialEq
+    + PartialOrd
+    + Send
+    + Sync
+    + 'static
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+    + DivAssign
+    + Sum
+    + Serialize
+    + DeserializeOwned
+{
+    /// 0.
+    const ZERO: Self;
+    /// 1.
+    const ONE: Self;
+    /// Machine epsilon of the type.
+    const EPSILON: Self;
+
+    /// Nearest value of this type to `x`.
+    fn from_f64(x: f64) -> Self;
+    /// `self` widened (or kept) as `f64`.
+    fn to_f64(self) -> f64;
+    /// `n` as this type (exact below 2^24 for `f32`).
+    #[inline]
+    fn from_usize(n: usize) -> Self {
+        Self::from_f64(n as f64)
+    }
+    /// e^self.
+    fn exp(self) -> Self;
+    /// e^self - 1, accurate near 0.
+    fn exp_m1(self) -> Self;
+    /// Natural logarithm.
+    fn ln(self) -> Self;
+    /// ln(1 + self), accurate near 0.
+    fn ln_1p(self) -> Self;
+    /// Hyperbolic tangent (for `f32` the vectorisable rational approximation [`tanh_f32`],
+    /// for `f64` the standard library's).
+    fn tanh(self) -> Self;
+    /// Square root.
+    fn sqrt(self) -> Self;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// Larger of the two (the other one if one is NaN, as `f64::max`).
+    fn max(self, other: Self) -> Self;
+    /// Smaller of the two (the other one if one is NaN, as `f64::min`).
+    fn min(self, other: Self) -> Self;
+    /// Neither infinite nor NaN.
+    fn is_finite(self) -> bool;
+
+    /// softplus(x) = ln(1 + e^x), computed as max(x, 0) + ln(1 + e^-|x|) so that it neither
+    /// overflows for large x nor loses precision for very negative x.
+    #[inline]
+    fn softplus(self) -> Self {
+        self.max(Self::ZERO) + (-self.abs()).exp().ln_1p()
+    }
+
+    /// The logistic sigmoid 1 / (1 + e^-x), computed without overflow for either sign.
+    #[inline]
+    fn sigmoid(self) -> Self {
+        if self >= Self::ZERO {
+            Self::ONE / (Self::ONE + (-self).exp())
+        } else {
+            let e = self.exp();
+            e / (Self::ONE + e)
+        }
+    }
+}
+
+macro_rules! impl_scalar {
+    ($t:ty, $tanh:expr) => {
+        impl Scalar for $t {
+            #[inline]
+            fn tanh(self) -> Self {
+                $tanh(self)
+            }
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            const EPSILON: Self = <$t>::EPSILON;
+
+            #[inline]
+            fn from_f64(x: f64) -> Self {
+                x as $t
+            }
+            #[inline]
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+            #[inline]
+            fn exp(self) -> Self {
+                <$t>::exp(self)
+            }
+            #[inline]
+            fn exp_m1(self) -> Self {
+                <$t>::exp_m1(self)
+            }
+            #[inline]
+            fn ln(self) -> Self {
+                <$t>::ln(self)
+            }
+            #[inline]
+            fn ln_1p(self) -> Self {
+                <$t>::ln_1p(self)
+            }
+            #[inline]
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            #[inline]
+            fn abs(self) -> Self {
+                <$t>::abs(self)
+            }
+            #[inline]
+            fn max(self, other: Self) -> Self {
+                <$t>::max(self, other)
+            }
+            #[inline]
+            fn min(self, other: Self) -> Self {
+                <$t>::min(self, other)
+            }
+            #[inline]
+            fn is_finite(self) -> bool {
+                <$t>::is_finite(self)
+            }
+        }
+    };
+}
+
+impl_scalar!(f32, tanh_f32);
+impl_scalar!(f64, f64::tanh);
+
+/// tanh for `f32` as a [13/6] odd/even rational function on [-7.905, 7.905] (the approximation of
+/// Eigen's `generic_fast_tanh_float`), `x` itself below 4e-4 and +-1 beyond the clamp.
+///
+/// Branch-free, so loops of it auto-vectorise (glibc's `tanhf` is a scalar call through
+/// `expm1f`); its error is a few ulp (checked against `f64::tanh` in the tests).
+#[inline]
+#[allow(clippy::excessive_precision)] // Eigen's published coefficients, rounded by the compiler
+pub fn tanh_f32(x: f32) -> f32 {
+    const CLAMP: f32 = 7.90531110763549805;
+    const A1: f32 = 4.89352455891786e-03;
+    const A3: f32 = 6.37261928875436e-04;
+    const A5: f32 = 1.48572235717979e-05;
+    const A7: f32 = 5.12229709037114e-08;
+    const A9: f32 = -8.60467152213735e-11;
+    const A11: f32 = 2.00018790482477e-13;
+    const A13: f32 = -2.76076847742355e-16;
+    const B0: f32 = 4.89352518554385e-03;
+    const B2: f32 = 2.26843463243900e-03;
+    const B4: f32 = 1.18534705686654e-04;
+    const B6: f32 = 1.19825839466702e-06;
+    let c = x.clamp(-CLAMP, CLAMP);
+    let x2 = c * c;
+    let p = ((((((A13 * x2 + A11) * x2 + A9) * x2 + A7) * x2 + A5) * x2 + A3) * x2 + A1) * c;
+    let q = ((B6 * x2 + B4) * x2 + B2) * x2 + B0;
+    if x.abs() < 4e-4 {
+        x
+    } else {
+        p / q
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn softplus_naive(x: f64) -> f64 {
+        (1.0 + x.exp()).ln()
+    }
+
+    #[test]
+    fn softplus_and_sigmoid_are_stable_and_correct() {
+        for &x in &[-30.0, -5.0, -0.3, 0.0, 0.7, 4.0, 20.0] {
+            assert!((Scalar::softplus(x) - softplus_naive(x)).abs() <= 1e-12 * (1.0 + x.abs()));
+            let s = Scalar::sigmoid(x);
+            assert!((s - 1.0 / (1.0 + (-x).exp())).abs() <= 1e-15);
+        }
+        // Where the naive forms overflow.
+        assert_eq!(Scalar::softplus(1000.0f64), 1000.0);
+        assert_eq!(Scalar::softplus(-1000.0f64), 0.0);
+        assert_eq!(Scalar::sigmoid(-1000.0f64), 0.0);
+        assert_eq!(Scalar::softplus(200.0f32), 200.0);
+    }
+
+    #[test]
+    fn fast_f32_tanh_is_accurate() {
+        // Dense grid on [-12, 12] plus a log grid of small magnitudes, both signs.
+        let grid = (0..=2_000_000)
+            .map(|i| -12.0 + 24.0 * i as f64 / 2e6)
+            .chain((0..=90_000).map(|i| 10f64.powf(-8.0 + 9.0 * i as f64 / 9e4)));
+        let mut max_rel = 0.0f64;
+        for x in grid {
+            for x in [x as f32, -x as f32] {
+                let exact = (x as f64).tanh();
+                let got = tanh_f32(x) as f64;
+                let rel = (got - exact).abs() / exact.abs().max(1e-30);
+                max_rel = max_rel.max(rel);
+            }
+        }
+        assert!(max_rel < 4.0 * f32::EPSILON as f64, "max relative error {max_rel}");
+        assert_eq!(tanh_f32(0.0), 0.0);
+        assert_eq!(tanh_f32(100.0), 1.0);
+        assert_eq!(tanh_f32(-100.0), -1.0);
+        assert!(tanh_f32(f32::NAN).is_nan());
+    }
+
+    #[test]
+    fn conversions_round_trip() {
+        assert_eq!(<f32 as Scalar>::from_f64(0.5).to_f64(), 0.5);
+        assert_eq!(<f64 as Scalar>::from_usize(7), 7.0);
+    }
+}
