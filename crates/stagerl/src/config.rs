@@ -54,7 +54,8 @@ impl RobotConfig {
 #[serde(rename_all = "snake_case")]
 pub enum ObservationKind {
     /// N + 10 values (16 for six joints), f32: q / pi (N), end-effector position (3, m),
-    /// target (3, m), target - end-effector (3, m), D_PT (1, m).
+    /// target (3, m), k (target - end-effector) (3, m), k D_PT (1, m), with
+    /// k = `task.obs_delta_scale`.
     Standard,
 }
 
@@ -76,6 +77,10 @@ pub struct TaskConfig {
     pub target_min_z_m: f64,
     /// Observation layout.
     pub observation: ObservationKind,
+    /// Factor on the observation's `target - end-effector` and `D_PT` entries. Near the goal
+    /// these are about 0.01 m, a tiny input for a network that must turn them into precise
+    /// joint velocities; a factor of 10 puts the last centimetre on the scale of the other inputs.
+    pub obs_delta_scale: f64,
 }
 
 impl Default for TaskConfig {
@@ -87,6 +92,7 @@ impl Default for TaskConfig {
             target_joint_range_rad: None,
             target_min_z_m: 0.05,
             observation: ObservationKind::Standard,
+            obs_delta_scale: 1.0,
         }
     }
 }
@@ -105,6 +111,7 @@ pub struct ResolvedTask {
     pub target_joint_range: Vec<f64>,
     pub target_min_z_m: f64,
     pub observation: ObservationKind,
+    pub obs_delta_scale: f64,
     /// Fraction of target draws accepted by the height test, estimated from 2000 seeded draws.
     pub target_acceptance: f64,
 }
@@ -127,6 +134,9 @@ impl TaskConfig {
             return Err(Error::config("task.max_steps", self.max_steps, "an integer >= 1"));
         }
         check_finite("task.target_min_z_m", self.target_min_z_m)?;
+        if !(self.obs_delta_scale.is_finite() && self.obs_delta_scale > 0.0) {
+            return Err(Error::config("task.obs_delta_scale", self.obs_delta_scale, "a finite number > 0"));
+        }
         Ok(())
     }
 
@@ -190,6 +200,7 @@ impl TaskConfig {
             target_joint_range: range,
             target_min_z_m: self.target_min_z_m,
             observation: self.observation,
+            obs_delta_scale: self.obs_delta_scale,
             target_acceptance: 0.0,
         };
         // Estimate how often a draw passes the height test; refuse a distribution the arm

@@ -9,6 +9,35 @@ use std::time::Instant;
 pub enum Bench {
     /// Environment steps per second, single thread (UR5, SAR by default, random actions).
     Env(EnvArgs),
+    /// Median milliseconds per agent update (one gradient step of every network), one thread.
+    Update(UpdateArgs),
+    /// End-to-end training throughput: environment steps per second at one update per step.
+    Train(TrainArgs),
+}
+
+#[derive(clap::Args)]
+pub struct UpdateArgs {
+    #[arg(long, default_value = "sac")]
+    algo: stagerl::agent::Algo,
+    /// Width of both hidden layers.
+    #[arg(long, default_value_t = 256)]
+    hidden: usize,
+    #[arg(long, default_value_t = 256)]
+    batch: usize,
+    /// Timed updates (after 20 warm-up updates).
+    #[arg(long, default_value_t = 200)]
+    updates: usize,
+}
+
+#[derive(clap::Args)]
+pub struct TrainArgs {
+    #[arg(long, default_value = "sac")]
+    algo: stagerl::agent::Algo,
+    #[arg(long, default_value_t = 64)]
+    hidden: usize,
+    /// Environment steps to time (after `learning_starts` = 1000 random steps, which are timed too).
+    #[arg(long, default_value_t = 20_000)]
+    steps: u64,
 }
 
 #[derive(clap::Args)]
@@ -27,6 +56,8 @@ pub struct EnvArgs {
 pub fn run(b: Bench) -> Result<()> {
     match b {
         Bench::Env(a) => env(a),
+        Bench::Update(a) => update(a),
+        Bench::Train(a) => train(a),
     }
 }
 
@@ -67,6 +98,67 @@ fn env(a: EnvArgs) -> Result<()> {
         1e9 / sps,
         a.reward,
         checksum
+    );
+    println!("{}", serde_json::json!({ "steps_per_sec": sps }));
+    Ok(())
+}
+
+fn update(a: UpdateArgs) -> Result<()> {
+    use stagerl::agent::{build, AgentConfig};
+    use stagerl::replay::Batch;
+    let (od, ad) = (16, 6);
+    let cfg = AgentConfig {
+        algo: a.algo,
+        hidden: vec![a.hidden, a.hidden],
+        batch_size: a.batch,
+        ..AgentConfig::default()
+    };
+    let mut agent = build(&cfg, od, ad, 0)?;
+    let mut rng = Rng::new(1);
+    let mut batch = Batch::new(a.batch, od, ad);
+    for x in batch.obs.iter_mut().chain(batch.next_obs.iter_mut()).chain(batch.act.iter_mut()) {
+        *x = rng.uniform_range(-1.0, 1.0) as f32;
+    }
+    for r in batch.reward.iter_mut() {
+        *r = rng.normal() as f32;
+    }
+    for _ in 0..20 {
+        agent.update(&batch);
+    }
+    let mut times: Vec<f64> = (0..a.updates.max(1))
+        .map(|_| {
+            let t = Instant::now();
+            agent.update(&batch);
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    let median = times[times.len() / 2];
+    println!(
+        "update: {} hidden {}x{} batch {}: median {:.3} ms, min {:.3} ms over {} updates (obs {od}, act {ad}, one thread)",
+        a.algo, a.hidden, a.hidden, a.batch, median, times[0], times.len()
+    );
+    println!("{}", serde_json::json!({ "ms_per_update": median }));
+    Ok(())
+}
+
+fn train(a: TrainArgs) -> Result<()> {
+    let mut cfg = Config::default();
+    cfg.agent.algo = a.algo;
+    cfg.agent.hidden = vec![a.hidden, a.hidden];
+    cfg.train.eval_every_episodes = 0;
+    cfg.train.checkpoint_every_episodes = 0;
+    // Enough episodes to cover the steps; stopped by counting steps below.
+    cfg.train.episodes = a.steps.div_ceil(u64::from(cfg.task.max_steps)).max(1);
+    let dir = std::env::temp_dir().join(format!("stagerl-bench-train-{}", std::process::id()));
+    let start = Instant::now();
+    let summary = stagerl::train::train(&cfg, &dir, |_| {}).context("training")?;
+    let secs = start.elapsed().as_secs_f64();
+    std::fs::remove_dir_all(&dir).ok();
+    let sps = summary.env_steps as f64 / secs;
+    println!(
+        "train: {} hidden {}x{}: {} env steps, {} updates in {:.2} s, {:.0} env steps/s end to end (one update per step, one thread)",
+        a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps
     );
     println!("{}", serde_json::json!({ "steps_per_sec": sps }));
     Ok(())

@@ -194,7 +194,7 @@ impl ReachEnv {
             ObservationKind::Standard => {
                 let n = self.q.len();
                 let (p, t) = (self.ee.position, self.target);
-                let d = t - p;
+                let d = (t - p) * self.task.obs_delta_scale;
                 let obs = &mut self.obs;
                 for (o, q) in obs.iter_mut().zip(&self.q) {
                     *o = (q / PI) as f32;
