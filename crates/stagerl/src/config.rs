@@ -92,7 +92,7 @@ impl Default for TaskConfig {
             target_joint_range_rad: None,
             target_min_z_m: 0.05,
             observation: ObservationKind::Standard,
-            obs_delta_scale: 1.0,
+            obs_delta_scale: 10.0,
         }
     }
 }

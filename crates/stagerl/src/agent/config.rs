@@ -55,6 +55,9 @@ pub enum NoiseKind {
     Ou,
 }
 
+/// Default exploration noise of DDPG and TD3 (action units).
+const NOISE_DEFAULT: f64 = 0.1;
+
 /// Hyper-parameters of the agents; each algorithm reads the ones it uses.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -62,8 +65,10 @@ pub struct AgentConfig {
     pub algo: Algo,
     /// Hidden layer widths of every network (actor and critics).
     pub hidden: Vec<usize>,
-    pub actor_lr: f64,
-    pub critic_lr: f64,
+    /// Actor learning rate; unset: the algorithm's default ([`AgentConfig::actor_lr`]).
+    pub actor_lr: Option<f64>,
+    /// Critic learning rate; unset: the algorithm's default ([`AgentConfig::critic_lr`]).
+    pub critic_lr: Option<f64>,
     /// Discount factor.
     pub gamma: f64,
     /// Polyak coefficient of the target networks.
@@ -79,8 +84,9 @@ pub struct AgentConfig {
     pub max_grad_norm: f64,
     /// DDPG/TD3 exploration noise kind.
     pub noise: NoiseKind,
-    /// DDPG/TD3 exploration noise scale (action units, actions in [-1, 1]).
-    pub noise_sigma: f64,
+    /// DDPG/TD3 exploration noise scale (action units, actions in [-1, 1]); unset: the
+    /// algorithm's default ([`AgentConfig::noise_sigma`]).
+    pub noise_sigma: Option<f64>,
     /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
     pub ou_theta: f64,
     /// TD3: actor and target updates every this many critic updates.
@@ -103,9 +109,9 @@ impl Default for AgentConfig {
     fn default() -> Self {
         AgentConfig {
             algo: Algo::Sac,
-            hidden: vec![256, 256],
-            actor_lr: 3e-4,
-            critic_lr: 3e-4,
+            hidden: vec![64, 64],
+            actor_lr: None,
+            critic_lr: None,
             gamma: 0.99,
             tau: 0.005,
             batch_size: 256,
@@ -114,7 +120,7 @@ impl Default for AgentConfig {
             updates_per_step: 1,
             max_grad_norm: 0.0,
             noise: NoiseKind::Gaussian,
-            noise_sigma: 0.1,
+            noise_sigma: None,
             ou_theta: 0.15,
             policy_delay: 2,
             target_noise: 0.2,
@@ -128,6 +134,28 @@ impl Default for AgentConfig {
 }
 
 impl AgentConfig {
+    /// The actor's learning rate: as set, else 1e-3 for SAC and 3e-4 for DDPG and TD3 (measured
+    /// on the reaching task: SAC at 3e-4 learns about twice as slowly; DDPG at 1e-3 diverges).
+    pub fn actor_lr(&self) -> f64 {
+        self.actor_lr.unwrap_or(match self.algo {
+            Algo::Sac => 1e-3,
+            Algo::Ddpg | Algo::Td3 => 3e-4,
+        })
+    }
+
+    /// The critics' learning rate: as set, else as [`AgentConfig::actor_lr`]'s default.
+    pub fn critic_lr(&self) -> f64 {
+        self.critic_lr.unwrap_or(match self.algo {
+            Algo::Sac => 1e-3,
+            Algo::Ddpg | Algo::Td3 => 3e-4,
+        })
+    }
+
+    /// DDPG/TD3 exploration noise: as set, else NOISE_DEFAULT.
+    pub fn noise_sigma(&self) -> f64 {
+        self.noise_sigma.unwrap_or(NOISE_DEFAULT)
+    }
+
     /// Check every value; the error names the field, the value and what is allowed.
     pub fn validate(&self) -> Result<()> {
         let pos = |field: &str, v: f64| {
@@ -151,8 +179,8 @@ impl AgentConfig {
                 "one or more layer widths, each in 1..=16384",
             ));
         }
-        pos("agent.actor_lr", self.actor_lr)?;
-        pos("agent.critic_lr", self.critic_lr)?;
+        pos("agent.actor_lr", self.actor_lr())?;
+        pos("agent.critic_lr", self.critic_lr())?;
         if !(self.gamma.is_finite() && (0.0..=1.0).contains(&self.gamma)) {
             return Err(Error::config("agent.gamma", self.gamma, "a number in [0, 1]"));
         }
@@ -169,7 +197,7 @@ impl AgentConfig {
             return Err(Error::config("agent.updates_per_step", 0, "an integer >= 1"));
         }
         nonneg("agent.max_grad_norm", self.max_grad_norm)?;
-        nonneg("agent.noise_sigma", self.noise_sigma)?;
+        nonneg("agent.noise_sigma", self.noise_sigma())?;
         nonneg("agent.ou_theta", self.ou_theta)?;
         if self.policy_delay == 0 {
             return Err(Error::config("agent.policy_delay", 0, "an integer >= 1"));

@@ -53,11 +53,11 @@ impl Ddpg {
         );
         let b = cfg.batch_size;
         Ddpg {
-            actor_opt: Adam::new(actor.num_params(), cfg.actor_lr),
-            critic_opt: Adam::new(critic.num_params(), cfg.critic_lr),
+            actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
+            critic_opt: Adam::new(critic.num_params(), cfg.critic_lr()),
             actor_target: actor.clone(),
             critic_target: critic.clone(),
-            noise: ActionNoise::new(cfg.noise, cfg.noise_sigma, cfg.ou_theta, act_dim),
+            noise: ActionNoise::new(cfg.noise, cfg.noise_sigma(), cfg.ou_theta, act_dim),
             rng: Rng::derived(seed, 0xDD961),
             critic_in: vec![0.0; b * (obs_dim + act_dim)],
             y: vec![0.0; b],

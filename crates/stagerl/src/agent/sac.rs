@@ -72,9 +72,9 @@ impl Sac {
         let (q1_target, q2_target) = (q1.clone(), q2.clone());
         let b = cfg.batch_size;
         Sac {
-            actor_opt: Adam::new(actor.num_params(), cfg.actor_lr),
-            q1_opt: Adam::new(q1.num_params(), cfg.critic_lr),
-            q2_opt: Adam::new(q2.num_params(), cfg.critic_lr),
+            actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
+            q1_opt: Adam::new(q1.num_params(), cfg.critic_lr()),
+            q2_opt: Adam::new(q2.num_params(), cfg.critic_lr()),
             log_alpha: [cfg.init_alpha.ln() as f32],
             alpha_opt: Adam::new(1, cfg.alpha_lr),
             target_entropy: (cfg.target_entropy_per_dim * act_dim as f64) as f32,

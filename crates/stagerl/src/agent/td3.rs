@@ -52,13 +52,13 @@ impl Td3 {
         let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
         let b = cfg.batch_size;
         Td3 {
-            actor_opt: Adam::new(actor.num_params(), cfg.actor_lr),
-            q1_opt: Adam::new(q1.num_params(), cfg.critic_lr),
-            q2_opt: Adam::new(q2.num_params(), cfg.critic_lr),
+            actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
+            q1_opt: Adam::new(q1.num_params(), cfg.critic_lr()),
+            q2_opt: Adam::new(q2.num_params(), cfg.critic_lr()),
             actor_target: actor.clone(),
             q1_target: q1.clone(),
             q2_target: q2.clone(),
-            noise: ActionNoise::new(cfg.noise, cfg.noise_sigma, cfg.ou_theta, act_dim),
+            noise: ActionNoise::new(cfg.noise, cfg.noise_sigma(), cfg.ou_theta, act_dim),
             rng: Rng::derived(seed, 0x7D31),
             updates: 0,
             critic_in: vec![0.0; b * (obs_dim + act_dim)],

@@ -55,7 +55,7 @@ fn every_algorithm_updates_acts_in_range_and_is_deterministic() {
 fn critic_fits_a_fixed_target() {
     // With gamma 0 the critic target is the reward itself: the TD loss must fall.
     for algo in Algo::ALL {
-        let cfg = AgentConfig { gamma: 0.0, critic_lr: 1e-3, ..small_cfg(algo) };
+        let cfg = AgentConfig { gamma: 0.0, critic_lr: Some(1e-3), ..small_cfg(algo) };
         let mut agent = build(&cfg, 16, 6, 1).unwrap();
         let mut rng = Rng::new(5);
         let batch = random_batch(&mut rng, 16, 16, 6);

@@ -309,9 +309,9 @@ mod tests {
         for k in 0..3 {
             assert_eq!(o[6 + k], p[k] as f32);
             assert_eq!(o[9 + k], t[k] as f32);
-            assert_eq!(o[12 + k], (t[k] - p[k]) as f32);
+            assert_eq!(o[12 + k], ((t[k] - p[k]) * 10.0) as f32);
         }
-        assert_eq!(o[15], e.distance() as f32);
+        assert_eq!(o[15], (e.distance() * 10.0) as f32);
     }
 
     #[test]
