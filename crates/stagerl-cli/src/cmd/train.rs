@@ -51,9 +51,14 @@ pub fn run(args: Args) -> Result<()> {
         cfg.train.episodes = e;
     }
     cfg.validate()?;
+    // Without --out, the first free runs/<algo>-<reward>-seed<N>[-k]: running the same command
+    // again starts a new run beside the old one instead of failing or overwriting it.
     let out = args.out.unwrap_or_else(|| {
-        PathBuf::from("runs")
-            .join(format!("{}-{}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed))
+        let base = format!("{}-{}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed);
+        (1..)
+            .map(|k| PathBuf::from("runs").join(if k == 1 { base.clone() } else { format!("{base}-{k}") }))
+            .find(|p| !p.exists())
+            .expect("some directory name is free")
     });
     let dir = RunDir::new(&out);
     if dir.config().exists() && !args.force {

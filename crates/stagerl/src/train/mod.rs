@@ -34,7 +34,8 @@ pub use eval::{evaluate, EvalSummary, TrialRecord};
 pub struct TrainConfig {
     /// The run's seed: environment targets, initial weights, exploration, replay sampling.
     pub seed: u64,
-    /// Training episodes (paper: 10000).
+    /// Training episodes (paper: 10000). Default 5000: DDPG + SAR reaches 99 % by then, SAC + SAR
+    /// by about 1500.
     pub episodes: u64,
     /// Evaluate the deterministic policy every this many episodes; 0 disables.
     pub eval_every_episodes: u64,
@@ -50,7 +51,7 @@ impl Default for TrainConfig {
     fn default() -> Self {
         TrainConfig {
             seed: 0,
-            episodes: 3000,
+            episodes: 5000,
             eval_every_episodes: 250,
             eval_trials: 100,
             eval_seed: 1_000_003,
