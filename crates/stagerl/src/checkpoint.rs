@@ -86,6 +86,21 @@ impl Checkpoint {
             .map_err(|e| Error::InvalidInput(format!("{}: metadata `{key}`: {e}", self.where_())))
     }
 
+    /// Every metadata entry, sorted by key.
+    pub fn metadata(&self) -> &BTreeMap<String, String> {
+        &self.metadata
+    }
+
+    /// Same tensors (names, shapes, bit-identical values) and same metadata. (The files' bytes
+    /// may differ: safetensors writes the metadata map in hash order.)
+    pub fn same_contents(&self, other: &Checkpoint) -> bool {
+        self.metadata == other.metadata
+            && self.tensors.len() == other.tensors.len()
+            && self.tensors.iter().zip(&other.tensors).all(|((na, (sa, da)), (nb, (sb, db)))| {
+                na == nb && sa == sb && da.iter().zip(db).all(|(x, y)| x.to_bits() == y.to_bits())
+            })
+    }
+
     /// Tensor names, sorted.
     pub fn tensor_names(&self) -> impl Iterator<Item = &str> {
         self.tensors.keys().map(String::as_str)

@@ -18,6 +18,12 @@ pub enum Error {
     /// Input to a function that is outside its domain (wrong length, non-finite value, ...).
     #[error("invalid input: {0}")]
     InvalidInput(String),
+    /// Training stopped on request (SIGINT/SIGTERM); the state was saved to `checkpoint`.
+    #[error("interrupted at episode {episode}; the run was saved to {checkpoint} and can be resumed")]
+    Interrupted { episode: u64, checkpoint: PathBuf },
+    /// A loss, gradient or parameter became NaN or infinite.
+    #[error("numerical fault: {0}")]
+    NumericalFault(String),
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {

@@ -2,10 +2,12 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use stagerl::agent::Algo;
 use stagerl::reward::RewardFunction;
-use stagerl::train::{self, evaluate, Progress, RunDir};
+use stagerl::train::{self, evaluate, Progress, Resumed, RunDir, TrainOptions};
 use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 #[derive(clap::Args)]
@@ -29,14 +31,47 @@ pub struct Args {
     #[arg(long)]
     config: Option<PathBuf>,
     /// Replace a run already in the output directory.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "resume")]
     force: bool,
+    /// Continue the run in this directory from its last checkpoint (with its own config).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "seed", "episodes", "out", "config"])]
+    resume: Option<PathBuf>,
     /// Trials of the closing evaluation (deterministic policy); 0 skips it.
     #[arg(long, default_value_t = 500)]
     eval_trials: u32,
 }
 
+/// Exit code of a run stopped by SIGINT or SIGTERM (after saving it).
+pub const INTERRUPTED_EXIT: u8 = 130;
+
+/// A stop flag raised by SIGINT and SIGTERM: the loop then saves the run and returns.
+fn stop_flag() -> Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&flag)).context("installing the signal handler")?;
+    }
+    Ok(flag)
+}
+
+/// Map an interruption to a message and the interrupted exit code.
+fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path) -> Result<T> {
+    match r {
+        Err(stagerl::Error::Interrupted { episode, checkpoint }) => {
+            eprintln!(
+                "stagerl: interrupted after episode {episode}; saved to {}. Continue with: stagerl train --resume {}",
+                checkpoint.display(),
+                dir.display()
+            );
+            std::process::exit(i32::from(INTERRUPTED_EXIT));
+        }
+        other => other.context("training"),
+    }
+}
+
 pub fn run(args: Args) -> Result<()> {
+    if let Some(dir) = &args.resume {
+        return resume(dir, args.eval_trials);
+    }
     let mut cfg = super::load_config(args.config.as_deref())?;
     if let Some(a) = args.algo {
         cfg.agent.algo = a;
@@ -82,9 +117,43 @@ pub fn run(args: Args) -> Result<()> {
         cfg.train.episodes,
         out.display()
     );
+    let stop = stop_flag()?;
+    let opts = TrainOptions { stop: Some(&stop) };
     let mut reporter = Reporter::new(cfg.train.episodes);
-    let summary = train::train(&cfg, &out, |p| reporter.episode(p)).context("training")?;
+    let summary = finish(train::train_with(&cfg, &out, &opts, &mut |p| reporter.episode(p)), &out)?;
     reporter.finish();
+    report_and_evaluate(&cfg, &out, &summary, args.eval_trials)
+}
+
+fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
+    let run = RunDir::new(dir);
+    let cfg = run.load_config().with_context(|| format!("reading the run in {}", dir.display()))?;
+    match train::checkpointed_episode(dir)? {
+        Some((episode, false)) => println!("resuming {} after episode {episode}", dir.display()),
+        Some((_, true)) => {}
+        None => println!("{} has no checkpoint yet: starting it over", dir.display()),
+    }
+    let stop = stop_flag()?;
+    let opts = TrainOptions { stop: Some(&stop) };
+    let mut reporter = Reporter::new(cfg.train.episodes);
+    match finish(train::resume(dir, &opts, &mut |p| reporter.episode(p)), dir)? {
+        Resumed::AlreadyFinished(s) => {
+            println!("{} already finished ({} episodes); nothing to do", dir.display(), s.episodes);
+            Ok(())
+        }
+        Resumed::Finished(s) => {
+            reporter.finish();
+            report_and_evaluate(&cfg, dir, &s, eval_trials)
+        }
+    }
+}
+
+fn report_and_evaluate(
+    cfg: &stagerl::config::Config,
+    out: &std::path::Path,
+    summary: &train::TrainSummary,
+    eval_trials: u32,
+) -> Result<()> {
     println!(
         "trained {} episodes, {} env steps, {} updates in {:.1} s ({:.0} env steps/s)",
         summary.episodes,
@@ -93,11 +162,11 @@ pub fn run(args: Args) -> Result<()> {
         summary.wall_s,
         summary.env_steps as f64 / summary.wall_s
     );
-    if args.eval_trials > 0 {
-        let mut env = stagerl::env::ReachEnv::from_config(&cfg, 0)?;
-        let mut agent = train::load_agent(&cfg, &env, &summary.final_checkpoint)?;
+    if eval_trials > 0 {
+        let mut env = stagerl::env::ReachEnv::from_config(cfg, 0)?;
+        let mut agent = train::load_agent(cfg, &env, &summary.final_checkpoint)?;
         let seed = cfg.train.eval_seed;
-        let (s, trials) = evaluate(agent.as_mut(), &mut env, args.eval_trials, seed)?;
+        let (s, trials) = evaluate(agent.as_mut(), &mut env, eval_trials, seed)?;
         let csv = out.join(format!("eval-final-seed{seed}.csv"));
         train::eval::write_trials_csv(&csv, &trials)?;
         super::eval::print_summary(&s, false);

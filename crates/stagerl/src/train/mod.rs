@@ -7,20 +7,28 @@
 //! - `episodes.csv`: one row per episode (see [`EpisodeRecord`]);
 //! - `eval.csv`: the periodic evaluations;
 //! - `tb/`: TensorBoard event files with the same scalars and the losses;
-//! - `checkpoints/latest.safetensors` (every `checkpoint_every_episodes`) and
-//!   `checkpoints/final.safetensors` (at the end): networks, targets, optimiser states, random
-//!   states, counters, with metadata naming the algorithm, the shapes and the config hash.
+//! - `checkpoints/latest.safetensors`: everything the run needs to continue (networks, targets,
+//!   optimiser moments, the replay buffer, every random state, the counters, where the logs
+//!   stand), written atomically every `checkpoint_every_episodes` episodes, on a stop request
+//!   (SIGINT/SIGTERM in the CLI, mid-episode if need be) and at the end;
+//! - `checkpoints/final.safetensors`: the trained agent alone (no replay buffer), for evaluation
+//!   and deployment.
+//!
+//! Metadata in both names the algorithm, the shapes and the config hash. [`resume`] continues a
+//! run from `latest.safetensors` so that its `episodes.csv` (but the wall time) and its networks
+//! are bit-identical to those of an uninterrupted run.
 
 pub mod eval;
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use crate::agent::{self, Agent, UpdateStats};
 use crate::checkpoint::Checkpoint;
 use crate::config::Config;
-use crate::env::ReachEnv;
+use crate::env::{EnvState, ReachEnv};
 use crate::log::{EpisodeCsv, EpisodeRecord, EventWriter};
 use crate::replay::{Batch, ReplayBuffer};
 use crate::rng::Rng;
@@ -169,167 +177,419 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
     Ok(agent)
 }
 
-/// Train from scratch into `out` (created if needed; any previous run there is replaced, the
-/// caller decides whether that is allowed). `on_episode` sees every finished episode.
-pub fn train(cfg: &Config, out: &Path, mut on_episode: impl FnMut(&Progress<'_>)) -> Result<TrainSummary> {
-    cfg.validate()?;
-    let dir = RunDir::new(out);
-    for d in [dir.root.clone(), dir.tb(), dir.checkpoints()] {
-        std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
-    }
-    crate::io::write_atomic(&dir.config(), cfg.to_toml_string().as_bytes())?;
-    let hash = config_hash(cfg);
+/// Counters and random states of a run, saved in every full checkpoint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct LoopState {
+    /// Episodes completed.
+    episode: u64,
+    env_steps: u64,
+    updates: u64,
+    /// A checkpoint taken mid-episode: the episode `episode + 1` is under way.
+    in_episode: bool,
+    /// The eq. 16 reward of the episode under way so far.
+    episode_reward: f64,
+    env: EnvState,
+    replay_rng: Rng,
+    warmup_rng: Rng,
+    replay_len: usize,
+    replay_pos: usize,
+    /// Wall seconds of the run before this session (so `wall_s` keeps counting).
+    wall_s: f64,
+    finished: bool,
+}
 
-    let seed = cfg.train.seed;
-    let mut env = ReachEnv::from_config(cfg, Rng::derived(seed, 0).next_u64())?;
-    let mut eval_env = env.clone();
-    let (od, ad) = (env.obs_dim(), env.act_dim());
-    let mut agent = build_agent(cfg, &env)?;
-    let mut buffer = ReplayBuffer::new(cfg.agent.buffer_size, od, ad)?;
-    let mut batch = Batch::new(cfg.agent.batch_size, od, ad);
-    let mut replay_rng = Rng::derived(seed, 1);
-    let mut warmup_rng = Rng::derived(seed, 2);
+/// Options of a training session.
+#[derive(Default)]
+pub struct TrainOptions<'a> {
+    /// Set (by a signal handler, say) to stop: the run is saved and [`Error::Interrupted`] returned.
+    pub stop: Option<&'a AtomicBool>,
+}
 
-    let mut csv = EpisodeCsv::create(&dir.episodes())?;
-    let mut eval_csv =
-        String::from("episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m\n");
-    let mut tb = EventWriter::create(&dir.tb())?;
-    let start = Instant::now();
-    let (mut env_steps, mut updates) = (0u64, 0u64);
-    let mut obs = vec![0.0f32; od];
-    let mut action = vec![0.0f32; ad];
-    let mut last_stats: Option<UpdateStats> = None;
+/// A run in progress.
+struct Trainer {
+    cfg: Config,
+    dir: RunDir,
+    hash: String,
+    env: ReachEnv,
+    eval_env: ReachEnv,
+    agent: Box<dyn Agent>,
+    buffer: ReplayBuffer,
+    batch: Batch,
+    state: LoopState,
+    eval_csv: String,
+}
 
-    let save = |agent: &dyn Agent, path: &Path, episode: u64, env_steps: u64, updates: u64| -> Result<()> {
-        let mut ck = Checkpoint::new();
-        agent.save(&mut ck);
-        ck.put_meta("algorithm", agent.algo().name());
-        ck.put_json("obs_dim", &od);
-        ck.put_json("act_dim", &ad);
-        ck.put_json("hidden", &cfg.agent.hidden);
-        ck.put_meta("config_hash", hash.clone());
-        ck.put_meta("config", cfg.to_toml_string());
-        ck.put_json("episode", &episode);
-        ck.put_json("env_steps", &env_steps);
-        ck.put_json("updates", &updates);
-        ck.save(path)
-    };
+const EVAL_HEADER: &str = "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m\n";
 
-    for episode in 1..=cfg.train.episodes {
-        obs.copy_from_slice(env.reset());
-        agent.begin_episode();
-        let mut episode_reward = 0.0;
-        let step = loop {
-            if env_steps < cfg.agent.learning_starts {
-                for a in action.iter_mut() {
-                    *a = warmup_rng.uniform_range(-1.0, 1.0) as f32;
-                }
-            } else {
-                agent.act(&obs, &mut action);
-            }
-            let s = env.step(&action)?;
-            episode_reward += s.total();
-            buffer.push(&obs, &action, s.total(), env.observation(), s.terminated);
-            obs.copy_from_slice(env.observation());
-            env_steps += 1;
-            if env_steps >= cfg.agent.learning_starts {
-                for _ in 0..cfg.agent.updates_per_step {
-                    buffer.sample_into(&mut replay_rng, &mut batch);
-                    let stats = agent.update(&batch);
-                    updates += 1;
-                    for (what, v) in
-                        [("critic loss", Some(stats.critic_loss)), ("actor loss", stats.actor_loss)]
-                    {
-                        if let Some(v) = v.filter(|v| !v.is_finite()) {
-                            return Err(Error::InvalidInput(format!(
-                                "numerical fault: {what} = {v} at episode {episode}, step {} (update {updates}); \
-                                 the last good checkpoint is left in place",
-                                env.steps()
-                            )));
-                        }
-                    }
-                    last_stats = Some(stats);
-                }
-            }
-            if s.done() {
-                break s;
-            }
+impl Trainer {
+    /// A fresh run.
+    fn new(cfg: &Config, dir: RunDir) -> Result<Trainer> {
+        let seed = cfg.train.seed;
+        let env = ReachEnv::from_config(cfg, Rng::derived(seed, 0).next_u64())?;
+        let (od, ad) = (env.obs_dim(), env.act_dim());
+        let agent = build_agent(cfg, &env)?;
+        let state = LoopState {
+            episode: 0,
+            env_steps: 0,
+            updates: 0,
+            in_episode: false,
+            episode_reward: 0.0,
+            env: env.state(),
+            replay_rng: Rng::derived(seed, 1),
+            warmup_rng: Rng::derived(seed, 2),
+            replay_len: 0,
+            replay_pos: 0,
+            wall_s: 0.0,
+            finished: false,
         };
-        if let Some(fault) = agent.first_non_finite() {
+        Ok(Trainer {
+            hash: config_hash(cfg),
+            eval_env: env.clone(),
+            buffer: ReplayBuffer::new(cfg.agent.buffer_size, od, ad)?,
+            batch: Batch::new(cfg.agent.batch_size, od, ad),
+            cfg: cfg.clone(),
+            dir,
+            env,
+            agent,
+            state,
+            eval_csv: EVAL_HEADER.to_string(),
+        })
+    }
+
+    /// Write the full training state to `latest.safetensors` (atomically).
+    fn save_latest(&mut self) -> Result<()> {
+        let mut ck = self.checkpoint_base();
+        self.state.env = self.env.state();
+        self.state.replay_len = self.buffer.len();
+        self.state.replay_pos = self.buffer.position();
+        for (name, data) in self.buffer.arrays() {
+            ck.put_tensor(name, &[data.len()], data);
+        }
+        ck.put_json("train_state", &self.state);
+        ck.put_meta("eval_csv", self.eval_csv.clone());
+        ck.save(&self.dir.latest())
+    }
+
+    /// The agent and the run's identity, shared by both checkpoint kinds.
+    fn checkpoint_base(&self) -> Checkpoint {
+        let mut ck = Checkpoint::new();
+        self.agent.save(&mut ck);
+        ck.put_meta("algorithm", self.agent.algo().name());
+        ck.put_json("obs_dim", &self.env.obs_dim());
+        ck.put_json("act_dim", &self.env.act_dim());
+        ck.put_json("hidden", &self.cfg.agent.hidden);
+        ck.put_meta("config_hash", self.hash.clone());
+        ck.put_meta("config", self.cfg.to_toml_string());
+        ck.put_json("episode", &self.state.episode);
+        ck.put_json("env_steps", &self.state.env_steps);
+        ck.put_json("updates", &self.state.updates);
+        ck
+    }
+
+    /// Restore a run from its `latest.safetensors`.
+    fn restore(cfg: &Config, dir: RunDir, ck: &Checkpoint) -> Result<Trainer> {
+        let mut t = Trainer::new(cfg, dir)?;
+        let path = t.dir.latest();
+        let hash = ck.meta("config_hash")?;
+        if hash != t.hash {
             return Err(Error::InvalidInput(format!(
-                "numerical fault: {fault} at episode {episode}, step {}; the last good checkpoint is left in place",
-                env.steps()
+                "{}: written for another config (hash {hash}, the run's config.toml gives {}); \
+                 was config.toml edited?",
+                path.display(),
+                t.hash
             )));
         }
-        let record = EpisodeRecord {
-            episode,
-            reward: episode_reward,
-            steps: env.steps(),
-            success: step.terminated,
-            final_distance_m: step.terms.distance,
-            env_steps,
-            wall_s: start.elapsed().as_secs_f64(),
-        };
-        csv.write(&record)?;
-        let ep = episode as i64;
-        tb.scalar("train/episode_reward", ep, record.reward)?;
-        tb.scalar("train/steps", ep, f64::from(record.steps))?;
-        tb.scalar("train/success", ep, f64::from(u8::from(record.success)))?;
-        tb.scalar("train/final_distance_m", ep, record.final_distance_m)?;
-        if let Some(st) = &last_stats {
-            tb.scalar("loss/critic", ep, st.critic_loss)?;
-            if let Some(v) = st.actor_loss {
-                tb.scalar("loss/actor", ep, v)?;
-            }
-            if let Some(v) = st.alpha {
-                tb.scalar("sac/alpha", ep, v)?;
-            }
-            if let Some(v) = st.entropy {
-                tb.scalar("sac/entropy", ep, v)?;
-            }
+        let algo = ck.meta("algorithm")?;
+        if algo != cfg.agent.algo.name() {
+            return Err(Error::InvalidInput(format!(
+                "{}: checkpoint of algorithm `{algo}`, the run's config says `{}`",
+                path.display(),
+                cfg.agent.algo
+            )));
         }
-        let every = cfg.train.eval_every_episodes;
-        let eval = if every > 0 && (episode % every == 0 || episode == cfg.train.episodes) {
-            let (summary, _) =
-                evaluate(agent.as_mut(), &mut eval_env, cfg.train.eval_trials, cfg.train.eval_seed)?;
-            eval_csv.push_str(&format!(
-                "{episode},{env_steps},{},{},{},{}\n",
-                summary.success_rate,
-                summary.mean_reward,
-                summary.mean_steps.map(|s| s.to_string()).unwrap_or_default(),
-                summary.median_final_distance_m
-            ));
-            crate::io::write_atomic(&dir.eval(), eval_csv.as_bytes())?;
-            tb.scalar("eval/success_rate", ep, summary.success_rate)?;
-            tb.scalar("eval/mean_reward", ep, summary.mean_reward)?;
-            tb.scalar("eval/median_final_distance_m", ep, summary.median_final_distance_m)?;
-            Some(summary)
-        } else {
-            None
-        };
-        let k = cfg.train.checkpoint_every_episodes;
-        if k > 0 && episode % k == 0 {
-            save(agent.as_ref(), &dir.latest(), episode, env_steps, updates)?;
+        t.agent.load(ck).map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))?;
+        t.state = ck.json("train_state")?;
+        let arrays = crate::replay::ReplayBuffer::new(1, 1, 1)?.arrays().map(|(name, _)| name);
+        let data: Vec<&[f32]> = arrays.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
+        t.buffer.restore(
+            t.state.replay_len,
+            t.state.replay_pos,
+            [data[0], data[1], data[2], data[3], data[4]],
+        )?;
+        t.env.restore(&t.state.env)?;
+        t.eval_csv = ck.meta("eval_csv")?.to_string();
+        Ok(t)
+    }
+
+    /// Cut the logs back to what the checkpoint has seen (a killed run may have logged further).
+    fn rewind_logs(&self) -> Result<()> {
+        let path = self.dir.episodes();
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let keep = self.state.episode as usize;
+        let mut lines = text.lines();
+        let mut out = String::new();
+        match lines.next() {
+            Some(h) if h == EpisodeRecord::HEADER => out.push_str(h),
+            _ => return Err(Error::InvalidInput(format!("{}: not an episodes.csv", path.display()))),
         }
-        on_episode(&Progress {
-            record: &record,
-            stats: last_stats,
-            eval: eval.as_ref(),
-            episodes: cfg.train.episodes,
-        });
-        if episode % 50 == 0 {
-            tb.flush()?;
+        out.push('\n');
+        let rows: Vec<&str> = lines.take(keep).collect();
+        if rows.len() < keep || rows.iter().any(|r| EpisodeRecord::from_csv(r).is_err()) {
+            return Err(Error::InvalidInput(format!(
+                "{}: holds fewer complete rows than the checkpoint's {keep} episodes",
+                path.display()
+            )));
+        }
+        for r in rows {
+            out.push_str(r);
+            out.push('\n');
+        }
+        crate::io::write_atomic(&path, out.as_bytes())?;
+        crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())
+    }
+
+    fn check_loss(&self, what: &str, v: Option<f64>) -> Result<()> {
+        match v {
+            Some(v) if !v.is_finite() => Err(Error::NumericalFault(format!(
+                "{what} = {v} at episode {}, step {} (update {}); the last good checkpoint is left in place",
+                self.state.episode + 1,
+                self.env.steps(),
+                self.state.updates
+            ))),
+            _ => Ok(()),
         }
     }
-    tb.flush()?;
-    let final_checkpoint = dir.final_checkpoint();
-    save(agent.as_ref(), &final_checkpoint, cfg.train.episodes, env_steps, updates)?;
-    save(agent.as_ref(), &dir.latest(), cfg.train.episodes, env_steps, updates)?;
-    Ok(TrainSummary {
-        episodes: cfg.train.episodes,
-        env_steps,
-        updates,
-        wall_s: start.elapsed().as_secs_f64(),
-        final_checkpoint,
-    })
+
+    /// Train until `train.episodes` episodes are done or `stop` is set.
+    fn run(
+        &mut self,
+        opts: &TrainOptions<'_>,
+        on_episode: &mut dyn FnMut(&Progress<'_>),
+    ) -> Result<TrainSummary> {
+        let cfg = self.cfg.clone();
+        for d in [self.dir.root.clone(), self.dir.tb(), self.dir.checkpoints()] {
+            std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
+        }
+        let mut csv = if self.state.episode == 0 && !self.state.in_episode {
+            EpisodeCsv::create(&self.dir.episodes())?
+        } else {
+            EpisodeCsv::append(&self.dir.episodes())?
+        };
+        let mut tb = EventWriter::create(&self.dir.tb())?;
+        let start = Instant::now();
+        let wall0 = self.state.wall_s;
+        let (od, ad) = (self.env.obs_dim(), self.env.act_dim());
+        let mut obs = vec![0.0f32; od];
+        let mut action = vec![0.0f32; ad];
+        let mut last_stats: Option<UpdateStats> = None;
+        let stop_requested = || opts.stop.is_some_and(|s| s.load(Ordering::SeqCst));
+        let interrupted = |t: &mut Trainer, wall: f64| -> Error {
+            t.state.wall_s = wall;
+            match t.save_latest() {
+                Ok(()) => Error::Interrupted { episode: t.state.episode, checkpoint: t.dir.latest() },
+                Err(e) => e,
+            }
+        };
+
+        while self.state.episode < cfg.train.episodes {
+            if self.state.in_episode {
+                obs.copy_from_slice(self.env.observation());
+            } else {
+                obs.copy_from_slice(self.env.reset());
+                self.agent.begin_episode();
+                self.state.episode_reward = 0.0;
+                self.state.in_episode = true;
+            }
+            let step = loop {
+                if self.state.env_steps < cfg.agent.learning_starts {
+                    for a in action.iter_mut() {
+                        *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;
+                    }
+                } else {
+                    self.agent.act(&obs, &mut action);
+                }
+                let s = self.env.step(&action)?;
+                self.state.episode_reward += s.total();
+                self.buffer.push(&obs, &action, s.total(), self.env.observation(), s.terminated);
+                obs.copy_from_slice(self.env.observation());
+                self.state.env_steps += 1;
+                if self.state.env_steps >= cfg.agent.learning_starts {
+                    for _ in 0..cfg.agent.updates_per_step {
+                        self.buffer.sample_into(&mut self.state.replay_rng, &mut self.batch);
+                        let stats = self.agent.update(&self.batch);
+                        self.state.updates += 1;
+                        self.check_loss("critic loss", Some(stats.critic_loss))?;
+                        self.check_loss("actor loss", stats.actor_loss)?;
+                        last_stats = Some(stats);
+                    }
+                }
+                if s.done() {
+                    break s;
+                }
+                if stop_requested() {
+                    return Err(interrupted(self, wall0 + start.elapsed().as_secs_f64()));
+                }
+            };
+            if let Some(fault) = self.agent.first_non_finite() {
+                return Err(Error::NumericalFault(format!(
+                    "{fault} at episode {}, step {}; the last good checkpoint is left in place",
+                    self.state.episode + 1,
+                    self.env.steps()
+                )));
+            }
+            self.state.in_episode = false;
+            self.state.episode += 1;
+            let episode = self.state.episode;
+            let record = EpisodeRecord {
+                episode,
+                reward: self.state.episode_reward,
+                steps: self.env.steps(),
+                success: step.terminated,
+                final_distance_m: step.terms.distance,
+                env_steps: self.state.env_steps,
+                wall_s: wall0 + start.elapsed().as_secs_f64(),
+            };
+            csv.write(&record)?;
+            let ep = episode as i64;
+            tb.scalar("train/episode_reward", ep, record.reward)?;
+            tb.scalar("train/steps", ep, f64::from(record.steps))?;
+            tb.scalar("train/success", ep, f64::from(u8::from(record.success)))?;
+            tb.scalar("train/final_distance_m", ep, record.final_distance_m)?;
+            if let Some(st) = &last_stats {
+                tb.scalar("loss/critic", ep, st.critic_loss)?;
+                for (tag, v) in
+                    [("loss/actor", st.actor_loss), ("sac/alpha", st.alpha), ("sac/entropy", st.entropy)]
+                {
+                    if let Some(v) = v {
+                        tb.scalar(tag, ep, v)?;
+                    }
+                }
+            }
+            let every = cfg.train.eval_every_episodes;
+            let eval = if every > 0 && (episode % every == 0 || episode == cfg.train.episodes) {
+                let (summary, _) = evaluate(
+                    self.agent.as_mut(),
+                    &mut self.eval_env,
+                    cfg.train.eval_trials,
+                    cfg.train.eval_seed,
+                )?;
+                self.eval_csv.push_str(&format!(
+                    "{episode},{},{},{},{},{}\n",
+                    self.state.env_steps,
+                    summary.success_rate,
+                    summary.mean_reward,
+                    summary.mean_steps.map(|s| s.to_string()).unwrap_or_default(),
+                    summary.median_final_distance_m
+                ));
+                crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
+                tb.scalar("eval/success_rate", ep, summary.success_rate)?;
+                tb.scalar("eval/mean_reward", ep, summary.mean_reward)?;
+                tb.scalar("eval/median_final_distance_m", ep, summary.median_final_distance_m)?;
+                Some(summary)
+            } else {
+                None
+            };
+            let k = cfg.train.checkpoint_every_episodes;
+            if k > 0 && episode % k == 0 && episode < cfg.train.episodes {
+                self.state.wall_s = record.wall_s;
+                self.save_latest()?;
+            }
+            on_episode(&Progress {
+                record: &record,
+                stats: last_stats,
+                eval: eval.as_ref(),
+                episodes: cfg.train.episodes,
+            });
+            if episode % 50 == 0 {
+                tb.flush()?;
+            }
+            if stop_requested() && episode < cfg.train.episodes {
+                return Err(interrupted(self, record.wall_s));
+            }
+        }
+        tb.flush()?;
+        self.state.wall_s = wall0 + start.elapsed().as_secs_f64();
+        self.state.finished = true;
+        self.checkpoint_base().save(&self.dir.final_checkpoint())?;
+        self.save_latest()?;
+        Ok(self.summary())
+    }
+
+    fn summary(&self) -> TrainSummary {
+        TrainSummary {
+            episodes: self.state.episode,
+            env_steps: self.state.env_steps,
+            updates: self.state.updates,
+            wall_s: self.state.wall_s,
+            final_checkpoint: self.dir.final_checkpoint(),
+        }
+    }
+}
+
+/// Train from scratch into `out` (created if needed; files of a previous run there are replaced,
+/// the caller decides whether that is allowed). `on_episode` sees every finished episode.
+pub fn train(cfg: &Config, out: &Path, mut on_episode: impl FnMut(&Progress<'_>)) -> Result<TrainSummary> {
+    train_with(cfg, out, &TrainOptions::default(), &mut on_episode)
+}
+
+/// [`train`] with options (a stop flag).
+pub fn train_with(
+    cfg: &Config,
+    out: &Path,
+    opts: &TrainOptions<'_>,
+    on_episode: &mut dyn FnMut(&Progress<'_>),
+) -> Result<TrainSummary> {
+    cfg.validate()?;
+    let dir = RunDir::new(out);
+    std::fs::create_dir_all(&dir.root).map_err(|e| Error::io(&dir.root, e))?;
+    // A new run: no checkpoint of an older one may be mistaken for this run's.
+    for p in [dir.latest(), dir.final_checkpoint(), dir.eval()] {
+        if p.exists() {
+            std::fs::remove_file(&p).map_err(|e| Error::io(&p, e))?;
+        }
+    }
+    crate::io::write_atomic(&dir.config(), cfg.to_toml_string().as_bytes())?;
+    Trainer::new(cfg, dir)?.run(opts, on_episode)
+}
+
+/// What [`resume`] found and did.
+pub enum Resumed {
+    /// The run was continued (or restarted, when killed before its first checkpoint) and finished.
+    Finished(TrainSummary),
+    /// The run had already finished; nothing was done.
+    AlreadyFinished(TrainSummary),
+}
+
+/// Continue the run in `out` from its last checkpoint, with the config stored in the run. A run
+/// killed before its first checkpoint starts over. The result is bit-identical (but wall time) to
+/// an uninterrupted run with the same seed on one thread.
+pub fn resume(
+    out: &Path,
+    opts: &TrainOptions<'_>,
+    on_episode: &mut dyn FnMut(&Progress<'_>),
+) -> Result<Resumed> {
+    let dir = RunDir::new(out);
+    let cfg = dir.load_config()?;
+    let latest = dir.latest();
+    if !latest.exists() {
+        return train_with(&cfg, out, opts, on_episode).map(Resumed::Finished);
+    }
+    let ck = Checkpoint::load(&latest)?;
+    let mut t = Trainer::restore(&cfg, dir, &ck)?;
+    if t.state.finished {
+        return Ok(Resumed::AlreadyFinished(t.summary()));
+    }
+    t.rewind_logs()?;
+    t.run(opts, on_episode).map(Resumed::Finished)
+}
+
+/// The episode count of the last full checkpoint of a run, if any (`None` before the first).
+pub fn checkpointed_episode(out: &Path) -> Result<Option<(u64, bool)>> {
+    let latest = RunDir::new(out).latest();
+    if !latest.exists() {
+        return Ok(None);
+    }
+    let ck = Checkpoint::load(&latest)?;
+    let st: LoopState = ck.json("train_state")?;
+    Ok(Some((st.episode, st.finished)))
 }

@@ -1,0 +1,134 @@
+//! Killing `stagerl train` at any moment loses nothing: resumed runs end identical (but wall
+//! time) to an uninterrupted one.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::Duration;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_stagerl"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("stagerl-resume-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+const CONFIG: &str = "[agent]\nhidden = [16, 16]\nlearning_starts = 200\nbatch_size = 32\n\
+[train]\nepisodes = 300\neval_every_episodes = 100\neval_trials = 5\ncheckpoint_every_episodes = 20\n";
+
+fn run(args: &[&str]) -> Output {
+    bin().args(args).stdin(Stdio::null()).output().unwrap()
+}
+
+/// episodes.csv without the wall-time column.
+fn episodes(dir: &Path) -> Vec<String> {
+    std::fs::read_to_string(dir.join("episodes.csv"))
+        .unwrap()
+        .lines()
+        .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+        .collect()
+}
+
+#[test]
+fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_run() {
+    let root = scratch("kill");
+    let cfg = root.join("c.toml");
+    std::fs::write(&cfg, CONFIG).unwrap();
+    let (full, cut) = (root.join("full"), root.join("cut"));
+    let out = run(&[
+        "train",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--out",
+        full.to_str().unwrap(),
+        "--eval-trials",
+        "0",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    // Kill moments drawn from a fixed seed, spread over the run (which takes a few seconds).
+    let mut rng = stagerl::rng::Rng::new(2026);
+    let mut kills = 0;
+    let mut first = true;
+    for _ in 0..5 {
+        let mut cmd = bin();
+        if first {
+            cmd.args(["train", "--config", cfg.to_str().unwrap(), "--out", cut.to_str().unwrap()]);
+        } else {
+            cmd.args(["train", "--resume", cut.to_str().unwrap()]);
+        }
+        cmd.args(["--eval-trials", "0"]).stdout(Stdio::null()).stderr(Stdio::null());
+        let mut child = cmd.spawn().unwrap();
+        first = false;
+        std::thread::sleep(Duration::from_millis(200 + rng.below(900)));
+        if child.try_wait().unwrap().is_none() {
+            child.kill().unwrap(); // SIGKILL: no chance to save anything
+            kills += 1;
+        }
+        child.wait().unwrap();
+    }
+    assert!(kills >= 2, "the run was killed at least twice ({kills})");
+    let out = run(&["train", "--resume", cut.to_str().unwrap(), "--eval-trials", "0"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    assert_eq!(episodes(&full).len(), 301);
+    assert_eq!(episodes(&full), episodes(&cut), "episodes.csv (but wall time) differs");
+    let eval = |d: &Path| std::fs::read_to_string(d.join("eval.csv")).unwrap();
+    assert_eq!(eval(&full), eval(&cut));
+    let ck =
+        |d: &Path| stagerl::checkpoint::Checkpoint::load(&d.join("checkpoints/final.safetensors")).unwrap();
+    let (a, b) = (ck(&full), ck(&cut));
+    assert!(a.tensor_names().count() > 20);
+    assert!(a.same_contents(&b), "final networks or metadata differ");
+
+    // Resuming a finished run does nothing and says so.
+    let out = run(&["train", "--resume", cut.to_str().unwrap()]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("already finished"));
+    std::fs::remove_dir_all(&root).ok();
+}
+
+#[test]
+fn sigterm_saves_and_exits_130_and_existing_runs_are_protected() {
+    let root = scratch("term");
+    let cfg = root.join("c.toml");
+    std::fs::write(&cfg, CONFIG.replace("episodes = 300", "episodes = 100000")).unwrap();
+    let dir = root.join("run");
+    let child = bin()
+        .args([
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--out",
+            dir.to_str().unwrap(),
+            "--eval-trials",
+            "0",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    let pid = child.id().to_string();
+    assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--resume") && err.contains("interrupted"), "{err}");
+    assert!(dir.join("checkpoints/latest.safetensors").exists());
+
+    // A second train into the same directory is refused; the run is untouched.
+    let before = std::fs::read(dir.join("episodes.csv")).unwrap();
+    let out = run(&["train", "--config", cfg.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--force"));
+    assert_eq!(before, std::fs::read(dir.join("episodes.csv")).unwrap());
+    // --resume with other settings is a usage error.
+    let out = run(&["train", "--resume", dir.to_str().unwrap(), "--seed", "3"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
+    std::fs::remove_dir_all(&root).ok();
+}
