@@ -8,19 +8,23 @@ pub struct Args {
     /// The run directory (holds config.toml and checkpoints/).
     #[arg(long)]
     run: PathBuf,
-    /// Checkpoint to evaluate (default: the run's final, else latest).
+    /// Checkpoint to evaluate (default: the run's best, else final, else latest).
     #[arg(long)]
     checkpoint: Option<PathBuf>,
     /// Random targets.
     #[arg(long, default_value_t = 500)]
     trials: u32,
     /// Seed of the targets.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = DEFAULT_SEED)]
     seed: u64,
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
 }
+
+/// Seed of the evaluation targets unless told otherwise (differs from `train.eval_seed`, the
+/// targets the best checkpoint is chosen on).
+pub const DEFAULT_SEED: u64 = 0;
 
 pub fn run(args: Args) -> Result<()> {
     let dir = RunDir::new(&args.run);

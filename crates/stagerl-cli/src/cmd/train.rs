@@ -163,12 +163,21 @@ fn report_and_evaluate(
         summary.env_steps as f64 / summary.wall_s
     );
     if eval_trials > 0 {
+        // The checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0: not
+        // the `train.eval_seed` targets the best checkpoint was chosen on.
+        let checkpoint =
+            RunDir::new(out).best_available_checkpoint().unwrap_or(summary.final_checkpoint.clone());
         let mut env = stagerl::env::ReachEnv::from_config(cfg, 0)?;
-        let mut agent = train::load_agent(cfg, &env, &summary.final_checkpoint)?;
-        let seed = cfg.train.eval_seed;
+        let mut agent = train::load_agent(cfg, &env, &checkpoint)?;
+        let seed = super::eval::DEFAULT_SEED;
         let (s, trials) = evaluate(agent.as_mut(), &mut env, eval_trials, seed)?;
-        let csv = out.join(format!("eval-final-seed{seed}.csv"));
+        let csv = out.join(format!("eval-seed{seed}.csv"));
         train::eval::write_trials_csv(&csv, &trials)?;
+        println!(
+            "{} on {eval_trials} new targets (seed {seed}), per-trial CSV {}",
+            checkpoint.display(),
+            csv.display()
+        );
         super::eval::print_summary(&s, false);
     }
     Ok(())

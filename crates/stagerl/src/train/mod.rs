@@ -11,8 +11,11 @@
 //!   optimiser moments, the replay buffer, every random state, the counters, where the logs
 //!   stand), written atomically every `checkpoint_every_episodes` episodes, on a stop request
 //!   (SIGINT/SIGTERM in the CLI, mid-episode if need be) and at the end;
-//! - `checkpoints/final.safetensors`: the trained agent alone (no replay buffer), for evaluation
-//!   and deployment.
+//! - `checkpoints/final.safetensors`: the trained agent alone (no replay buffer) at the end;
+//! - `checkpoints/best.safetensors`: the agent at its best periodic evaluation (success rate,
+//!   then mean reward, on the `eval_seed` targets), for evaluation and deployment. Off-policy
+//!   agents, DDPG above all, oscillate after converging; the best checkpoint is the usual remedy
+//!   (as Stable-Baselines3's `EvalCallback`). Test it on other targets than it was chosen on.
 //!
 //! Metadata in both names the algorithm, the shapes and the config hash. [`resume`] continues a
 //! run from `latest.safetensors` so that its `episodes.csv` (but the wall time) and its networks
@@ -145,9 +148,13 @@ impl RunDir {
     pub fn final_checkpoint(&self) -> PathBuf {
         self.checkpoints().join("final.safetensors")
     }
-    /// The checkpoint a finished run is evaluated from: final, else latest.
+    /// The agent of the best periodic evaluation (success rate, then mean reward).
+    pub fn best(&self) -> PathBuf {
+        self.checkpoints().join("best.safetensors")
+    }
+    /// The checkpoint a run is evaluated from: best, else final, else latest.
     pub fn best_available_checkpoint(&self) -> Option<PathBuf> {
-        [self.final_checkpoint(), self.latest()].into_iter().find(|p| p.exists())
+        [self.best(), self.final_checkpoint(), self.latest()].into_iter().find(|p| p.exists())
     }
     /// Read the run's resolved config.
     pub fn load_config(&self) -> Result<Config> {
@@ -196,6 +203,9 @@ struct LoopState {
     /// Wall seconds of the run before this session (so `wall_s` keeps counting).
     wall_s: f64,
     finished: bool,
+    /// Best periodic evaluation so far: (success rate, mean reward), for `best.safetensors`.
+    #[serde(default)]
+    best_eval: Option<(f64, f64)>,
 }
 
 /// Options of a training session.
@@ -241,6 +251,7 @@ impl Trainer {
             replay_pos: 0,
             wall_s: 0.0,
             finished: false,
+            best_eval: None,
         };
         Ok(Trainer {
             hash: config_hash(cfg),
@@ -485,6 +496,14 @@ impl Trainer {
                 tb.scalar("eval/success_rate", ep, summary.success_rate)?;
                 tb.scalar("eval/mean_reward", ep, summary.mean_reward)?;
                 tb.scalar("eval/median_final_distance_m", ep, summary.median_final_distance_m)?;
+                let score = (summary.success_rate, summary.mean_reward);
+                if self.state.best_eval.is_none_or(|best| score > best) {
+                    self.state.best_eval = Some(score);
+                    let mut ck = self.checkpoint_base();
+                    ck.put_json("eval_success_rate", &summary.success_rate);
+                    ck.put_json("eval_mean_reward", &summary.mean_reward);
+                    ck.save(&self.dir.best())?;
+                }
                 Some(summary)
             } else {
                 None
@@ -543,7 +562,7 @@ pub fn train_with(
     let dir = RunDir::new(out);
     std::fs::create_dir_all(&dir.root).map_err(|e| Error::io(&dir.root, e))?;
     // A new run: no checkpoint of an older one may be mistaken for this run's.
-    for p in [dir.latest(), dir.final_checkpoint(), dir.eval()] {
+    for p in [dir.latest(), dir.final_checkpoint(), dir.best(), dir.eval()] {
         if p.exists() {
             std::fs::remove_file(&p).map_err(|e| Error::io(&p, e))?;
         }
