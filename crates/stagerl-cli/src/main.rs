@@ -23,6 +23,9 @@ enum Command {
     Train(cmd::train::Args),
     /// Evaluate a trained run's deterministic policy on random targets.
     Eval(cmd::eval::Args),
+    /// Run a sweep of algorithms x rewards x seeds (the paper's protocol or a reduced one),
+    /// resumable and shardable; each run is trained, then evaluated.
+    Reproduce(cmd::reproduce::Args),
     /// Run the scripted Jacobian controller on the reaching task, printing every reward term
     /// step by step, then its success rate over many random targets.
     Demo(cmd::demo::Args),
@@ -44,6 +47,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Train(a) => cmd::train::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::Reproduce(a) => cmd::reproduce::run(a),
         Command::Demo(a) => cmd::demo::run(a),
         Command::Fk(a) => cmd::fk::run(a),
         Command::Reward(a) => cmd::reward::run(a),

@@ -25,6 +25,7 @@ pub mod config;
 pub mod controller;
 pub mod env;
 pub mod error;
+pub mod experiment;
 pub mod io;
 pub mod log;
 pub mod nn;

@@ -45,7 +45,7 @@ pub struct Args {
 pub const INTERRUPTED_EXIT: u8 = 130;
 
 /// A stop flag raised by SIGINT and SIGTERM: the loop then saves the run and returns.
-fn stop_flag() -> Result<Arc<AtomicBool>> {
+pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, Arc::clone(&flag)).context("installing the signal handler")?;

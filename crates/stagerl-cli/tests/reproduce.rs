@@ -1,0 +1,151 @@
+//! `stagerl reproduce`: resumable sweeps. Killing it loses no finished run and repeats none.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_stagerl"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("stagerl-repro-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+const PRESET: &str = "[sweep]\nalgorithms = [\"ddpg\", \"sac\"]\nrewards = [\"posture\", \"sar\"]\nseeds = [1, 2]\neval_trials = 10\n\
+[agent]\nhidden = [16, 16]\nbatch_size = 32\nlearning_starts = 100\n\
+[train]\nepisodes = 150\neval_every_episodes = 50\neval_trials = 5\ncheckpoint_every_episodes = 10\n";
+
+fn finished(out: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().join("eval-seed0.csv").exists())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+fn episodes(dir: &Path) -> Vec<String> {
+    std::fs::read_to_string(dir.join("episodes.csv"))
+        .unwrap()
+        .lines()
+        .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+        .collect()
+}
+
+#[test]
+fn killed_sweep_loses_and_repeats_nothing() {
+    let root = scratch("kill");
+    let preset = root.join("p.toml");
+    std::fs::write(&preset, PRESET).unwrap();
+    let (full, cut) = (root.join("full"), root.join("cut"));
+    let p = preset.to_str().unwrap();
+    let out = bin()
+        .args(["reproduce", "--preset", p, "--out", full.to_str().unwrap(), "--jobs", "2"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(finished(&full).len(), 8);
+
+    // Kill it once some runs have finished and others are under way.
+    let mut child = bin()
+        .args(["reproduce", "--preset", p, "--out", cut.to_str().unwrap(), "--jobs", "1"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut waited = 0;
+    while finished_or_empty(&cut) < 2 && waited < 600 {
+        std::thread::sleep(Duration::from_millis(50));
+        waited += 1;
+    }
+    std::thread::sleep(Duration::from_millis(150));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let done_before = finished(&cut);
+    assert!(!done_before.is_empty() && done_before.len() < 8, "killed mid-sweep: {done_before:?}");
+    let kept: Vec<Vec<u8>> =
+        done_before.iter().map(|r| std::fs::read(cut.join(r).join("eval-seed0.csv")).unwrap()).collect();
+
+    let out = bin()
+        .args(["reproduce", "--preset", p, "--out", cut.to_str().unwrap(), "--jobs", "2"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    for (r, bytes) in done_before.iter().zip(&kept) {
+        assert!(
+            text.lines().any(|l| l.contains(r.as_str()) && l.contains("already done")),
+            "{r} repeated?\n{text}"
+        );
+        assert_eq!(&std::fs::read(cut.join(r).join("eval-seed0.csv")).unwrap(), bytes, "{r} changed");
+    }
+    assert_eq!(finished(&cut), finished(&full));
+    for r in finished(&full) {
+        assert_eq!(episodes(&full.join(&r)), episodes(&cut.join(&r)), "{r}");
+        assert_eq!(
+            std::fs::read(full.join(&r).join("eval-seed0.csv")).unwrap(),
+            std::fs::read(cut.join(&r).join("eval-seed0.csv")).unwrap(),
+            "{r}: evaluation differs"
+        );
+    }
+    std::fs::remove_dir_all(&root).ok();
+}
+
+fn finished_or_empty(out: &Path) -> usize {
+    if out.exists() {
+        finished(out).len()
+    } else {
+        0
+    }
+}
+
+#[test]
+fn sharding_splits_the_sweep_and_bad_arguments_are_refused() {
+    let root = scratch("shard");
+    let out = root.join("o");
+    let o = out.to_str().unwrap();
+    let a = bin()
+        .args(["reproduce", "--preset", "smoke", "--out", o, "--task-index", "1", "--task-count", "3"])
+        .output()
+        .unwrap();
+    assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
+    // Smoke: 10 runs (ddpg then sac; basic, posture, stride, har, sar); shard 1 of 3 holds runs 1, 4, 7.
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().is_dir())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["ddpg-posture-seed1", "ddpg-sar-seed1", "sac-stride-seed1"]);
+    // Slurm's variables select the shard when no flag does.
+    let out2 = root.join("o2");
+    let b = bin()
+        .args(["reproduce", "--preset", "smoke", "--out", out2.to_str().unwrap()])
+        .env("SLURM_ARRAY_TASK_ID", "10")
+        .env("SLURM_ARRAY_TASK_MIN", "1")
+        .env("SLURM_ARRAY_TASK_COUNT", "10")
+        .output()
+        .unwrap();
+    assert!(b.status.success(), "{}", String::from_utf8_lossy(&b.stderr));
+    assert!(out2.join("sac-sar-seed1").exists() && !out2.join("ddpg-basic-seed1").exists());
+    for (args, needle) in [
+        (vec!["--preset", "nope"], "nope"),
+        (vec!["--preset", "smoke", "--task-index", "3", "--task-count", "3"], "task index 3 of 3"),
+        (vec!["--preset", "smoke", "--jobs", "0"], "--jobs"),
+    ] {
+        let mut full = vec!["reproduce", "--out", o];
+        full.extend(args);
+        let r = bin().args(&full).output().unwrap();
+        assert!(!r.status.success());
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(err.contains(needle) && !err.contains("panicked"), "{full:?}: {err}");
+    }
+    std::fs::remove_dir_all(&root).ok();
+}

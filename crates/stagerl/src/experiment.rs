@@ -1,0 +1,298 @@
+//! Sweeps: the paper's protocol of algorithms x reward functions x seeds, each run trained and
+//! then evaluated on random targets, resumable and shardable across machines.
+//!
+//! A preset is a TOML file with a `[sweep]` section and, beside it, any sections of an ordinary
+//! [`Config`] that every run shares:
+//!
+//! ```toml
+//! [sweep]
+//! algorithms = ["ddpg", "sac"]
+//! rewards = ["basic", "posture", "stride", "har", "sar"]
+//! seeds = [1, 2, 3]
+//! eval_trials = 500
+//!
+//! [train]
+//! episodes = 10000
+//! ```
+//!
+//! Run `i` of the sweep (algorithm-major, then reward, then seed) lives in
+//! `OUT/<algo>-<reward>-seed<seed>/`, a normal run directory; its evaluation is
+//! `eval-seed<eval_seed>.csv` there. A run is finished when its checkpoint says so and that file
+//! exists; a run with a checkpoint is resumed; any other starts from scratch.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+use crate::agent::Algo;
+use crate::config::Config;
+use crate::env::ReachEnv;
+use crate::reward::RewardFunction;
+use crate::train::{self, EvalSummary, Progress, RunDir, TrainOptions};
+use crate::{Error, Result};
+
+/// The `[sweep]` section of a preset.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSpec {
+    pub algorithms: Vec<Algo>,
+    pub rewards: Vec<RewardFunction>,
+    pub seeds: Vec<u64>,
+    /// Evaluation trials of each trained run (paper: 500).
+    #[serde(default = "default_trials")]
+    pub eval_trials: u32,
+    /// Seed of the evaluation targets (not `train.eval_seed`, which picks the best checkpoint).
+    #[serde(default)]
+    pub eval_seed: u64,
+}
+
+fn default_trials() -> u32 {
+    500
+}
+
+/// A parsed preset: the sweep and the config every run starts from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Preset {
+    pub sweep: SweepSpec,
+    pub base: Config,
+}
+
+/// One run of a sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunSpec {
+    /// Position in the sweep (for sharding).
+    pub index: usize,
+    pub name: String,
+    pub config: Config,
+}
+
+/// Where a run stands on disk.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunStatus {
+    /// Trained and evaluated.
+    Done,
+    /// Trained, not yet evaluated.
+    Trained,
+    /// Has a checkpoint to continue from.
+    Partial { episode: u64 },
+    /// Nothing usable yet.
+    New,
+}
+
+impl Preset {
+    /// Parse a preset; `origin` names it in errors.
+    pub fn from_toml_str(text: &str, origin: &Path) -> Result<Preset> {
+        let bad = |m: String| Error::ConfigParse { path: origin.to_path_buf(), message: m };
+        let mut table: toml::Table = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
+        let sweep = table.remove("sweep").ok_or_else(|| bad("no [sweep] section".into()))?;
+        let sweep: SweepSpec = sweep.try_into().map_err(|e: toml::de::Error| bad(format!("[sweep]: {e}")))?;
+        let rest = toml::to_string(&table).map_err(|e| bad(e.to_string()))?;
+        let base = Config::from_toml_str(&rest, origin)?;
+        let preset = Preset { sweep, base };
+        preset.validate()?;
+        Ok(preset)
+    }
+
+    /// Read a preset file.
+    pub fn load(path: &Path) -> Result<Preset> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Preset::from_toml_str(&text, path)
+    }
+
+    fn validate(&self) -> Result<()> {
+        let s = &self.sweep;
+        for (field, n) in [
+            ("sweep.algorithms", s.algorithms.len()),
+            ("sweep.rewards", s.rewards.len()),
+            ("sweep.seeds", s.seeds.len()),
+        ] {
+            if n == 0 {
+                return Err(Error::config(field, "[]", "at least one entry"));
+            }
+        }
+        let mut seeds = s.seeds.clone();
+        seeds.sort_unstable();
+        if seeds.windows(2).any(|w| w[0] == w[1]) {
+            return Err(Error::config("sweep.seeds", format!("{:?}", s.seeds), "distinct seeds"));
+        }
+        if s.eval_trials == 0 {
+            return Err(Error::config("sweep.eval_trials", 0, "an integer >= 1"));
+        }
+        Ok(())
+    }
+
+    /// Every run of the sweep, in order.
+    pub fn runs(&self) -> Vec<RunSpec> {
+        let mut out = Vec::new();
+        for &algo in &self.sweep.algorithms {
+            for &reward in &self.sweep.rewards {
+                for &seed in &self.sweep.seeds {
+                    let mut config = self.base.clone();
+                    config.agent.algo = algo;
+                    config.reward.function = reward;
+                    config.train.seed = seed;
+                    out.push(RunSpec {
+                        index: out.len(),
+                        name: format!("{algo}-{reward}-seed{seed}"),
+                        config,
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The runs of shard `index` of `count`: those whose sweep position is congruent to `index`.
+pub fn shard(runs: Vec<RunSpec>, index: usize, count: usize) -> Result<Vec<RunSpec>> {
+    if count == 0 || index >= count {
+        return Err(Error::InvalidInput(format!(
+            "task index {index} of {count} tasks: need count >= 1 and 0 <= index < count"
+        )));
+    }
+    Ok(runs.into_iter().filter(|r| r.index % count == index).collect())
+}
+
+/// The evaluation file of a run.
+pub fn eval_csv(dir: &Path, eval_seed: u64) -> PathBuf {
+    dir.join(format!("eval-seed{eval_seed}.csv"))
+}
+
+/// Where the run `dir` stands.
+pub fn status(dir: &Path, eval_seed: u64) -> Result<RunStatus> {
+    Ok(match train::checkpointed_episode(dir)? {
+        Some((_, true)) if eval_csv(dir, eval_seed).exists() => RunStatus::Done,
+        Some((_, true)) => RunStatus::Trained,
+        Some((episode, false)) => RunStatus::Partial { episode },
+        None => RunStatus::New,
+    })
+}
+
+/// Train (or resume) and evaluate one run into `out/<name>`. A finished run is not repeated; a
+/// run whose config.toml differs from the preset's is refused rather than mixed.
+pub fn run_one(
+    spec: &RunSpec,
+    out: &Path,
+    sweep: &SweepSpec,
+    opts: &TrainOptions<'_>,
+    on_episode: &mut dyn FnMut(&Progress<'_>),
+) -> Result<EvalSummary> {
+    let dir = out.join(&spec.name);
+    let run = RunDir::new(&dir);
+    if run.config().exists() {
+        let existing = run.load_config()?;
+        if existing != spec.config {
+            return Err(Error::InvalidInput(format!(
+                "{} holds a run of another configuration than this sweep's; move it away or use another output directory",
+                dir.display()
+            )));
+        }
+    }
+    match status(&dir, sweep.eval_seed)? {
+        RunStatus::Done => return read_eval(&dir, sweep.eval_seed),
+        RunStatus::Trained => {}
+        RunStatus::Partial { .. } => {
+            train::resume(&dir, opts, on_episode)?;
+        }
+        RunStatus::New => {
+            train::train_with(&spec.config, &dir, opts, on_episode)?;
+        }
+    }
+    let checkpoint = run
+        .best_available_checkpoint()
+        .ok_or_else(|| Error::InvalidInput(format!("{}: trained but no checkpoint", dir.display())))?;
+    let mut env = ReachEnv::from_config(&spec.config, 0)?;
+    let mut agent = train::load_agent(&spec.config, &env, &checkpoint)?;
+    let (summary, trials) = train::evaluate(agent.as_mut(), &mut env, sweep.eval_trials, sweep.eval_seed)?;
+    train::eval::write_trials_csv(&eval_csv(&dir, sweep.eval_seed), &trials)?;
+    Ok(summary)
+}
+
+/// Summarise an existing evaluation file.
+pub fn read_eval(dir: &Path, eval_seed: u64) -> Result<EvalSummary> {
+    let path = eval_csv(dir, eval_seed);
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let bad = |l: &str| Error::InvalidInput(format!("{}: malformed row {l:?}", path.display()));
+    let mut records = Vec::new();
+    for line in text.lines().skip(1).filter(|l| !l.trim().is_empty()) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != 9 {
+            return Err(bad(line));
+        }
+        let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad(line));
+        records.push(train::TrialRecord {
+            trial: f[0].parse().map_err(|_| bad(line))?,
+            reward: num(1)?,
+            steps: f[2].parse().map_err(|_| bad(line))?,
+            success: f[3] == "1",
+            start_distance_m: num(4)?,
+            final_distance_m: num(5)?,
+            target: [num(6)?, num(7)?, num(8)?],
+        });
+    }
+    Ok(train::eval::summarize(&records))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PRESET: &str =
+        "[sweep]\nalgorithms = [\"ddpg\", \"sac\"]\nrewards = [\"posture\", \"sar\"]\nseeds = [1, 2, 3]\n\
+                          eval_trials = 20\n[train]\nepisodes = 7\n";
+
+    #[test]
+    fn preset_expands_in_order_and_shards_cover_every_run_once() {
+        let p = Preset::from_toml_str(PRESET, Path::new("p.toml")).unwrap();
+        assert_eq!(p.base.train.episodes, 7);
+        let runs = p.runs();
+        assert_eq!(runs.len(), 12);
+        assert_eq!(runs[0].name, "ddpg-posture-seed1");
+        assert_eq!(runs[11].name, "sac-sar-seed3");
+        assert_eq!(runs[4].config.reward.function, RewardFunction::Sar);
+        assert_eq!(runs[4].config.train.seed, 2);
+        let mut seen: Vec<usize> = Vec::new();
+        for i in 0..5 {
+            seen.extend(shard(runs.clone(), i, 5).unwrap().iter().map(|r| r.index));
+        }
+        seen.sort_unstable();
+        assert_eq!(seen, (0..12).collect::<Vec<_>>());
+        assert!(shard(runs.clone(), 5, 5).is_err());
+        assert!(shard(runs, 0, 0).is_err());
+    }
+
+    #[test]
+    fn preset_errors_name_the_field() {
+        let cases = [
+            ("[train]\nepisodes = 3\n", "no [sweep]"),
+            ("[sweep]\nalgorithms = []\nrewards = [\"sar\"]\nseeds = [1]\n", "sweep.algorithms"),
+            ("[sweep]\nalgorithms = [\"ppo\"]\nrewards = [\"sar\"]\nseeds = [1]\n", "ppo"),
+            ("[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\"]\nseeds = [1, 1]\n", "sweep.seeds"),
+            ("[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\"]\nseeds = [1]\nextra = 2\n", "extra"),
+            (
+                "[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\"]\nseeds = [1]\n[train]\nepisodes = 0\n",
+                "train.episodes",
+            ),
+        ];
+        for (text, needle) in cases {
+            let e = Preset::from_toml_str(text, Path::new("p.toml")).unwrap_err().to_string();
+            assert!(e.contains(needle), "{text:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn bundled_presets_parse() {
+        for name in ["smoke", "quick", "paper"] {
+            let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../configs/{name}.toml"));
+            let p = Preset::load(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(p.sweep.algorithms, vec![Algo::Ddpg, Algo::Sac], "{name}");
+            assert_eq!(p.sweep.rewards.len(), 5, "{name}");
+        }
+        let paper =
+            Preset::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/paper.toml")).unwrap();
+        assert_eq!(
+            (paper.sweep.seeds.len(), paper.base.train.episodes, paper.sweep.eval_trials),
+            (20, 10000, 500)
+        );
+        assert_eq!(paper.base.task.max_steps, 50);
+    }
+}
