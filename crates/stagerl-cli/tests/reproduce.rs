@@ -1,19 +1,11 @@
 //! `stagerl reproduce`: resumable sweeps. Killing it loses no finished run and repeats none.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+mod common;
+
+use common::{bin, episodes_without_wall, scratch};
+use std::path::Path;
+use std::process::Stdio;
 use std::time::Duration;
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_stagerl"))
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("stagerl-repro-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 const PRESET: &str = "[sweep]\nalgorithms = [\"ddpg\", \"sac\"]\nrewards = [\"posture\", \"sar\"]\nseeds = [1, 2]\neval_trials = 10\n\
 [agent]\nhidden = [16, 16]\nbatch_size = 32\nlearning_starts = 100\n\
@@ -30,17 +22,9 @@ fn finished(out: &Path) -> Vec<String> {
     v
 }
 
-fn episodes(dir: &Path) -> Vec<String> {
-    std::fs::read_to_string(dir.join("episodes.csv"))
-        .unwrap()
-        .lines()
-        .map(|l| l.rsplit_once(',').unwrap().0.to_string())
-        .collect()
-}
-
 #[test]
 fn killed_sweep_loses_and_repeats_nothing() {
-    let root = scratch("kill");
+    let root = scratch("repro-kill");
     let preset = root.join("p.toml");
     std::fs::write(&preset, PRESET).unwrap();
     let (full, cut) = (root.join("full"), root.join("cut"));
@@ -87,7 +71,7 @@ fn killed_sweep_loses_and_repeats_nothing() {
     }
     assert_eq!(finished(&cut), finished(&full));
     for r in finished(&full) {
-        assert_eq!(episodes(&full.join(&r)), episodes(&cut.join(&r)), "{r}");
+        assert_eq!(episodes_without_wall(&full.join(&r)), episodes_without_wall(&cut.join(&r)), "{r}");
         assert_eq!(
             std::fs::read(full.join(&r).join("eval-seed0.csv")).unwrap(),
             std::fs::read(cut.join(&r).join("eval-seed0.csv")).unwrap(),
@@ -107,7 +91,7 @@ fn finished_or_empty(out: &Path) -> usize {
 
 #[test]
 fn sharding_splits_the_sweep_and_bad_arguments_are_refused() {
-    let root = scratch("shard");
+    let root = scratch("repro-shard");
     let out = root.join("o");
     let o = out.to_str().unwrap();
     let a = bin()

@@ -14,11 +14,11 @@
 
 use super::noise::ActionNoise;
 use super::{
-    find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo,
-    UpdateStats,
+    find_non_finite, fit_critic, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig,
+    Algo, UpdateStats,
 };
 use crate::checkpoint::Checkpoint;
-use crate::nn::{concat_cols, mse_loss, Activation, Adam, Mlp};
+use crate::nn::{concat_cols, Activation, Adam, Mlp};
 use crate::replay::Batch;
 use crate::rng::Rng;
 use crate::Result;
@@ -107,11 +107,14 @@ impl Agent for Ddpg {
             self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * q_next[i];
         }
         concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
-        let q = self.critic.forward(&self.critic_in, b);
-        let critic_loss = mse_loss(q, &self.y[..b], &mut self.dq[..b]);
-        self.critic.zero_grad();
-        self.critic.backward(&self.dq[..b]);
-        step(&mut self.critic, &mut self.critic_opt, self.cfg.max_grad_norm);
+        let critic_loss = fit_critic(
+            &mut self.critic,
+            &mut self.critic_opt,
+            &self.critic_in,
+            &self.y[..b],
+            &mut self.dq,
+            self.cfg.max_grad_norm,
+        );
 
         // 2. Actor: descend on -mean Q(s, mu(s)).
         let mu = self.actor.forward(&batch.obs, b);
@@ -129,12 +132,7 @@ impl Agent for Ddpg {
         self.actor_target.polyak_from(&self.actor, tau);
         self.critic_target.polyak_from(&self.critic, tau);
 
-        UpdateStats {
-            critic_loss: f64::from(critic_loss),
-            actor_loss: Some(actor_loss),
-            alpha: None,
-            entropy: None,
-        }
+        UpdateStats { critic_loss, actor_loss: Some(actor_loss), alpha: None, entropy: None }
     }
 
     fn save(&self, ck: &mut Checkpoint) {

@@ -132,6 +132,25 @@ pub(crate) fn clip(grads: &mut [f32], max_norm: f64) {
     }
 }
 
+/// One regression step of a critic towards the targets `y` (`batch` rows): forward on `input`,
+/// mean squared error, backward, Adam. `dq` is scratch of at least `batch` values. Returns the loss.
+pub(crate) fn fit_critic(
+    q: &mut Mlp<f32>,
+    opt: &mut Adam<f32>,
+    input: &[f32],
+    y: &[f32],
+    dq: &mut [f32],
+    max_grad_norm: f64,
+) -> f64 {
+    let b = y.len();
+    let pred = q.forward(input, b);
+    let loss = crate::nn::mse_loss(pred, y, &mut dq[..b]);
+    q.zero_grad();
+    q.backward(&dq[..b]);
+    step(q, opt, max_grad_norm);
+    f64::from(loss)
+}
+
 /// Apply one Adam step to a network from its accumulated gradients (clipped first if asked).
 pub(crate) fn step(net: &mut Mlp<f32>, opt: &mut Adam<f32>, max_grad_norm: f64) {
     clip(net.grads_mut(), max_grad_norm);

@@ -14,11 +14,11 @@
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
 
 use super::{
-    find_non_finite, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig, Algo,
-    UpdateStats,
+    find_non_finite, fit_critic, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig,
+    Algo, UpdateStats,
 };
 use crate::checkpoint::Checkpoint;
-use crate::nn::{concat_cols, mse_loss, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
+use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
 use crate::replay::Batch;
 use crate::rng::Rng;
 use crate::Result;
@@ -158,14 +158,10 @@ impl Agent for Sac {
             self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * soft_v;
         }
         concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
-        let mut critic_loss = 0.0;
-        for (q, opt) in [(&mut self.q1, &mut self.q1_opt), (&mut self.q2, &mut self.q2_opt)] {
-            let pred = q.forward(&self.critic_in, b);
-            critic_loss += f64::from(mse_loss(pred, &self.y[..b], &mut self.dq[..b]));
-            q.zero_grad();
-            q.backward(&self.dq[..b]);
-            step(q, opt, self.cfg.max_grad_norm);
-        }
+        let n = self.cfg.max_grad_norm;
+        let critic_loss =
+            fit_critic(&mut self.q1, &mut self.q1_opt, &self.critic_in, &self.y[..b], &mut self.dq, n)
+                + fit_critic(&mut self.q2, &mut self.q2_opt, &self.critic_in, &self.y[..b], &mut self.dq, n);
 
         // 2. Actor, through the reparameterised sample and dQ/da of the smaller critic.
         let raw = self.actor.forward(&batch.obs, b);
