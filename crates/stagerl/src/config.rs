@@ -80,6 +80,7 @@ pub struct TaskConfig {
     /// Factor on the observation's `target - end-effector` and `D_PT` entries. Near the goal
     /// these are about 0.01 m, a tiny input for a network that must turn them into precise
     /// joint velocities; a factor of 10 puts the last centimetre on the scale of the other inputs.
+    /// At most [`MAX_OBS_DELTA_SCALE`]: the scaled entries are stored as f32.
     pub obs_delta_scale: f64,
 }
 
@@ -101,6 +102,10 @@ impl Default for TaskConfig {
 pub const UR5_HOME_POSE_RAD: [f64; 6] = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0];
 /// The default target joint range of the design notes, radians.
 pub const DEFAULT_TARGET_JOINT_RANGE_RAD: [f64; 6] = [1.2, 0.8, 0.8, 0.0, 0.0, 0.0];
+
+/// Largest `task.obs_delta_scale`: the scaled `target - end-effector` entries are f32, and a
+/// larger factor turns distances of metres into infinite observations.
+pub const MAX_OBS_DELTA_SCALE: f64 = 1e6;
 
 /// A task whose per-joint vectors are resolved against an arm and checked.
 #[derive(Clone, Debug, PartialEq)]
@@ -134,8 +139,12 @@ impl TaskConfig {
             return Err(Error::config("task.max_steps", self.max_steps, "an integer >= 1"));
         }
         check_finite("task.target_min_z_m", self.target_min_z_m)?;
-        if !(self.obs_delta_scale.is_finite() && self.obs_delta_scale > 0.0) {
-            return Err(Error::config("task.obs_delta_scale", self.obs_delta_scale, "a finite number > 0"));
+        if !(self.obs_delta_scale > 0.0 && self.obs_delta_scale <= MAX_OBS_DELTA_SCALE) {
+            return Err(Error::config(
+                "task.obs_delta_scale",
+                self.obs_delta_scale,
+                format!("a number in (0, {MAX_OBS_DELTA_SCALE:e}]"),
+            ));
         }
         Ok(())
     }

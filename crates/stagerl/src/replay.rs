@@ -52,6 +52,13 @@ impl ReplayBuffer {
         if capacity == 0 {
             return Err(Error::config("agent.buffer_size", 0, "an integer >= 1"));
         }
+        if capacity.checked_mul(obs_dim.max(act_dim).max(1)).and_then(|n| n.checked_mul(4)).is_none() {
+            return Err(Error::config(
+                "agent.buffer_size",
+                capacity,
+                format!("a capacity whose arrays ({obs_dim} observation values a transition) fit in memory"),
+            ));
+        }
         Ok(ReplayBuffer {
             capacity,
             obs_dim,

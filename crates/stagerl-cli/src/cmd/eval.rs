@@ -11,8 +11,8 @@ pub struct Args {
     /// Checkpoint to evaluate (default: the run's best, else final, else latest).
     #[arg(long)]
     checkpoint: Option<PathBuf>,
-    /// Random targets.
-    #[arg(long, default_value_t = 500)]
+    /// Random targets (1 to 10 000 000; every trial's record is kept for the CSV).
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
     trials: u32,
     /// Seed of the targets.
     #[arg(long, default_value_t = DEFAULT_SEED)]

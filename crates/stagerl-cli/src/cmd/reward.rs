@@ -14,16 +14,23 @@ pub struct Args {
     config: Option<PathBuf>,
 }
 
+/// The fixed-length fields are read as lists and checked here, so a wrong length is reported
+/// with the field's name.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Input {
-    ee_pos: [f64; 3],
-    ee_quat: [f64; 4],
-    target: [f64; 3],
+    ee_pos: Vec<f64>,
+    ee_quat: Vec<f64>,
+    target: Vec<f64>,
     joint_vel: Vec<f64>,
     /// Only for `reward.direction = "displacement"`: the end-effector position before the step.
     #[serde(default)]
-    prev_ee_pos: Option<[f64; 3]>,
+    prev_ee_pos: Option<Vec<f64>>,
+}
+
+/// `v` as an array of `N`, or an error naming the key.
+fn fixed<const N: usize>(key: &str, v: &[f64]) -> Result<[f64; N]> {
+    v.try_into().map_err(|_| anyhow::anyhow!("malformed input: `{key}` has {} values, expected {N}", v.len()))
 }
 
 #[derive(Serialize)]
@@ -51,11 +58,16 @@ pub fn run(args: Args) -> Result<()> {
     let stdout = std::io::BufWriter::new(std::io::stdout().lock());
     crate::jsonl::process(stdin, stdout, |i: Input| {
         let input = RewardInput {
-            ee_pos: Vec3::from(i.ee_pos),
-            ee_quat: i.ee_quat,
-            target: Vec3::from(i.target),
+            ee_pos: Vec3::from(fixed::<3>("ee_pos", &i.ee_pos)?),
+            ee_quat: fixed::<4>("ee_quat", &i.ee_quat)?,
+            target: Vec3::from(fixed::<3>("target", &i.target)?),
             joint_vel: &i.joint_vel,
-            prev_ee_pos: i.prev_ee_pos.map(Vec3::from),
+            prev_ee_pos: i
+                .prev_ee_pos
+                .as_deref()
+                .map(|p| fixed::<3>("prev_ee_pos", p))
+                .transpose()?
+                .map(Vec3::from),
         };
         input.validate()?;
         if cfg.reward.direction == stagerl::reward::DirectionSource::Displacement

@@ -58,6 +58,12 @@ pub enum NoiseKind {
 /// Default exploration noise of DDPG and TD3 (action units).
 const NOISE_DEFAULT: f64 = 0.1;
 
+/// Largest replay capacity, transitions (the paper's 10000 episodes make at most 500000).
+pub const MAX_BUFFER_SIZE: usize = 100_000_000;
+
+/// Largest `batch_size x widest hidden layer`: 2^28 f32 values, 1 GiB per activation matrix.
+pub const MAX_BATCH_VALUES: usize = 1 << 28;
+
 /// Hyper-parameters of the agents; each algorithm reads the ones it uses.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -76,8 +82,9 @@ pub struct AgentConfig {
     pub gamma: f64,
     /// Polyak coefficient of the target networks.
     pub tau: f64,
+    /// Transitions per update; `batch_size x widest hidden layer` at most [`MAX_BATCH_VALUES`].
     pub batch_size: usize,
-    /// Replay capacity, transitions.
+    /// Replay capacity, transitions, at most [`MAX_BUFFER_SIZE`] (preallocated).
     pub buffer_size: usize,
     /// Environment steps of uniform random actions before learning starts.
     pub learning_starts: u64,
@@ -190,11 +197,25 @@ impl AgentConfig {
         if !(self.tau.is_finite() && self.tau > 0.0 && self.tau <= 1.0) {
             return Err(Error::config("agent.tau", self.tau, "a number in (0, 1]"));
         }
-        if self.batch_size == 0 {
-            return Err(Error::config("agent.batch_size", 0, "an integer >= 1"));
+        // Both are preallocated: an absurd size must be refused here, not abort the process when
+        // the allocation fails (or overflow computing its length).
+        let widest = self.hidden.iter().copied().max().unwrap_or(1);
+        if self.batch_size == 0 || self.batch_size.saturating_mul(widest) > MAX_BATCH_VALUES {
+            return Err(Error::config(
+                "agent.batch_size",
+                self.batch_size,
+                format!(
+                    "an integer >= 1 with batch_size x widest hidden layer ({widest}) <= {MAX_BATCH_VALUES} \
+                     (one activation matrix of 1 GiB)"
+                ),
+            ));
         }
-        if self.buffer_size == 0 {
-            return Err(Error::config("agent.buffer_size", 0, "an integer >= 1"));
+        if self.buffer_size == 0 || self.buffer_size > MAX_BUFFER_SIZE {
+            return Err(Error::config(
+                "agent.buffer_size",
+                self.buffer_size,
+                format!("an integer in 1..={MAX_BUFFER_SIZE} (transitions; the buffer is preallocated)"),
+            ));
         }
         if self.updates_per_step == 0 {
             return Err(Error::config("agent.updates_per_step", 0, "an integer >= 1"));

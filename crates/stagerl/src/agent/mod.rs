@@ -9,7 +9,7 @@ pub mod noise;
 pub mod sac;
 pub mod td3;
 
-pub use config::{AgentConfig, Algo, NoiseKind};
+pub use config::{AgentConfig, Algo, NoiseKind, MAX_BATCH_VALUES, MAX_BUFFER_SIZE};
 
 use crate::checkpoint::Checkpoint;
 use crate::nn::{first_non_finite, Adam, Mlp};
@@ -79,7 +79,8 @@ pub(crate) fn save_mlp(ck: &mut Checkpoint, prefix: &str, net: &Mlp<f32>) {
     }
 }
 
-/// Load a network saved by [`save_mlp`]; every tensor's shape must match.
+/// Load a network saved by [`save_mlp`]; every tensor's shape must match and every value be
+/// finite (a damaged network would only show later, as a NaN action).
 pub(crate) fn load_mlp(ck: &Checkpoint, prefix: &str, net: &mut Mlp<f32>) -> Result<()> {
     for t in net.tensors() {
         let name = format!("{prefix}.{}", t.name);
@@ -89,6 +90,12 @@ pub(crate) fn load_mlp(ck: &Checkpoint, prefix: &str, net: &mut Mlp<f32>) -> Res
                 "checkpoint tensor `{name}` has shape {shape:?}, this agent's has {:?} \
                  (a different network size or observation?)",
                 t.shape
+            )));
+        }
+        if let Some(i) = first_non_finite(data) {
+            return Err(Error::InvalidInput(format!(
+                "checkpoint tensor `{name}`[{i}] = {} is not finite: the network is damaged",
+                data[i]
             )));
         }
         net.params_mut()[t.range()].copy_from_slice(data);

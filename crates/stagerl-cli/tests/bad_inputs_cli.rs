@@ -1,0 +1,357 @@
+//! Bad input to the `stagerl` binary: arguments, files and JSON lines. Every case must exit with
+//! an error (non-zero, not 101, the code of a panic, and not killed by a signal such as an
+//! allocation abort), print no "panicked", name what is wrong (each listed substring appears on
+//! stderr), and leave every file of the fixture directory as it was.
+//!
+//! The cases are data: adding one is adding one line to a table. In arguments, `$DIR` is the
+//! fixture directory, `$RUN` a small trained SAC run (hidden [8, 8]) and `$EMPTY` a run directory
+//! with a config but no checkpoint.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+use stagerl::agent::Algo;
+use stagerl::checkpoint::Checkpoint;
+use stagerl::config::Config;
+use stagerl::train::{train, RunDir};
+
+struct Case {
+    args: &'static [&'static str],
+    stdin: &'static str,
+    expect: &'static [&'static str],
+}
+
+const GOOD_REWARD: &str =
+    r#"{"ee_pos":[0,0,0],"ee_quat":[0,0,0,1],"target":[0.3,0,0],"joint_vel":[0,0,0,0,0,0]}"#;
+
+#[rustfmt::skip]
+const ARGS: &[Case] = &[
+    // Unknown algorithm or reward, bad numbers.
+    Case { args: &["train", "--algo", "ppo"], stdin: "", expect: &["ppo", "ddpg, td3, sac"] },
+    Case { args: &["train", "--reward", "sparse"], stdin: "", expect: &["sparse", "basic, posture, stride, har, sar"] },
+    Case { args: &["train", "--episodes=-5"], stdin: "", expect: &["--episodes", "-5"] },
+    Case { args: &["train", "--episodes", "-5"], stdin: "", expect: &["-5"] },
+    Case { args: &["train", "--episodes", "many"], stdin: "", expect: &["--episodes", "many"] },
+    Case { args: &["train", "--episodes", "0", "--out", "$DIR/out/zero"], stdin: "", expect: &["train.episodes"] },
+    Case { args: &["train", "--seed=-1"], stdin: "", expect: &["--seed", "-1"] },
+    Case { args: &["train", "--eval-trials=-1"], stdin: "", expect: &["--eval-trials", "-1"] },
+    Case { args: &["train", "--frobnicate"], stdin: "", expect: &["--frobnicate"] },
+    // Config files: missing, malformed, out of range (and once an allocation abort).
+    Case { args: &["train", "--config", "$DIR/missing.toml"], stdin: "", expect: &["missing.toml", "No such file"] },
+    Case { args: &["train", "--config", "$DIR/bad.toml", "--out", "$DIR/out/bad"], stdin: "", expect: &["bad.toml", "unknown field `max_step`"] },
+    Case { args: &["train", "--config", "$DIR/huge_buffer.toml", "--out", "$DIR/out/huge"], stdin: "", expect: &["agent.buffer_size"] },
+    Case { args: &["demo", "--config", "$DIR/bad.toml"], stdin: "", expect: &["bad.toml", "max_step"] },
+    Case { args: &["reward", "--function", "sar", "--config", "$DIR/missing.toml"], stdin: "", expect: &["missing.toml"] },
+    // A run that exists is not replaced without --force.
+    Case { args: &["train", "--out", "$RUN", "--episodes", "1"], stdin: "", expect: &["already holds a run", "--force"] },
+    // Missing required arguments, unknown commands.
+    Case { args: &["eval"], stdin: "", expect: &["--run"] },
+    Case { args: &["reward"], stdin: "", expect: &["--function"] },
+    Case { args: &["frobnicate"], stdin: "", expect: &["frobnicate"] },
+    Case { args: &[], stdin: "", expect: &["Usage"] },
+    // Eval: run directories and checkpoints.
+    Case { args: &["eval", "--run", "$DIR/nope"], stdin: "", expect: &["nope", "config.toml"] },
+    Case { args: &["eval", "--run", "$EMPTY"], stdin: "", expect: &["holds no checkpoint"] },
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/runs/td3/checkpoints/final.safetensors"], stdin: "", expect: &["td3/checkpoints/final.safetensors", "checkpoint of algorithm `td3`, the config says `sac`"] },
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/runs/wide/checkpoints/final.safetensors"], stdin: "", expect: &["wide/checkpoints/final.safetensors", "has shape [16, 16], this agent's has [8, 16]"] },
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/garbage.safetensors"], stdin: "", expect: &["garbage.safetensors", "not a valid checkpoint"] },
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/truncated.safetensors"], stdin: "", expect: &["truncated.safetensors", "not a valid checkpoint"] },
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/nan.safetensors"], stdin: "", expect: &["nan.safetensors", "`actor.layer1.weight`[3] = NaN is not finite"] },
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/missing.safetensors"], stdin: "", expect: &["missing.safetensors", "No such file"] },
+    Case { args: &["eval", "--run", "$RUN", "--trials", "0"], stdin: "", expect: &["--trials", "0 is not in 1..=10000000"] },
+    Case { args: &["eval", "--run", "$RUN", "--trials", "4000000000"], stdin: "", expect: &["--trials", "4000000000"] },
+    // Robots.
+    Case { args: &["fk", "--robot", "$DIR/missing.urdf"], stdin: "", expect: &["missing.urdf"] },
+    Case { args: &["fk", "--robot", "$DIR/branchy.urdf"], stdin: "", expect: &["branchy.urdf", "several leaf links (`tip`, `side`)"] },
+    Case { args: &["fk", "--robot", "ur5", "--tip", "flange"], stdin: "", expect: &["unknown tip link `flange`"] },
+    // Benchmarks take their values through the same validation.
+    Case { args: &["bench", "env", "--steps=-1"], stdin: "", expect: &["--steps", "-1"] },
+    Case { args: &["bench", "update", "--hidden", "0"], stdin: "", expect: &["agent.hidden"] },
+    Case { args: &["bench", "update", "--batch", "0"], stdin: "", expect: &["agent.batch_size"] },
+    Case { args: &["bench", "update", "--algo", "ppo"], stdin: "", expect: &["ppo"] },
+];
+
+#[rustfmt::skip]
+const FK_LINES: &[Case] = &[
+    Case { args: &["fk"], stdin: "{}\n", expect: &["line 1", "missing field `joints`"] },
+    Case { args: &["fk"], stdin: "{\"joints\":[0,0,0]}\n", expect: &["line 1", "q has 3 values", "6 joints"] },
+    Case { args: &["fk"], stdin: "{\"joints\":[]}\n", expect: &["line 1", "q has 0 values"] },
+    Case { args: &["fk"], stdin: "{\"joints\":[0,0,0,0,0,0]}\n{\"joints\":\"0,0,0,0,0,0\"}\n", expect: &["line 2", "malformed"] },
+    Case { args: &["fk"], stdin: "{\"joints\":[0,0,0,0,0,null]}\n", expect: &["line 1", "malformed"] },
+    Case { args: &["fk"], stdin: "{\"joints\":[0,0,0,0,0,true]}\n", expect: &["line 1", "malformed"] },
+    Case { args: &["fk"], stdin: "{\"joints\":[0,0,0,0,0,0],\"speed\":1}\n", expect: &["line 1", "unknown field `speed`"] },
+    Case { args: &["fk"], stdin: "[0,0,0,0,0,0]\n", expect: &["line 1", "malformed"] },
+    Case { args: &["fk"], stdin: "{\"joints\":[0,0,0,0,0,1e999]}\n", expect: &["line 1"] },
+    Case { args: &["fk"], stdin: "\n\n{\"joints\":[0,0,0,0,0,0]\n", expect: &["line 3", "malformed"] },
+    Case { args: &["fk", "--robot", "$DIR/two.urdf"], stdin: "{\"joints\":[0,0,0,0,0,0]}\n", expect: &["line 1", "q has 6 values", "2 joints"] },
+];
+
+#[rustfmt::skip]
+const REWARD_LINES: &[Case] = &[
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"joint_vel\":[0]}\n", expect: &["line 1", "missing field `target`"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`ee_pos` has 2 values, expected 3"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,1],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`ee_quat` has 3 values, expected 4"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`target` has 4 values, expected 3"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 2"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,0],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 0"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1.00001],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 1.00001"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[]}\n", expect: &["line 1", "joint_vel is empty"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":\"fast\"}\n", expect: &["line 1", "malformed"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,\"a\",0],\"joint_vel\":[0]}\n", expect: &["line 1", "malformed"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0],\"velocity\":1}\n", expect: &["line 1", "unknown field `velocity`"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0],\"prev_ee_pos\":[0,0]}\n", expect: &["line 1", "`prev_ee_pos` has 2 values, expected 3"] },
+    Case { args: &["reward", "--function", "stride", "--config", "$DIR/displacement.toml"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "prev_ee_pos"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "$GOOD\n\n$GOOD\n{\"ee_pos\":[0,0,0]}\n", expect: &["line 4", "missing field"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "null\n", expect: &["line 1", "malformed"] },
+];
+
+/// Every file and directory under `dir` except `dir/out` (where `train` may create runs), with
+/// the files' bytes.
+fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                out.insert(p.clone(), None);
+                stack.push(p);
+            } else {
+                out.insert(p.clone(), Some(std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out
+}
+
+fn small_run(dir: &Path, algo: Algo, hidden: usize) {
+    let mut cfg = Config::default();
+    cfg.agent.algo = algo;
+    cfg.agent.hidden = vec![hidden, hidden];
+    cfg.agent.batch_size = 8;
+    cfg.agent.buffer_size = 1000;
+    cfg.agent.learning_starts = 30;
+    cfg.train.episodes = 2;
+    cfg.train.eval_every_episodes = 0;
+    cfg.train.checkpoint_every_episodes = 1;
+    train(&cfg, dir, |_| {}).unwrap();
+}
+
+const TWO_JOINT_URDF: &str = r#"<robot name="two">
+  <link name="base"/><link name="l1"/><link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="tip"/>
+    <origin xyz="0.5 0 0.2"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>"#;
+
+/// The fixture directory: three small runs and the files the cases point at.
+fn fixture(dir: &Path) {
+    std::fs::remove_dir_all(dir).ok();
+    std::fs::create_dir_all(dir.join("out")).unwrap();
+    let runs = dir.join("runs");
+    small_run(&runs.join("sac"), Algo::Sac, 8);
+    small_run(&runs.join("td3"), Algo::Td3, 8);
+    small_run(&runs.join("wide"), Algo::Sac, 16);
+    let empty = dir.join("empty-run");
+    std::fs::create_dir_all(&empty).unwrap();
+    std::fs::copy(RunDir::new(&runs.join("sac")).config(), RunDir::new(&empty).config()).unwrap();
+
+    let good = std::fs::read(RunDir::new(&runs.join("sac")).final_checkpoint()).unwrap();
+    std::fs::write(dir.join("garbage.safetensors"), b"\x00\x01 not a checkpoint").unwrap();
+    std::fs::write(dir.join("truncated.safetensors"), &good[..good.len() / 2]).unwrap();
+    let ck = Checkpoint::from_bytes(&good, Path::new("good")).unwrap();
+    let mut nan = Checkpoint::new();
+    for name in ck.tensor_names() {
+        let (shape, data) = ck.tensor(name).unwrap();
+        let mut data = data.to_vec();
+        if name == "actor.layer1.weight" {
+            data[3] = f32::NAN;
+        }
+        nan.put_tensor(name, shape, &data);
+    }
+    for key in ["algorithm", "agent_rng", "actor_opt.step", "q1_opt.step", "q2_opt.step", "alpha_opt.step"] {
+        nan.put_meta(key, ck.meta(key).unwrap());
+    }
+    nan.save(&dir.join("nan.safetensors")).unwrap();
+
+    std::fs::write(dir.join("bad.toml"), "[task]\nmax_step = 10\n").unwrap();
+    std::fs::write(dir.join("huge_buffer.toml"), "[agent]\nbuffer_size = 100000000000000\n").unwrap();
+    std::fs::write(dir.join("displacement.toml"), "[reward]\ndirection = \"displacement\"\n").unwrap();
+    std::fs::write(dir.join("two.urdf"), TWO_JOINT_URDF).unwrap();
+    let branchy =
+        TWO_JOINT_URDF.replace("<link name=\"tip\"/>", "<link name=\"tip\"/><link name=\"side\"/>").replace(
+            "</robot>",
+            "<joint name=\"j3\" type=\"fixed\"><parent link=\"base\"/><child link=\"side\"/></joint></robot>",
+        );
+    std::fs::write(dir.join("branchy.urdf"), branchy).unwrap();
+}
+
+fn run(args: &[String], stdin: &str) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn stagerl");
+    // A command may exit before reading its input (a bad argument): ignore a broken pipe.
+    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
+    child.wait_with_output().unwrap()
+}
+
+/// Run every case of `table`; return the failures.
+fn check(table: &[Case], dir: &Path) -> Vec<String> {
+    let d = dir.to_string_lossy().into_owned();
+    let subst = |s: &str| {
+        s.replace("$RUN", &format!("{d}/runs/sac"))
+            .replace("$EMPTY", &format!("{d}/empty-run"))
+            .replace("$DIR", &d)
+            .replace("$GOOD", GOOD_REWARD)
+    };
+    let mut failures = Vec::new();
+    for c in table {
+        let args: Vec<String> = c.args.iter().map(|a| subst(a)).collect();
+        let stdin = subst(c.stdin);
+        let before = snapshot(dir);
+        let out = run(&args, &stdin);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let case = format!("`stagerl {}` < {:?}", args.join(" "), stdin);
+        if std::env::var_os("STAGERL_SHOW_ERRORS").is_some() {
+            eprintln!("{case}\n    -> {:?} {}", out.status.code(), err.trim_end());
+        }
+        match out.status.code() {
+            None => failures.push(format!("{case}: killed by a signal ({:?}); stderr: {err}", out.status)),
+            Some(0) => failures.push(format!("{case}: succeeded, expected an error")),
+            Some(101) => failures.push(format!("{case}: exit code 101 (a panic); stderr: {err}")),
+            Some(_) => {}
+        }
+        if err.contains("panicked") {
+            failures.push(format!("{case}: stderr reports a panic: {err}"));
+        }
+        for needle in c.expect {
+            if !err.contains(needle) {
+                failures.push(format!("{case}: stderr does not contain {needle:?}: {err}"));
+            }
+        }
+        if snapshot(dir) != before {
+            failures.push(format!("{case}: files in the fixture directory changed"));
+        }
+    }
+    failures
+}
+
+#[test]
+fn bad_input_to_the_cli_is_an_error_naming_the_problem() {
+    let dir = std::env::temp_dir().join(format!("stagerl-bad-cli-{}", std::process::id()));
+    fixture(&dir);
+    // The fixture is sound: the good run evaluates, and the good lines are answered.
+    let d = dir.to_string_lossy().into_owned();
+    let ok =
+        run(&["eval".into(), "--run".into(), format!("{d}/runs/sac"), "--trials".into(), "2".into()], "");
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    std::fs::remove_file(dir.join("runs/sac/eval-seed0.csv")).unwrap();
+    let ok = run(&["reward".into(), "--function".into(), "sar".into()], &format!("{GOOD_REWARD}\n"));
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+
+    let mut failures = check(ARGS, &dir);
+    failures.extend(check(FK_LINES, &dir));
+    failures.extend(check(REWARD_LINES, &dir));
+    // Nothing was created where a failed `train` was pointed.
+    let created: Vec<_> = std::fs::read_dir(dir.join("out")).unwrap().map(|e| e.unwrap().path()).collect();
+    if !created.is_empty() {
+        failures.push(format!("failed `train` commands created {created:?}"));
+    }
+    let total = ARGS.len() + FK_LINES.len() + REWARD_LINES.len();
+    assert!(
+        failures.is_empty(),
+        "{} failures over {total} cases:\n{}",
+        failures.len(),
+        failures.join("\n\n")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn answered_lines_before_a_bad_one_are_kept() {
+    // The JSON-lines commands answer every good line before the bad one, then stop.
+    let out = run(
+        &["reward".into(), "--function".into(), "sar".into()],
+        &format!("{GOOD_REWARD}\n{GOOD_REWARD}\n{{\"ee_pos\":[0,0,0]}}\n{GOOD_REWARD}\n"),
+    );
+    assert!(!out.status.success());
+    assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 2);
+    let out =
+        run(&["fk".into()], "{\"joints\":[0,0,0,0,0,0]}\n{\"joints\":[0]}\n{\"joints\":[0,0,0,0,0,0]}\n");
+    assert!(!out.status.success());
+    assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 1);
+}
+
+#[test]
+fn a_numerical_fault_is_a_clean_error_and_the_run_stays_usable() {
+    // Learning rates of 1e30 blow the networks up on the first update (episode 2, step 10); the
+    // checkpoint of episode 1 stays, and `eval` falls back to it.
+    let dir = std::env::temp_dir().join(format!("stagerl-bad-cli-nan-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("explode.toml");
+    std::fs::write(
+        &cfg,
+        "[agent]\nhidden = [8, 8]\nbatch_size = 8\nbuffer_size = 1000\nlearning_starts = 60\n\
+         actor_lr = 1e30\ncritic_lr = 1e30\n[train]\nseed = 7\nepisodes = 20\neval_every_episodes = 0\n\
+         checkpoint_every_episodes = 1\n",
+    )
+    .unwrap();
+    let out = dir.join("run");
+    let s = |p: &Path| p.to_string_lossy().into_owned();
+    let args: Vec<String> =
+        ["train", "--config", &s(&cfg), "--out", &s(&out), "--eval-trials", "0"].map(String::from).to_vec();
+    let r = run(&args, "");
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for needle in ["numerical fault", "actor loss", "at episode 2, step 10", "last good checkpoint"] {
+        assert!(err.contains(needle), "{needle:?} not in {err}");
+    }
+    let run_dir = RunDir::new(&out);
+    assert!(!run_dir.final_checkpoint().exists());
+    let latest = Checkpoint::load(&run_dir.latest()).unwrap();
+    assert_eq!(latest.json::<u64>("episode").unwrap(), 1);
+    let args: Vec<String> = ["eval", "--run", &s(&out), "--trials", "3", "--json"].map(String::from).to_vec();
+    let r = run(&args, "");
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stdout).contains("\"trials\":3"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Known gap in `train/` and the `train` command, reported: the evaluation preallocates one
+/// record per trial (`evaluate` in `train/eval.rs`), so 4e9 trials abort the process ("memory
+/// allocation of 256000000000 bytes failed", SIGABRT) instead of being refused. `train.eval_trials`
+/// is checked in `TrainConfig::validate` and `--eval-trials` in the train command, which this
+/// branch does not touch; `eval --trials` is bounded (see `ARGS`). Enable when both are bounded.
+#[rustfmt::skip]
+const TRAIN_PENDING: &[Case] = &[
+    Case { args: &["train", "--config", "$DIR/huge_eval.toml", "--out", "$DIR/out/a"], stdin: "", expect: &["train.eval_trials"] },
+    Case { args: &["train", "--config", "$DIR/tiny.toml", "--eval-trials", "4000000000", "--out", "$DIR/out/b"], stdin: "", expect: &["--eval-trials"] },
+];
+
+#[test]
+#[ignore = "train.eval_trials / --eval-trials of 4e9 abort on allocation (reported; train/ is not ours)"]
+fn huge_evaluations_are_refused_not_aborted() {
+    let dir = std::env::temp_dir().join(format!("stagerl-bad-cli-eval-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(dir.join("out")).unwrap();
+    let tiny = "[agent]\nhidden = [8]\nbatch_size = 8\nlearning_starts = 10\n[train]\nepisodes = 1\n";
+    std::fs::write(dir.join("tiny.toml"), format!("{tiny}eval_every_episodes = 0\n")).unwrap();
+    std::fs::write(
+        dir.join("huge_eval.toml"),
+        format!("{tiny}eval_every_episodes = 1\neval_trials = 4000000000\n"),
+    )
+    .unwrap();
+    let failures = check(TRAIN_PENDING, &dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+    std::fs::remove_dir_all(&dir).ok();
+}
