@@ -339,7 +339,7 @@ const TRAIN_PENDING: &[Case] = &[
 ];
 
 #[test]
-#[ignore = "train.eval_trials / --eval-trials of 4e9 abort on allocation (reported; train/ is not ours)"]
+
 fn huge_evaluations_are_refused_not_aborted() {
     let dir = std::env::temp_dir().join(format!("stagerl-bad-cli-eval-{}", std::process::id()));
     std::fs::remove_dir_all(&dir).ok();

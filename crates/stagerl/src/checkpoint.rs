@@ -45,6 +45,11 @@ impl Checkpoint {
         self.put_meta(key, serde_json::to_string(value).expect("metadata serialises"));
     }
 
+    /// The file it was read from, or "checkpoint", for error messages.
+    pub fn name(&self) -> String {
+        self.where_()
+    }
+
     fn where_(&self) -> String {
         self.origin.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "checkpoint".into())
     }

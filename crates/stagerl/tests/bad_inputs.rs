@@ -399,7 +399,7 @@ const CHECKPOINTS: &[Ck] = &[
     Ck { name: "no-actor-weight", bytes: |f| edited(f, |c| rebuild(c, "actor.layer0.weight", None, &[])), expect: "no tensor `actor.layer0.weight`" },
     Ck { name: "short-adam", bytes: |f| edited(f, |c| rebuild(c, "", Some(("q1_opt.m", &[3], &[0.0; 3])), &[])), expect: "tensor `q1_opt.m` has shape [3]" },
     Ck { name: "bad-json-meta", bytes: |f| edited(f, |c| rebuild(c, "", None, &[("agent_rng", Some("{oops"))])), expect: "metadata `agent_rng`" },
-    Ck { name: "nan-weight", bytes: |f| edited(f, |c| rebuild(c, "", Some(("q2.layer2.bias", &[1], &[f32::NAN])), &[])), expect: "checkpoint tensor `q2.layer2.bias`[0] = NaN is not finite" },
+    Ck { name: "nan-weight", bytes: |f| edited(f, |c| rebuild(c, "", Some(("q2.layer2.bias", &[1], &[f32::NAN])), &[])), expect: "tensor `q2.layer2.bias`[0] = NaN is not finite" },
     Ck { name: "inf-weight", bytes: |f| edited(f, |c| { let (s, d) = c.tensor("actor.layer0.weight").unwrap(); let mut d = d.to_vec(); d[5] = f32::INFINITY; rebuild(c, "", Some(("actor.layer0.weight", s, &d)), &[]) }), expect: "`actor.layer0.weight`[5] = inf" },
     // Not a file.
     Ck { name: "missing-file", bytes: |_| None, expect: "missing-file.safetensors" },

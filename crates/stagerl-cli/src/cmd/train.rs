@@ -37,7 +37,7 @@ pub struct Args {
     #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "seed", "episodes", "out", "config"])]
     resume: Option<PathBuf>,
     /// Trials of the closing evaluation (deterministic policy); 0 skips it.
-    #[arg(long, default_value_t = 500)]
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(0..=10_000_000))]
     eval_trials: u32,
 }
 

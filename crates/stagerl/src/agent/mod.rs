@@ -87,14 +87,16 @@ pub(crate) fn load_mlp(ck: &Checkpoint, prefix: &str, net: &mut Mlp<f32>) -> Res
         let (shape, data) = ck.tensor(&name)?;
         if shape != t.shape.as_slice() {
             return Err(Error::InvalidInput(format!(
-                "checkpoint tensor `{name}` has shape {shape:?}, this agent's has {:?} \
+                "{}: tensor `{name}` has shape {shape:?}, this agent's has {:?} \
                  (a different network size or observation?)",
+                ck.name(),
                 t.shape
             )));
         }
         if let Some(i) = first_non_finite(data) {
             return Err(Error::InvalidInput(format!(
-                "checkpoint tensor `{name}`[{i}] = {} is not finite: the network is damaged",
+                "{}: tensor `{name}`[{i}] = {} is not finite: the network is damaged",
+                ck.name(),
                 data[i]
             )));
         }

@@ -46,6 +46,12 @@ pub fn evaluate(
     trials: u32,
     seed: u64,
 ) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    if trials > super::MAX_EVAL_TRIALS {
+        return Err(crate::Error::InvalidInput(format!(
+            "{trials} evaluation trials: at most {}",
+            super::MAX_EVAL_TRIALS
+        )));
+    }
     let saved_rng = env.rng().clone();
     env.reset_with_seed(seed);
     let mut action = vec![0.0f32; env.act_dim()];
@@ -59,6 +65,14 @@ pub fn evaluate(
         let mut reward = 0.0;
         let success = loop {
             agent.predict(env.observation(), &mut action);
+            if let Some(i) = action.iter().position(|a| !a.is_finite()) {
+                return Err(crate::Error::NumericalFault(format!(
+                    "the policy's action[{i}] = {} in evaluation trial {}, step {}",
+                    action[i],
+                    trial + 1,
+                    env.steps() + 1
+                )));
+            }
             let s = env.step(&action)?;
             reward += s.total();
             if s.done() {

@@ -39,6 +39,9 @@ use crate::{Error, Result};
 
 pub use eval::{evaluate, EvalSummary, TrialRecord};
 
+/// The largest evaluation asked for at once (its per-trial records are kept in memory).
+pub const MAX_EVAL_TRIALS: u32 = 10_000_000;
+
 /// Training settings (the `[train]` section).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -75,6 +78,13 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<()> {
         if self.episodes == 0 {
             return Err(Error::config("train.episodes", 0, "an integer >= 1"));
+        }
+        if self.eval_trials > MAX_EVAL_TRIALS {
+            return Err(Error::config(
+                "train.eval_trials",
+                self.eval_trials,
+                format!("at most {MAX_EVAL_TRIALS}"),
+            ));
         }
         if self.eval_every_episodes > 0 && self.eval_trials == 0 {
             return Err(Error::config(
@@ -180,7 +190,7 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
         )));
     }
     let mut agent = build_agent(cfg, env)?;
-    agent.load(&ck).map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))?;
+    agent.load(&ck)?; // the checkpoint's errors name its file
     Ok(agent)
 }
 
@@ -318,7 +328,7 @@ impl Trainer {
                 cfg.agent.algo
             )));
         }
-        t.agent.load(ck).map_err(|e| Error::InvalidInput(format!("{}: {e}", path.display())))?;
+        t.agent.load(ck)?;
         t.state = ck.json("train_state")?;
         let arrays = crate::replay::ReplayBuffer::new(1, 1, 1)?.arrays().map(|(name, _)| name);
         let data: Vec<&[f32]> = arrays.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
@@ -418,6 +428,16 @@ impl Trainer {
                     }
                 } else {
                     self.agent.act(&obs, &mut action);
+                    if let Some(i) = action.iter().position(|a| !a.is_finite()) {
+                        return Err(Error::NumericalFault(format!(
+                            "the actor's action[{i}] = {} at episode {}, step {} (update {}); \
+                             the last good checkpoint is left in place",
+                            action[i],
+                            self.state.episode + 1,
+                            self.env.steps() + 1,
+                            self.state.updates
+                        )));
+                    }
                 }
                 let s = self.env.step(&action)?;
                 self.state.episode_reward += s.total();
