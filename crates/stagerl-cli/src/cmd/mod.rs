@@ -2,6 +2,7 @@ pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod fk;
+pub mod report;
 pub mod reward;
 pub mod train;
 
