@@ -235,22 +235,22 @@ fn compare(
     Comparison { metric, better, worse, verdict, ours, paper_verdict, paper }
 }
 
+/// An (algorithm, reward function) pair: one row of Table 1.
+type Cell = (Algo, RewardFunction);
+/// `(metric, better, worse)`.
+type Check = (Metric, Cell, Cell);
+
 struct Spec {
     id: &'static str,
     section: &'static str,
     statement: String,
     paper_text: &'static str,
-    /// (metric, better, worse)
-    checks: Vec<(Metric, (Algo, RewardFunction), (Algo, RewardFunction))>,
+    checks: Vec<Check>,
 }
 
 const ALGOS: [Algo; 2] = [Algo::Sac, Algo::Ddpg];
 
-fn per_algo(
-    metric: Metric,
-    better: RewardFunction,
-    worse: &[RewardFunction],
-) -> Vec<(Metric, (Algo, RewardFunction), (Algo, RewardFunction))> {
+fn per_algo(metric: Metric, better: RewardFunction, worse: &[RewardFunction]) -> Vec<Check> {
     ALGOS.iter().flat_map(|&a| worse.iter().map(move |&w| (metric, (a, better), (a, w)))).collect()
 }
 

@@ -125,7 +125,11 @@ pub fn analyze(
 /// The runs whose trajectories are drawn: for the algorithm with the most reward functions run,
 /// the lowest seed of its best and of its worst reward function (by evaluation success rate, then
 /// evaluation reward, then the tail's mean training reward), among runs with a checkpoint.
-pub fn pick_trajectory_runs<'a>(groups: &'a [Group], summaries: &[GroupSummary]) -> Vec<&'a runs::RunData> {
+/// Each pick is `(run, "best" or "worst", the group's mean evaluation success rate)`.
+pub fn pick_trajectory_runs<'a>(
+    groups: &'a [Group],
+    summaries: &[GroupSummary],
+) -> Vec<(&'a runs::RunData, &'static str, Option<f64>)> {
     fn has_ckpt(g: &Group) -> Option<&runs::RunData> {
         g.runs.iter().find(|r| crate::train::RunDir::new(&r.dir).best_available_checkpoint().is_some())
     }
@@ -148,11 +152,13 @@ pub fn pick_trajectory_runs<'a>(groups: &'a [Group], summaries: &[GroupSummary])
     let mut ranked: Vec<&(&Group, &GroupSummary)> =
         candidates.iter().filter(|(g, _)| g.algo == algo).collect();
     ranked.sort_by(|a, b| score(b.1).partial_cmp(&score(a.1)).unwrap_or(std::cmp::Ordering::Equal));
-    let mut out: Vec<&runs::RunData> = Vec::new();
-    for (g, _) in [ranked.first(), ranked.last()].into_iter().flatten() {
-        if let Some(r) = has_ckpt(g) {
-            if !out.iter().any(|o| o.dir == r.dir) {
-                out.push(r);
+    let mut out: Vec<(&runs::RunData, &'static str, Option<f64>)> = Vec::new();
+    for (role, pick) in [("best", ranked.first()), ("worst", ranked.last())] {
+        if let Some((g, s)) = pick {
+            if let Some(r) = has_ckpt(g) {
+                if !out.iter().any(|o| o.0.dir == r.dir) {
+                    out.push((r, role, s.success_rate.map(|m| m.mean)));
+                }
             }
         }
     }
@@ -190,10 +196,16 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
 
     if opts.trajectories > 0 {
         let mut sets: Vec<Rollouts> = Vec::new();
-        for run in pick_trajectory_runs(&groups, &report.groups) {
+        for (run, role, success) in pick_trajectory_runs(&groups, &report.groups) {
             let seed = run.final_eval.as_ref().and_then(|f| f.seed).unwrap_or(run.config.train.eval_seed);
             match trajectory::rollout(run, opts.trajectories, seed) {
-                Ok(r) => sets.push(r),
+                Ok(mut r) => {
+                    let rate = success
+                        .map(|s| format!(", group's evaluation success {:.1} %", 100.0 * s))
+                        .unwrap_or_default();
+                    r.title = format!("{role}: {}{rate}", r.title);
+                    sets.push(r)
+                }
                 Err(e) => report.warnings.push(format!("trajectories of {}: {e}", run.name)),
             }
         }

@@ -377,12 +377,12 @@ pub fn figure8(groups: &[Group]) -> CurveFigure {
     let trials =
         groups.iter().flat_map(|g| g.runs.iter()).map(|r| r.config.train.eval_trials).max().unwrap_or(0);
     let mut panels = Vec::new();
-    let rows: [(&str, &str, Option<(f64, f64)>); 3] = [
-        ("success rate", "success rate (%)", Some((0.0, 102.0))),
-        ("evaluation reward", "mean episode reward (eq. 16)", None),
-        ("evaluation steps", "mean steps (successful trials)", None),
+    let rows = [
+        ("success rate", "success rate (%)"),
+        ("evaluation reward", "mean episode reward (eq. 16)"),
+        ("evaluation steps", "mean steps (successful trials)"),
     ];
-    for (row, (what, unit, range)) in rows.into_iter().enumerate() {
+    for (row, (what, unit)) in rows.into_iter().enumerate() {
         for &a in &algos {
             let mut series = Vec::new();
             for g in groups.iter().filter(|g| g.primary && g.algo == a && !g.runs.is_empty()) {
@@ -408,11 +408,13 @@ pub fn figure8(groups: &[Group]) -> CurveFigure {
                     series.push((g.reward, series_label(g), band));
                 }
             }
-            let range = if row == 2 {
-                let top = series.iter().flat_map(|(_, _, b)| b.hi.iter().copied()).fold(1.0, f64::max);
-                Some((0.0, (top * 1.1).ceil()))
-            } else {
-                range
+            let range = match row {
+                0 => Some((0.0, 102.0)),
+                1 => None,
+                _ => {
+                    let top = series.iter().flat_map(|(_, _, b)| b.hi.iter().copied()).fold(1.0, f64::max);
+                    Some((0.0, (top * 1.1).ceil()))
+                }
             };
             panels.push(Panel {
                 title: format!("{} — {what}", algo_title(a)),
@@ -472,15 +474,17 @@ impl Figure for TrajectoryFigure {
             for (n, path) in set.paths.iter().enumerate() {
                 let color = PALETTE[n % PALETTE.len()];
                 let label = format!(
-                    "trial {}: {} in {} steps, reward {:.2}",
+                    "trial {}: {}, {} steps, R = {:.2}",
                     path.trial,
                     if path.success { "reached" } else { "missed" },
                     path.points.len().saturating_sub(1),
                     path.reward
                 );
+                let font = TextStyle::from((FAMILY, 14).into_font());
+                let width = cap.estimate_text_size(&label, &font).map_or(8 * label.len() as u32, |(w, _)| w);
                 cap.draw(&PathElement::new(vec![(x, 48), (x + 24, 48)], color.stroke_width(4))).map_err(e)?;
-                cap.draw(&Text::new(label.clone(), (x + 30, 40), (FAMILY, 15).into_font())).map_err(e)?;
-                x += 30 + 8 * label.len() as i32 + 30;
+                cap.draw(&Text::new(label, (x + 30, 40), font)).map_err(e)?;
+                x += 30 + width as i32 + 22;
             }
             let panels = panels.split_evenly((1, 3));
             for (k, (i, j)) in [(0usize, 1usize), (0, 2), (1, 2)].into_iter().enumerate() {
