@@ -488,7 +488,9 @@ pub fn render_markdown(claims: &[Claim]) -> String {
         s,
         "{} claims: {} hold, {} do not hold, {} not measurable. Ours are the primary configuration of each \
          algorithm and reward function in `table1.md` (mean over seeds); \"paper's table\" is the verdict the \
-         paper's own Table 1 gives, which does not always support its text.\n",
+         paper's own Table 1 gives, which does not always support its text. Percentages are relative to the \
+         second value of each comparison; \"within the seed spread\": the difference is smaller than the larger \
+         std over seeds.\n",
         claims.len(),
         count(Verdict::Holds),
         count(Verdict::DoesNotHold),

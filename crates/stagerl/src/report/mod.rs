@@ -63,6 +63,73 @@ pub struct TrajectorySummary {
     pub reached: usize,
 }
 
+/// E_start of one group under another band width `band_k` (the other criterion fields as given).
+#[derive(Clone, Debug, Serialize)]
+pub struct Sensitivity {
+    pub algo: crate::agent::Algo,
+    pub reward: crate::reward::RewardFunction,
+    pub variant: String,
+    /// `(band_k, mean E_start over the converged seeds, converged seeds)`.
+    pub e_start: Vec<(f64, Option<f64>, usize)>,
+    pub seeds: usize,
+}
+
+/// The band widths of the sensitivity table.
+pub const SENSITIVITY_BAND_K: [f64; 3] = [0.5, 1.0, 2.0];
+
+/// E_start of every primary group for each of [`SENSITIVITY_BAND_K`].
+pub fn sensitivity(groups: &[Group], criterion: &ConvergenceCriterion) -> Result<Vec<Sensitivity>> {
+    let mut out = Vec::new();
+    for g in groups.iter().filter(|g| g.primary) {
+        let mut row = Vec::new();
+        for k in SENSITIVITY_BAND_K {
+            let c = ConvergenceCriterion { band_k: k, ..*criterion };
+            let mut starts = Vec::new();
+            for r in &g.runs {
+                let rewards: Vec<f64> = r.episodes.iter().map(|e| e.reward).collect();
+                if let Some(i) = crate::metrics::e_start(&rewards, &c)? {
+                    starts.push(r.episodes[i as usize - 1].episode as f64);
+                }
+            }
+            row.push((k, crate::metrics::mean(&starts), starts.len()));
+        }
+        out.push(Sensitivity {
+            algo: g.algo,
+            reward: g.reward,
+            variant: g.variant.clone(),
+            e_start: row,
+            seeds: g.runs.len(),
+        });
+    }
+    Ok(out)
+}
+
+/// The sensitivity table as Markdown.
+pub fn render_sensitivity(rows: &[Sensitivity], criterion: &ConvergenceCriterion) -> String {
+    let mut s = format!(
+        "\n## Sensitivity of E_start to the band\n\nMean E_start over the converged seeds (converged/seeds) \
+         with the band half-width max(k × std, {}) for other k; Table 1 and the claims use k = {}.\n\n| Method | Reward |",
+        criterion.band_floor, criterion.band_k
+    );
+    for k in SENSITIVITY_BAND_K {
+        s.push_str(&format!(" k = {k} |"));
+    }
+    s.push_str("\n|---|---|");
+    s.push_str(&"---|".repeat(SENSITIVITY_BAND_K.len()));
+    s.push('\n');
+    for r in rows {
+        s.push_str(&format!("| {} | {} |", table::algo_title(r.algo), table::reward_title(r.reward)));
+        for (_, m, n) in &r.e_start {
+            match m {
+                Some(m) => s.push_str(&format!(" {m:.0} ({n}/{}) |", r.seeds)),
+                None => s.push_str(&format!(" — (0/{}) |", r.seeds)),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
 /// Everything the report found, as written to `table1.json`.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -72,6 +139,8 @@ pub struct Report {
     pub groups: Vec<GroupSummary>,
     pub paper: Vec<PaperRow>,
     pub claims: Vec<Claim>,
+    /// E_start of the primary groups under other band widths.
+    pub sensitivity: Vec<Sensitivity>,
     /// Directories that looked like runs but could not be read.
     pub skipped: Vec<SkippedRun>,
     pub trajectories: Vec<TrajectorySummary>,
@@ -108,12 +177,14 @@ pub fn analyze(
     let summaries = groups.iter().map(|g| table::summarize(g, criterion)).collect::<Result<Vec<_>>>()?;
     let paper_rows = paper::table1();
     let claims = claims::evaluate(&summaries, &paper_rows);
+    let sensitivity = sensitivity(&groups, criterion)?;
     let report = Report {
         input: dir.to_path_buf(),
         criterion: *criterion,
         groups: summaries,
         paper: paper_rows,
         claims,
+        sensitivity,
         skipped,
         trajectories: Vec::new(),
         warnings: Vec::new(),
@@ -181,6 +252,9 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     };
     let input = dir.display().to_string();
     let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
+    if !report.sensitivity.is_empty() {
+        md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));
+    }
     if !report.skipped.is_empty() {
         md.push_str("\n## Directories not read\n\n");
         for s in &report.skipped {
@@ -191,7 +265,8 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     write("table1.csv", &table::render_csv(&report.groups, &report.paper))?;
     write("claims.md", &claims::render_markdown(&report.claims))?;
 
-    files.extend(plot::save(&plot::figure7(&groups, opts.criterion.window), &out("figure7"))?);
+    files
+        .extend(plot::save(&plot::figure7(&groups, &report.groups, opts.criterion.window), &out("figure7"))?);
     files.extend(plot::save(&plot::figure8(&groups), &out("figure8"))?);
 
     if opts.trajectories > 0 {

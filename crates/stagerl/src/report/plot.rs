@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
-use super::table::{algo_title, reward_title, Group, ALGO_ORDER};
+use super::table::{algo_title, reward_title, Group, GroupSummary, ALGO_ORDER};
 use super::trajectory::Rollouts;
 use crate::agent::Algo;
 use crate::metrics::trailing_moving_average;
@@ -153,6 +153,8 @@ pub struct Panel {
     pub series: Vec<(RewardFunction, String, Band)>,
     /// Draw markers (sparse evaluation points).
     pub markers: bool,
+    /// Vertical dashed lines at these episodes (E_start), in the reward function's colour.
+    pub marks: Vec<(RewardFunction, f64)>,
     pub legend_low: bool,
 }
 
@@ -175,12 +177,10 @@ impl Figure for CurveFigure {
         let (head, body) = root.split_vertically(100);
         head.draw(&Text::new(self.title.clone(), (30, 16), (FAMILY, 30).into_font().color(&BLACK)))
             .map_err(e)?;
-        head.draw(&Text::new(
-            self.subtitle.clone(),
-            (30, 60),
-            (FAMILY, 17).into_font().color(&RGBColor(80, 80, 80)),
-        ))
-        .map_err(e)?;
+        for (k, line) in self.subtitle.lines().enumerate() {
+            let style = (FAMILY, 16).into_font().color(&RGBColor(80, 80, 80));
+            head.draw(&Text::new(line.to_string(), (30, 54 + 22 * k as i32), style)).map_err(e)?;
+        }
         let body = body.margin(0, 10, 10, 20);
         if self.panels.is_empty() {
             body.draw(&Text::new("no runs to plot", (40, 40), (FAMILY, 24).into_font())).map_err(e)?;
@@ -239,6 +239,17 @@ fn draw_panel<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> D
             )))
             .map_err(e)?;
     }
+    for &(reward, x) in &p.marks {
+        let color = reward_color(reward);
+        chart
+            .draw_series(std::iter::once(plotters::element::DashedPathElement::new(
+                vec![(x, ylo), (x, yhi)],
+                6,
+                5,
+                color.mix(0.8).stroke_width(1),
+            )))
+            .map_err(e)?;
+    }
     for (reward, label, band) in &p.series {
         let color = reward_color(*reward);
         if band.x.len() > 1 && band.lo != band.hi {
@@ -277,9 +288,9 @@ fn draw_panel<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> D
 
 /// A tick label with as many decimals as the axis span needs, and no "-0".
 fn tick(v: f64, span: f64) -> String {
-    let decimals = if span >= 20.0 {
+    let decimals = if span >= 10.0 {
         0
-    } else if span >= 2.0 {
+    } else if span >= 1.0 {
         1
     } else {
         2
@@ -319,8 +330,9 @@ fn thin(curve: Vec<(f64, f64)>, max_points: usize) -> Vec<(f64, f64)> {
 
 /// Figure 7: training episode reward and steps against the episode, moving average over
 /// `window` episodes, mean over seeds with the min-max band; one column per algorithm, one
-/// colour per reward function (primary configurations only).
-pub fn figure7(groups: &[Group], window: usize) -> CurveFigure {
+/// colour per reward function (primary configurations only), a dashed line at the mean E_start
+/// (from `summaries`, the groups' indicators).
+pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize) -> CurveFigure {
     let algos = algos(groups);
     let mut panels = Vec::new();
     let max_steps =
@@ -348,12 +360,18 @@ pub fn figure7(groups: &[Group], window: usize) -> CurveFigure {
                     .collect();
                 series.push((g.reward, series_label(g), Band::from_curves(&curves)));
             }
+            let marks = summaries
+                .iter()
+                .filter(|s| s.primary && s.algo == a)
+                .filter_map(|s| s.e_start.map(|m| (s.reward, m.mean)))
+                .collect();
             panels.push(Panel {
                 title: format!("{} — {what}", algo_title(a)),
                 y_label: unit.to_string(),
                 y_range: (row == 1).then_some((0.0, f64::from(max_steps) + 2.0)),
                 series,
                 markers: false,
+                marks,
                 legend_low: row == 0,
             });
         }
@@ -361,7 +379,7 @@ pub fn figure7(groups: &[Group], window: usize) -> CurveFigure {
     CurveFigure {
         title: "Figure 7: training".into(),
         subtitle: format!(
-            "Moving average over {window} episodes; line: mean over seeds, band: min-max over seeds. Steps: {max_steps} = episode limit (target not reached)."
+            "Moving average over {window} episodes. Line: mean over seeds; band: min-max over seeds; dashed: mean E_start of the converged seeds.\nSteps: {max_steps} = episode limit (target not reached)."
         ),
         rows: 2,
         cols: algos.len(),
@@ -422,6 +440,7 @@ pub fn figure8(groups: &[Group]) -> CurveFigure {
                 y_range: range,
                 series,
                 markers: true,
+                marks: Vec::new(),
                 legend_low: row != 2,
             });
         }
@@ -456,7 +475,7 @@ impl Figure for TrajectoryFigure {
         ))
         .map_err(e)?;
         head.draw(&Text::new(
-            "End-effector path (line) from the home pose (square) to the target (x, circle of radius beta); dot: where the episode ended. Metres, base frame.",
+            "End-effector path from the home pose (black square) to the target (x, circle of radius beta); dot: where the episode ended. Metres, base frame; R: episode reward (eq. 16).",
             (30, 60),
             (FAMILY, 17).into_font().color(&RGBColor(80, 80, 80)),
         ))
