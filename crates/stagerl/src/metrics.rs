@@ -96,6 +96,9 @@ pub enum ConvergenceOutcome {
     NotSettled,
     /// The settled level is not clearly above the first window: nothing was learned.
     NoImprovement,
+    /// The rewards could not be analysed (a non-finite value); reports set this, never
+    /// [`convergence`], which returns an error instead.
+    InvalidData,
 }
 
 impl ConvergenceOutcome {
@@ -106,6 +109,7 @@ impl ConvergenceOutcome {
             ConvergenceOutcome::TooShort => "did not converge: run too short for the criterion",
             ConvergenceOutcome::NotSettled => "did not converge: the reward still drifts at the end",
             ConvergenceOutcome::NoImprovement => "did not converge: no clear rise above the first episodes",
+            ConvergenceOutcome::InvalidData => "not analysed: invalid episode rewards",
         }
     }
 }

@@ -179,6 +179,12 @@ fn report_of_synthetic_runs() {
     std::fs::write(root.join("broken/episodes.csv"), "").unwrap();
     write_run(&root.join("bad-csv"), Algo::Sac, RewardFunction::Har, 1, 100.0, 10, false);
     std::fs::write(root.join("bad-csv/episodes.csv"), "episode,reward\n1,2\n").unwrap();
+    // A non-finite reward in an otherwise complete run.
+    write_run(&root.join("td3-nan"), Algo::Td3, RewardFunction::Sar, 1, 100.0, EPISODES, false);
+    let text = std::fs::read_to_string(root.join("td3-nan/episodes.csv")).unwrap();
+    let text = text.replacen("\n7,", "\n7,NaN,50,0,0.2,0,0.0\n7x,", 1);
+    let text: String = text.lines().filter(|l| !l.starts_with("7x,")).map(|l| format!("{l}\n")).collect();
+    std::fs::write(root.join("td3-nan/episodes.csv"), text).unwrap();
 
     let out = root.join("report");
     let r = report::generate(&root, &ReportOptions::new(&out)).unwrap();
@@ -201,9 +207,9 @@ fn report_of_synthetic_runs() {
     assert!(!out.join("trajectories.png").exists());
     assert!(r.warnings.iter().any(|w| w.contains("no trajectories")), "{:?}", r.warnings);
     let (w, h) = png_size(&out.join("figure7.png"));
-    assert_eq!((w, h), (60 + 640 * 2, 110 + 420 * 2), "two algorithms, two rows");
+    assert_eq!((w, h), (60 + 640 * 3, 110 + 420 * 2), "three algorithms, two rows");
     let (w, h) = png_size(&out.join("figure8.png"));
-    assert_eq!((w, h), (60 + 640 * 2, 110 + 420 * 3));
+    assert_eq!((w, h), (60 + 640 * 3, 110 + 420 * 3));
     assert!(std::fs::read_to_string(out.join("figure7.svg")).unwrap().starts_with("<svg"));
 
     // Values against the CSVs.
@@ -251,7 +257,11 @@ fn report_of_synthetic_runs() {
     assert!(r.skipped.iter().any(|s| s.name == "broken"), "{:?}", r.skipped);
     let har = group("sac", "har");
     assert_eq!(har["seeds"].as_u64(), Some(0));
-    assert!(har["notes"].to_string().contains("no episodes read"), "{}", har["notes"]);
+    assert!(har["notes"].to_string().contains("no episodes read (episodes.csv not read"), "{}", har["notes"]);
+    let td3 = group("td3", "sar");
+    assert_eq!((td3["seeds"].as_u64(), td3["converged"].as_u64()), (Some(1), Some(0)));
+    assert_eq!(td3["runs"][0]["convergence"]["outcome"], "invalid_data");
+    assert!(td3["notes"].to_string().contains("not finite"), "{}", td3["notes"]);
 
     // The Markdown table shows ours beside the paper's, with the notes.
     let md = std::fs::read_to_string(out.join("table1.md")).unwrap();
@@ -289,7 +299,9 @@ fn report_of_synthetic_runs() {
     let claims_md = std::fs::read_to_string(out.join("claims.md")).unwrap();
     assert!(claims_md.contains("DDPG+SAR not run"), "{claims_md}");
 
-    std::fs::remove_dir_all(&root).ok();
+    if std::env::var_os("STAGERL_KEEP_REPORT").is_none() {
+        std::fs::remove_dir_all(&root).ok();
+    }
 }
 
 #[test]

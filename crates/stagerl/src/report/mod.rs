@@ -79,6 +79,7 @@ pub const SENSITIVITY_BAND_K: [f64; 3] = [0.5, 1.0, 2.0];
 
 /// E_start of every primary group for each of [`SENSITIVITY_BAND_K`].
 pub fn sensitivity(groups: &[Group], criterion: &ConvergenceCriterion) -> Result<Vec<Sensitivity>> {
+    criterion.validate()?;
     let mut out = Vec::new();
     for g in groups.iter().filter(|g| g.primary) {
         let mut row = Vec::new();
@@ -87,7 +88,8 @@ pub fn sensitivity(groups: &[Group], criterion: &ConvergenceCriterion) -> Result
             let mut starts = Vec::new();
             for r in &g.runs {
                 let rewards: Vec<f64> = r.episodes.iter().map(|e| e.reward).collect();
-                if let Some(i) = crate::metrics::e_start(&rewards, &c)? {
+                // Invalid rewards are reported by the table; here they count as not converged.
+                if let Ok(Some(i)) = crate::metrics::e_start(&rewards, &c) {
                     starts.push(r.episodes[i as usize - 1].episode as f64);
                 }
             }

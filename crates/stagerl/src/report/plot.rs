@@ -349,13 +349,15 @@ pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize) -> C
                     .runs
                     .iter()
                     .map(|r| {
-                        let ys: Vec<f64> = r
+                        // Non-finite rewards (reported in the table) would poison the running sum.
+                        let (xs, ys): (Vec<f64>, Vec<f64>) = r
                             .episodes
                             .iter()
-                            .map(|e| if row == 0 { e.reward } else { f64::from(e.steps) })
-                            .collect();
+                            .map(|e| (e.episode as f64, if row == 0 { e.reward } else { f64::from(e.steps) }))
+                            .filter(|(_, y)| y.is_finite())
+                            .unzip();
                         let sm = trailing_moving_average(&ys, window);
-                        thin(r.episodes.iter().map(|e| e.episode as f64).zip(sm).collect(), 1200)
+                        thin(xs.into_iter().zip(sm).collect(), 1200)
                     })
                     .collect();
                 series.push((g.reward, series_label(g), Band::from_curves(&curves)));

@@ -111,7 +111,8 @@ pub fn group_runs(runs: Vec<RunData>, include_incomplete: bool) -> Vec<Group> {
         });
         let exclude = |reason: String| Excluded { name: run.name.clone(), seed: run.seed(), reason };
         if run.episodes.is_empty() {
-            g.excluded.push(exclude("no episodes read".into()));
+            let why = run.notes.first().cloned().unwrap_or_else(|| "episodes.csv holds no episode".into());
+            g.excluded.push(exclude(format!("no episodes read ({why})")));
         } else if !run.complete && !include_incomplete {
             g.excluded.push(exclude(format!(
                 "incomplete: {} of {} episodes",
@@ -209,10 +210,22 @@ fn seeds_list(seeds: &[u64]) -> String {
 
 /// Compute a group's indicators.
 pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<GroupSummary> {
+    criterion.validate()?;
     let mut runs = Vec::new();
     for run in &group.runs {
         let rewards: Vec<f64> = run.episodes.iter().map(|r| r.reward).collect();
-        let convergence = metrics::convergence(&rewards, criterion)?;
+        let mut notes = run.notes.clone();
+        let convergence = metrics::convergence(&rewards, criterion).unwrap_or_else(|e| {
+            notes.push(format!("episodes.csv: {e}"));
+            Convergence {
+                outcome: metrics::ConvergenceOutcome::InvalidData,
+                e_start: None,
+                tail_mean: f64::NAN,
+                tail_std: f64::NAN,
+                band: f64::NAN,
+                first_window_mean: f64::NAN,
+            }
+        });
         let train = convergence
             .e_start
             .and_then(|i| run.episodes.get(i as usize - 1))
@@ -224,7 +237,6 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
             .as_ref()
             .and_then(|f| f.path.file_name())
             .map(|n| n.to_string_lossy().into_owned());
-        let mut notes = run.notes.clone();
         if !run.complete {
             notes.push(format!(
                 "incomplete: {} of {} episodes",
