@@ -35,6 +35,8 @@ enum Command {
     /// Reward terms: JSON lines {"ee_pos","ee_quat","target","joint_vel"} on stdin, one line of
     /// every term out per input.
     Reward(cmd::reward::Args),
+    /// Table 1, the paper's claims, Figures 7 and 8 and trajectories from finished run directories.
+    Report(cmd::report::Args),
     /// Benchmarks.
     #[command(subcommand)]
     Bench(cmd::bench::Bench),
@@ -51,6 +53,7 @@ fn main() -> ExitCode {
         Command::Demo(a) => cmd::demo::run(a),
         Command::Fk(a) => cmd::fk::run(a),
         Command::Reward(a) => cmd::reward::run(a),
+        Command::Report(a) => cmd::report::run(a),
         Command::Bench(b) => cmd::bench::run(b),
         Command::Config => {
             print!("{}", stagerl::config::Config::default().to_toml_string());

@@ -3,6 +3,7 @@ pub mod demo;
 pub mod eval;
 pub mod fk;
 pub mod reproduce;
+pub mod report;
 pub mod reward;
 pub mod train;
 

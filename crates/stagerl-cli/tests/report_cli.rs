@@ -1,0 +1,106 @@
+//! `stagerl report` on small runs made by `stagerl train`.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn stagerl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_stagerl")).args(args).output().expect("spawn stagerl")
+}
+
+fn ok(out: &Output) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "stdout: {stdout}\nstderr: {}", String::from_utf8_lossy(&out.stderr));
+    stdout
+}
+
+fn is_png(path: &Path) -> bool {
+    std::fs::read(path).map(|b| b.len() > 100 && b.starts_with(b"\x89PNG\r\n\x1a\n")).unwrap_or(false)
+}
+
+#[test]
+fn report_on_trained_runs() {
+    let root = std::env::temp_dir().join(format!("stagerl-cli-report-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let runs = root.join("runs");
+    std::fs::create_dir_all(&runs).unwrap();
+    let cfg = root.join("small.toml");
+    std::fs::write(
+        &cfg,
+        "[agent]\nhidden = [16, 16]\nlearning_starts = 100\n[train]\neval_every_episodes = 10\neval_trials = 5\n",
+    )
+    .unwrap();
+    for (algo, reward) in [("sac", "sar"), ("sac", "posture")] {
+        let out = runs.join(format!("{algo}-{reward}-s1"));
+        ok(&stagerl(&[
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--algo",
+            algo,
+            "--reward",
+            reward,
+            "--seed",
+            "1",
+            "--episodes",
+            "30",
+            "--eval-trials",
+            "10",
+            "--out",
+            out.to_str().unwrap(),
+        ]));
+    }
+    let text = ok(&stagerl(&["report", runs.to_str().unwrap(), "--trajectories", "3"]));
+    assert!(text.contains("2 run(s) in 2 group(s)"), "{text}");
+    let out = runs.join("report");
+    for name in [
+        "table1.md",
+        "table1.csv",
+        "table1.json",
+        "claims.md",
+        "figure7.svg",
+        "figure8.svg",
+        "trajectories.csv",
+    ] {
+        assert!(std::fs::metadata(out.join(name)).map(|m| m.len() > 0).unwrap_or(false), "{name}");
+    }
+    for name in ["figure7.png", "figure8.png", "trajectories.png"] {
+        assert!(is_png(&out.join(name)), "{name}");
+    }
+    // 30 episodes are too few for the default criterion (W = 100): reported, not an error.
+    let md = std::fs::read_to_string(out.join("table1.md")).unwrap();
+    assert!(md.contains("run too short"), "{md}");
+    assert!(md.contains("| SAC | SAR | ours | 1 (0 conv.) | 30 | did not converge |"), "{md}");
+    // Evaluation columns come from the 10 closing trials.
+    assert!(md.contains("of 10 |"), "{md}");
+    // Trajectories: 3 trials each for the best and the worst reward function, from the home pose.
+    let traj = std::fs::read_to_string(out.join("trajectories.csv")).unwrap();
+    let runs_drawn: std::collections::BTreeSet<&str> =
+        traj.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
+    assert_eq!(runs_drawn.len(), 2, "{runs_drawn:?}");
+    let starts: Vec<&str> = traj.lines().filter(|l| l.split(',').nth(2) == Some("0")).collect();
+    assert_eq!(starts.len(), 6, "{traj}");
+
+    // A smaller window lets the criterion run; a bad criterion is an error naming the option.
+    ok(&stagerl(&[
+        "report",
+        runs.to_str().unwrap(),
+        "--window",
+        "5",
+        "--out",
+        root.join("r2").to_str().unwrap(),
+    ]));
+    let bad = stagerl(&[
+        "report",
+        runs.to_str().unwrap(),
+        "--tail-fraction",
+        "2",
+        "--out",
+        root.join("r3").to_str().unwrap(),
+    ]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("tail_fraction"));
+    let missing = stagerl(&["report", root.join("nope").to_str().unwrap()]);
+    assert!(!missing.status.success());
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("nope"));
+    std::fs::remove_dir_all(&root).ok();
+}

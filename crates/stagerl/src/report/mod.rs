@@ -1,0 +1,315 @@
+//! The reporting layer: from finished run directories alone (no training), our version of the
+//! paper's Table 1 beside the paper's figures, the verdict on each claim of its section VI, and
+//! Figures 7 and 8 and evaluation trajectories as PNG and SVG.
+//!
+//! - [`runs`]: finding and reading run directories;
+//! - [`table`]: grouping over seeds, the indicators of [`crate::metrics`], Table 1 as Markdown/CSV;
+//! - [`claims`]: the claims of section VI and our verdicts;
+//! - [`plot`], [`trajectory`]: the figures;
+//! - [`paper`]: the paper's Table 1 (compiled in from `assets/paper/table1.csv`).
+//!
+//! [`generate`] does all of it and writes into one output directory.
+
+pub mod claims;
+pub mod paper;
+pub mod plot;
+pub mod runs;
+pub mod table;
+pub mod trajectory;
+
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+use crate::metrics::ConvergenceCriterion;
+use crate::{Error, Result};
+use claims::Claim;
+use paper::PaperRow;
+use runs::SkippedRun;
+use table::{Group, GroupSummary};
+use trajectory::Rollouts;
+
+/// What [`generate`] does.
+#[derive(Clone, Debug)]
+pub struct ReportOptions {
+    /// Output directory (created if needed).
+    pub out: PathBuf,
+    pub criterion: ConvergenceCriterion,
+    /// Evaluation trajectories to roll out for the best and the worst reward function; 0: none.
+    pub trajectories: u32,
+    /// Include runs with fewer episodes than configured (still training, or stopped).
+    pub include_incomplete: bool,
+}
+
+impl ReportOptions {
+    /// Defaults, writing into `out`.
+    pub fn new(out: impl Into<PathBuf>) -> ReportOptions {
+        ReportOptions {
+            out: out.into(),
+            criterion: ConvergenceCriterion::default(),
+            trajectories: 5,
+            include_incomplete: false,
+        }
+    }
+}
+
+/// The rollouts drawn, without their paths.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrajectorySummary {
+    pub title: String,
+    pub run: String,
+    pub checkpoint: String,
+    pub eval_seed: u64,
+    pub trials: usize,
+    pub reached: usize,
+}
+
+/// E_start of one group under another band width `band_k` (the other criterion fields as given).
+#[derive(Clone, Debug, Serialize)]
+pub struct Sensitivity {
+    pub algo: crate::agent::Algo,
+    pub reward: crate::reward::RewardFunction,
+    pub variant: String,
+    /// `(band_k, mean E_start over the converged seeds, converged seeds)`.
+    pub e_start: Vec<(f64, Option<f64>, usize)>,
+    pub seeds: usize,
+}
+
+/// The band widths of the sensitivity table.
+pub const SENSITIVITY_BAND_K: [f64; 3] = [0.5, 1.0, 2.0];
+
+/// E_start of every primary group for each of [`SENSITIVITY_BAND_K`].
+pub fn sensitivity(groups: &[Group], criterion: &ConvergenceCriterion) -> Result<Vec<Sensitivity>> {
+    criterion.validate()?;
+    let mut out = Vec::new();
+    for g in groups.iter().filter(|g| g.primary) {
+        let mut row = Vec::new();
+        for k in SENSITIVITY_BAND_K {
+            let c = ConvergenceCriterion { band_k: k, ..*criterion };
+            let mut starts = Vec::new();
+            for r in &g.runs {
+                let rewards: Vec<f64> = r.episodes.iter().map(|e| e.reward).collect();
+                // Invalid rewards are reported by the table; here they count as not converged.
+                if let Ok(Some(i)) = crate::metrics::e_start(&rewards, &c) {
+                    starts.push(r.episodes[i as usize - 1].episode as f64);
+                }
+            }
+            row.push((k, crate::metrics::mean(&starts), starts.len()));
+        }
+        out.push(Sensitivity {
+            algo: g.algo,
+            reward: g.reward,
+            variant: g.variant.clone(),
+            e_start: row,
+            seeds: g.runs.len(),
+        });
+    }
+    Ok(out)
+}
+
+/// The sensitivity table as Markdown.
+pub fn render_sensitivity(rows: &[Sensitivity], criterion: &ConvergenceCriterion) -> String {
+    let mut s = format!(
+        "\n## Sensitivity of E_start to the band\n\nMean E_start over the converged seeds (converged/seeds) \
+         with the band half-width max(k × std, {}) for other k; Table 1 and the claims use k = {}.\n\n| Method | Reward |",
+        criterion.band_floor, criterion.band_k
+    );
+    for k in SENSITIVITY_BAND_K {
+        s.push_str(&format!(" k = {k} |"));
+    }
+    s.push_str("\n|---|---|");
+    s.push_str(&"---|".repeat(SENSITIVITY_BAND_K.len()));
+    s.push('\n');
+    for r in rows {
+        s.push_str(&format!("| {} | {} |", table::algo_title(r.algo), table::reward_title(r.reward)));
+        for (_, m, n) in &r.e_start {
+            match m {
+                Some(m) => s.push_str(&format!(" {m:.0} ({n}/{}) |", r.seeds)),
+                None => s.push_str(&format!(" — (0/{}) |", r.seeds)),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Everything the report found, as written to `table1.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub input: PathBuf,
+    pub criterion: ConvergenceCriterion,
+    /// Every (algorithm, reward function, configuration) group, per run and over seeds.
+    pub groups: Vec<GroupSummary>,
+    pub paper: Vec<PaperRow>,
+    pub claims: Vec<Claim>,
+    /// E_start of the primary groups under other band widths.
+    pub sensitivity: Vec<Sensitivity>,
+    /// Directories that looked like runs but could not be read.
+    pub skipped: Vec<SkippedRun>,
+    pub trajectories: Vec<TrajectorySummary>,
+    /// Problems that did not stop the report (a trajectory that could not be computed, ...).
+    pub warnings: Vec<String>,
+    /// The files written.
+    pub files: Vec<PathBuf>,
+}
+
+/// Read every run under `dir` and group them (see [`table::group_runs`]).
+pub fn load_groups(dir: &Path, include_incomplete: bool) -> Result<(Vec<Group>, Vec<SkippedRun>)> {
+    let mut loaded = Vec::new();
+    let mut skipped = Vec::new();
+    for run_dir in runs::discover(dir)? {
+        match runs::load_run(&run_dir, dir) {
+            Ok(r) => loaded.push(r),
+            Err(e) => skipped.push(SkippedRun {
+                name: run_dir.strip_prefix(dir).unwrap_or(&run_dir).display().to_string(),
+                reason: e.to_string(),
+            }),
+        }
+    }
+    Ok((table::group_runs(loaded, include_incomplete), skipped))
+}
+
+/// The analysis without writing anything: groups, their indicators and the claims.
+pub fn analyze(
+    dir: &Path,
+    criterion: &ConvergenceCriterion,
+    include_incomplete: bool,
+) -> Result<(Vec<Group>, Report)> {
+    criterion.validate()?;
+    let (groups, skipped) = load_groups(dir, include_incomplete)?;
+    let summaries = groups.iter().map(|g| table::summarize(g, criterion)).collect::<Result<Vec<_>>>()?;
+    let paper_rows = paper::table1();
+    let claims = claims::evaluate(&summaries, &paper_rows);
+    let sensitivity = sensitivity(&groups, criterion)?;
+    let report = Report {
+        input: dir.to_path_buf(),
+        criterion: *criterion,
+        groups: summaries,
+        paper: paper_rows,
+        claims,
+        sensitivity,
+        skipped,
+        trajectories: Vec::new(),
+        warnings: Vec::new(),
+        files: Vec::new(),
+    };
+    Ok((groups, report))
+}
+
+/// The runs whose trajectories are drawn: for the algorithm with the most reward functions run,
+/// the lowest seed of its best and of its worst reward function (by evaluation success rate, then
+/// evaluation reward, then the tail's mean training reward), among runs with a checkpoint.
+/// Each pick is `(run, "best" or "worst", the group's mean evaluation success rate)`.
+pub fn pick_trajectory_runs<'a>(
+    groups: &'a [Group],
+    summaries: &[GroupSummary],
+) -> Vec<(&'a runs::RunData, &'static str, Option<f64>)> {
+    fn has_ckpt(g: &Group) -> Option<&runs::RunData> {
+        g.runs.iter().find(|r| crate::train::RunDir::new(&r.dir).best_available_checkpoint().is_some())
+    }
+    let candidates: Vec<(&Group, &GroupSummary)> =
+        groups.iter().zip(summaries).filter(|(g, _)| g.primary && has_ckpt(g).is_some()).collect();
+    let algo = table::ALGO_ORDER
+        .into_iter()
+        .enumerate()
+        .max_by_key(|(i, a)| (candidates.iter().filter(|(g, _)| g.algo == *a).count(), std::cmp::Reverse(*i)))
+        .map(|(_, a)| a);
+    let Some(algo) = algo else { return Vec::new() };
+    let score = |s: &GroupSummary| {
+        let tail = crate::metrics::mean(&s.runs.iter().map(|r| r.tail_mean_reward).collect::<Vec<_>>());
+        (
+            s.success_rate.map_or(-1.0, |m| m.mean),
+            s.eval_reward.map_or(f64::NEG_INFINITY, |m| m.mean),
+            tail.unwrap_or(f64::NEG_INFINITY),
+        )
+    };
+    let mut ranked: Vec<&(&Group, &GroupSummary)> =
+        candidates.iter().filter(|(g, _)| g.algo == algo).collect();
+    ranked.sort_by(|a, b| score(b.1).partial_cmp(&score(a.1)).unwrap_or(std::cmp::Ordering::Equal));
+    let mut out: Vec<(&runs::RunData, &'static str, Option<f64>)> = Vec::new();
+    for (role, pick) in [("best", ranked.first()), ("worst", ranked.last())] {
+        if let Some((g, s)) = pick {
+            if let Some(r) = has_ckpt(g) {
+                if !out.iter().any(|o| o.0.dir == r.dir) {
+                    out.push((r, role, s.success_rate.map(|m| m.mean)));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Read the runs under `dir` and write the report into `opts.out`: `table1.md`, `table1.csv`,
+/// `table1.json`, `claims.md`, `figure7.{png,svg}`, `figure8.{png,svg}` and, when
+/// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}`.
+pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
+    let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
+    std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
+    let out = |name: &str| opts.out.join(name);
+    let mut files = Vec::new();
+    let mut write = |name: &str, text: &str| -> Result<()> {
+        let p = out(name);
+        crate::io::write_atomic(&p, text.as_bytes())?;
+        files.push(p);
+        Ok(())
+    };
+    let input = dir.display().to_string();
+    let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
+    if !report.sensitivity.is_empty() {
+        md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));
+    }
+    if !report.skipped.is_empty() {
+        md.push_str("\n## Directories not read\n\n");
+        for s in &report.skipped {
+            md.push_str(&format!("- `{}`: {}\n", s.name, s.reason));
+        }
+    }
+    write("table1.md", &md)?;
+    write("table1.csv", &table::render_csv(&report.groups, &report.paper))?;
+    write("claims.md", &claims::render_markdown(&report.claims))?;
+
+    files
+        .extend(plot::save(&plot::figure7(&groups, &report.groups, opts.criterion.window), &out("figure7"))?);
+    files.extend(plot::save(&plot::figure8(&groups), &out("figure8"))?);
+
+    if opts.trajectories > 0 {
+        let mut sets: Vec<Rollouts> = Vec::new();
+        for (run, role, success) in pick_trajectory_runs(&groups, &report.groups) {
+            let seed = run.final_eval.as_ref().and_then(|f| f.seed).unwrap_or(run.config.train.eval_seed);
+            match trajectory::rollout(run, opts.trajectories, seed) {
+                Ok(mut r) => {
+                    let rate = success
+                        .map(|s| format!(", group's evaluation success {:.1} %", 100.0 * s))
+                        .unwrap_or_default();
+                    r.title = format!("{role}: {}{rate}", r.title);
+                    sets.push(r)
+                }
+                Err(e) => report.warnings.push(format!("trajectories of {}: {e}", run.name)),
+            }
+        }
+        if sets.is_empty() {
+            report.warnings.push("no trajectories drawn: no run with a loadable checkpoint".into());
+        } else {
+            crate::io::write_atomic(&out("trajectories.csv"), trajectory::to_csv(&sets).as_bytes())?;
+            files.push(out("trajectories.csv"));
+            files.extend(plot::save(&plot::TrajectoryFigure { sets: sets.clone() }, &out("trajectories"))?);
+            report.trajectories = sets
+                .iter()
+                .map(|s| TrajectorySummary {
+                    title: s.title.clone(),
+                    run: s.run.clone(),
+                    checkpoint: s.checkpoint.clone(),
+                    eval_seed: s.eval_seed,
+                    trials: s.paths.len(),
+                    reached: s.paths.iter().filter(|p| p.success).count(),
+                })
+                .collect();
+        }
+    }
+    let json_path = out("table1.json");
+    files.push(json_path.clone());
+    report.files = files;
+    let json = serde_json::to_string_pretty(&report)
+        .map_err(|e| Error::InvalidInput(format!("report JSON: {e}")))?;
+    crate::io::write_atomic(&json_path, json.as_bytes())?;
+    Ok(report)
+}
