@@ -133,3 +133,47 @@ fn sharding_splits_the_sweep_and_bad_arguments_are_refused() {
     }
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// The CI path of the paper pipeline: the smoke preset, then the report on its output.
+#[test]
+fn smoke_preset_then_report_writes_every_file() {
+    let root = scratch("repro-smoke");
+    let out = root.join("smoke");
+    let r = bin()
+        .args(["reproduce", "--preset", "smoke", "--out", out.to_str().unwrap(), "--jobs", "2"])
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let runs = std::fs::read_dir(&out)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().join("eval-seed0.csv").exists())
+        .count();
+    assert_eq!(runs, 10, "2 algorithms x 5 rewards x 1 seed, each evaluated");
+    let r = bin().args(["report", out.to_str().unwrap()]).output().unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let rep = out.join("report");
+    for f in [
+        "table1.md",
+        "table1.csv",
+        "table1.json",
+        "claims.md",
+        "figure7.png",
+        "figure7.svg",
+        "figure8.png",
+        "figure8.svg",
+        "trajectories.png",
+        "trajectories.svg",
+        "trajectories.csv",
+    ] {
+        let bytes = std::fs::read(rep.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(bytes.len() > 100, "{f} is nearly empty");
+        if f.ends_with(".png") {
+            assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{f} is a PNG");
+        }
+    }
+    let table = std::fs::read_to_string(rep.join("table1.md")).unwrap();
+    for row in ["SAC", "DDPG", "SAR", "HAR", "Posture", "Stride", "Basic"] {
+        assert!(table.contains(row), "table1.md lacks {row}");
+    }
+    std::fs::remove_dir_all(&root).ok();
+}

@@ -2,8 +2,8 @@ pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod fk;
-pub mod reproduce;
 pub mod report;
+pub mod reproduce;
 pub mod reward;
 pub mod train;
 
