@@ -234,3 +234,20 @@ fn bench_env_prints_a_json_line() {
     let v: Value = serde_json::from_str(&last).unwrap();
     assert!(f(&v["steps_per_sec"]) > 0.0);
 }
+
+#[test]
+fn unwritable_output_directory_is_refused_before_training() {
+    // Paths no process can create, root included: under a regular file, and inside /proc.
+    let file = std::env::temp_dir().join(format!("stagerl-cli-notadir-{}", std::process::id()));
+    std::fs::write(&file, b"x").unwrap();
+    let under_file = file.join("run");
+    for out in [under_file.to_str().unwrap(), "/proc/stagerl-run"] {
+        let o = stagerl(&["train", "--episodes", "100000", "--out", out], "");
+        assert!(!o.status.success(), "{out}");
+        let err = stderr(&o);
+        assert!(err.contains(out) && !err.contains("panicked"), "{out}: {err}");
+        // `train` announces "training ..." once it starts: it must not have got there.
+        assert!(!String::from_utf8_lossy(&o.stdout).contains("training "), "refused before training");
+    }
+    std::fs::remove_file(&file).ok();
+}

@@ -32,28 +32,33 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_run() {
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    // Kill moments drawn from a fixed seed, spread over the run (which takes a few seconds).
+    // Kill at moments tied to progress (not to wall time, so any machine speed works): when
+    // episodes.csv has reached an episode drawn from a fixed seed, never a checkpoint boundary.
     let mut rng = stagerl::rng::Rng::new(2026);
-    let mut kills = 0;
-    let mut first = true;
-    for _ in 0..5 {
+    let mut target = 0u64;
+    for k in 0..3 {
+        target += 25 + rng.below(60);
+        if target % 20 == 0 {
+            target += 7;
+        }
         let mut cmd = bin();
-        if first {
+        if k == 0 {
             cmd.args(["train", "--config", cfg.to_str().unwrap(), "--out", cut.to_str().unwrap()]);
         } else {
             cmd.args(["train", "--resume", cut.to_str().unwrap()]);
         }
         cmd.args(["--eval-trials", "0"]).stdout(Stdio::null()).stderr(Stdio::null());
         let mut child = cmd.spawn().unwrap();
-        first = false;
-        std::thread::sleep(Duration::from_millis(200 + rng.below(900)));
-        if child.try_wait().unwrap().is_none() {
-            child.kill().unwrap(); // SIGKILL: no chance to save anything
-            kills += 1;
+        let rows = || {
+            std::fs::read_to_string(cut.join("episodes.csv")).map(|t| t.lines().count() as u64).unwrap_or(0)
+        };
+        while rows() <= target && child.try_wait().unwrap().is_none() {
+            std::thread::sleep(Duration::from_millis(2));
         }
+        assert!(child.try_wait().unwrap().is_none(), "run {k} finished before its kill at episode {target}");
+        child.kill().unwrap(); // SIGKILL: no chance to save anything
         child.wait().unwrap();
     }
-    assert!(kills >= 2, "the run was killed at least twice ({kills})");
     let out = run(&["train", "--resume", cut.to_str().unwrap(), "--eval-trials", "0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
