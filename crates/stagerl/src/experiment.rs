@@ -209,27 +209,7 @@ pub fn run_one(
 
 /// Summarise an existing evaluation file.
 pub fn read_eval(dir: &Path, eval_seed: u64) -> Result<EvalSummary> {
-    let path = eval_csv(dir, eval_seed);
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-    let bad = |l: &str| Error::InvalidInput(format!("{}: malformed row {l:?}", path.display()));
-    let mut records = Vec::new();
-    for line in text.lines().skip(1).filter(|l| !l.trim().is_empty()) {
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() != 9 {
-            return Err(bad(line));
-        }
-        let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad(line));
-        records.push(train::TrialRecord {
-            trial: f[0].parse().map_err(|_| bad(line))?,
-            reward: num(1)?,
-            steps: f[2].parse().map_err(|_| bad(line))?,
-            success: f[3] == "1",
-            start_distance_m: num(4)?,
-            final_distance_m: num(5)?,
-            target: [num(6)?, num(7)?, num(8)?],
-        });
-    }
-    Ok(train::eval::summarize(&records))
+    Ok(train::eval::summarize(&train::eval::read_trials_csv(&eval_csv(dir, eval_seed))?))
 }
 
 #[cfg(test)]

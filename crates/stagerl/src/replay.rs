@@ -47,6 +47,10 @@ impl Batch {
 }
 
 impl ReplayBuffer {
+    /// Checkpoint names of the stored arrays, in [`ReplayBuffer::arrays`] order.
+    pub const ARRAY_NAMES: [&'static str; 5] =
+        ["replay.obs", "replay.act", "replay.reward", "replay.next_obs", "replay.terminal"];
+
     /// An empty buffer of `capacity >= 1` transitions.
     pub fn new(capacity: usize, obs_dim: usize, act_dim: usize) -> Result<ReplayBuffer> {
         if capacity == 0 {
@@ -125,12 +129,13 @@ impl ReplayBuffer {
     /// only when not yet wrapped (for checkpoints).
     pub fn arrays(&self) -> [(&'static str, &[f32]); 5] {
         let n = self.len;
+        let [o, a, rw, no, t] = Self::ARRAY_NAMES;
         [
-            ("replay.obs", &self.obs[..n * self.obs_dim]),
-            ("replay.act", &self.act[..n * self.act_dim]),
-            ("replay.reward", &self.reward[..n]),
-            ("replay.next_obs", &self.next_obs[..n * self.obs_dim]),
-            ("replay.terminal", &self.terminal[..n]),
+            (o, &self.obs[..n * self.obs_dim]),
+            (a, &self.act[..n * self.act_dim]),
+            (rw, &self.reward[..n]),
+            (no, &self.next_obs[..n * self.obs_dim]),
+            (t, &self.terminal[..n]),
         ]
     }
 

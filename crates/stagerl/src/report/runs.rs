@@ -9,11 +9,8 @@ use crate::log::EpisodeRecord;
 use crate::train::{RunDir, TrialRecord};
 use crate::{Error, Result};
 
-/// The header of the per-trial evaluation CSV (`stagerl::train::eval::write_trials_csv`).
-pub const TRIALS_HEADER: &str =
-    "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m";
-/// The header of a run's `eval.csv`.
-pub const EVAL_HEADER: &str = "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m";
+pub use crate::train::eval::{read_trials_csv, TRIALS_HEADER};
+pub use crate::train::EVAL_HEADER;
 
 /// One periodic evaluation (a row of `eval.csv`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -133,42 +130,6 @@ pub fn read_eval_points(path: &Path) -> Result<Vec<EvalPoint>> {
                 mean_reward: f[3].parse().map_err(|_| bad())?,
                 mean_steps: parse_opt_f64(f[4]).map_err(|_| bad())?,
                 median_final_distance_m: f[5].parse().map_err(|_| bad())?,
-            })
-        })
-        .collect()
-}
-
-/// Read a per-trial evaluation CSV (written by `stagerl::train::eval::write_trials_csv`).
-pub fn read_trials_csv(path: &Path) -> Result<Vec<TrialRecord>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let mut lines = text.lines();
-    if lines.next().map(str::trim_end) != Some(TRIALS_HEADER) {
-        return Err(Error::InvalidInput(format!(
-            "{}: expected the header {TRIALS_HEADER:?}",
-            path.display()
-        )));
-    }
-    lines
-        .filter(|l| !l.trim().is_empty())
-        .map(|line| {
-            let bad = || Error::InvalidInput(format!("{}: malformed row {line:?}", path.display()));
-            let f: Vec<&str> = line.trim_end().split(',').collect();
-            if f.len() != 9 {
-                return Err(bad());
-            }
-            let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad());
-            Ok(TrialRecord {
-                trial: f[0].parse().map_err(|_| bad())?,
-                reward: num(1)?,
-                steps: f[2].parse().map_err(|_| bad())?,
-                success: match f[3] {
-                    "1" => true,
-                    "0" => false,
-                    _ => return Err(bad()),
-                },
-                start_distance_m: num(4)?,
-                final_distance_m: num(5)?,
-                target: [num(6)?, num(7)?, num(8)?],
             })
         })
         .collect()

@@ -115,11 +115,13 @@ pub fn summarize(records: &[TrialRecord]) -> EvalSummary {
     }
 }
 
+/// The header of the per-trial evaluation CSV.
+pub const TRIALS_HEADER: &str =
+    "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m";
+
 /// Write trial records as CSV (atomically).
 pub fn write_trials_csv(path: &Path, records: &[TrialRecord]) -> Result<()> {
-    let mut s = String::from(
-        "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m\n",
-    );
+    let mut s = format!("{TRIALS_HEADER}\n");
     for r in records {
         s.push_str(&format!(
             "{},{},{},{},{},{},{},{},{}\n",
@@ -135,4 +137,40 @@ pub fn write_trials_csv(path: &Path, records: &[TrialRecord]) -> Result<()> {
         ));
     }
     crate::io::write_atomic(path, s.as_bytes())
+}
+
+/// Read a per-trial evaluation CSV (written by [`write_trials_csv`]).
+pub fn read_trials_csv(path: &Path) -> Result<Vec<TrialRecord>> {
+    let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
+    let mut lines = text.lines();
+    if lines.next().map(str::trim_end) != Some(TRIALS_HEADER) {
+        return Err(crate::Error::InvalidInput(format!(
+            "{}: expected the header {TRIALS_HEADER:?}",
+            path.display()
+        )));
+    }
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .map(|line| {
+            let bad = || crate::Error::InvalidInput(format!("{}: malformed row {line:?}", path.display()));
+            let f: Vec<&str> = line.trim_end().split(',').collect();
+            if f.len() != 9 {
+                return Err(bad());
+            }
+            let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad());
+            Ok(TrialRecord {
+                trial: f[0].parse().map_err(|_| bad())?,
+                reward: num(1)?,
+                steps: f[2].parse().map_err(|_| bad())?,
+                success: match f[3] {
+                    "1" => true,
+                    "0" => false,
+                    _ => return Err(bad()),
+                },
+                start_distance_m: num(4)?,
+                final_distance_m: num(5)?,
+                target: [num(6)?, num(7)?, num(8)?],
+            })
+        })
+        .collect()
 }

@@ -239,7 +239,8 @@ struct Trainer {
     eval_csv: String,
 }
 
-const EVAL_HEADER: &str = "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m\n";
+/// The header of a run's `eval.csv`.
+pub const EVAL_HEADER: &str = "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m";
 
 impl Trainer {
     /// A fresh run.
@@ -273,7 +274,7 @@ impl Trainer {
             env,
             agent,
             state,
-            eval_csv: EVAL_HEADER.to_string(),
+            eval_csv: format!("{EVAL_HEADER}\n"),
         })
     }
 
@@ -330,8 +331,8 @@ impl Trainer {
         }
         t.agent.load(ck)?;
         t.state = ck.json("train_state")?;
-        let arrays = crate::replay::ReplayBuffer::new(1, 1, 1)?.arrays().map(|(name, _)| name);
-        let data: Vec<&[f32]> = arrays.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
+        let data: Vec<&[f32]> =
+            ReplayBuffer::ARRAY_NAMES.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
         t.buffer.restore(
             t.state.replay_len,
             t.state.replay_pos,
