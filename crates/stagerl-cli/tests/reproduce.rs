@@ -134,6 +134,54 @@ fn sharding_splits_the_sweep_and_bad_arguments_are_refused() {
     std::fs::remove_dir_all(&root).ok();
 }
 
+/// Slurm job arrays with a step (`--array=0-19:2`), and explicit flags that win over the
+/// variables (a malformed variable is then not read).
+#[test]
+fn slurm_step_and_explicit_flags_over_the_environment() {
+    let root = scratch("repro-slurm");
+    let names = |out: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(out)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.path().is_dir())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    // Task id 4 of --array=0-19:2 is task 2 of 10: smoke's run 2.
+    let stepped = root.join("stepped");
+    let r = bin()
+        .args(["reproduce", "--preset", "smoke", "--out", stepped.to_str().unwrap()])
+        .env("SLURM_ARRAY_TASK_ID", "4")
+        .env("SLURM_ARRAY_TASK_MIN", "0")
+        .env("SLURM_ARRAY_TASK_STEP", "2")
+        .env("SLURM_ARRAY_TASK_COUNT", "10")
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(names(&stepped), ["ddpg-stride-seed1"]);
+    let flags = root.join("flags");
+    let r = bin()
+        .args(["reproduce", "--preset", "smoke", "--out", flags.to_str().unwrap()])
+        .args(["--task-index", "9", "--task-count", "10"])
+        .env("SLURM_ARRAY_TASK_ID", "not-a-number")
+        .env("SLURM_ARRAY_TASK_COUNT", "")
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(names(&flags), ["sac-sar-seed1"]);
+    // Without the flags the malformed variable is an error that names it.
+    let r = bin()
+        .args(["reproduce", "--preset", "smoke", "--out", root.join("bad").to_str().unwrap()])
+        .env("SLURM_ARRAY_TASK_ID", "not-a-number")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success() && err.contains("SLURM_ARRAY_TASK_ID"), "{err}");
+    std::fs::remove_dir_all(&root).ok();
+}
+
 /// The CI path of the paper pipeline: the smoke preset, then the report on its output.
 #[test]
 fn smoke_preset_then_report_writes_every_file() {

@@ -22,6 +22,9 @@
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
 
 use crate::agent::Algo;
 use crate::config::Config;
@@ -78,7 +81,33 @@ pub enum RunStatus {
     New,
 }
 
+/// The presets bundled with the library (the files in `configs/`), by name.
+pub const BUNDLED_PRESETS: [(&str, &str); 3] = [
+    ("smoke", include_str!("../../../configs/smoke.toml")),
+    ("quick", include_str!("../../../configs/quick.toml")),
+    ("paper", include_str!("../../../configs/paper.toml")),
+];
+
 impl Preset {
+    /// A bundled preset by name (`smoke`, `quick`, `paper`), else the preset file at that path;
+    /// with the preset's text (written to the sweep directory as `preset.toml`).
+    pub fn resolve(name_or_path: &str) -> Result<(Preset, String)> {
+        if let Some((_, text)) = BUNDLED_PRESETS.iter().find(|(n, _)| *n == name_or_path) {
+            let origin = PathBuf::from(format!("configs/{name_or_path}.toml"));
+            return Ok((Preset::from_toml_str(text, &origin)?, text.to_string()));
+        }
+        let path = Path::new(name_or_path);
+        if !path.exists() {
+            let names: Vec<&str> = BUNDLED_PRESETS.iter().map(|(n, _)| *n).collect();
+            return Err(Error::InvalidInput(format!(
+                "preset `{name_or_path}`: not one of {}, and no such file",
+                names.join(", ")
+            )));
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Ok((Preset::from_toml_str(&text, path)?, text))
+    }
+
     /// Parse a preset; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Preset> {
         let bad = |m: String| Error::ConfigParse { path: origin.to_path_buf(), message: m };
@@ -130,16 +159,73 @@ impl Preset {
                     config.agent.algo = algo;
                     config.reward.function = reward;
                     config.train.seed = seed;
-                    out.push(RunSpec {
-                        index: out.len(),
-                        name: format!("{algo}-{reward}-seed{seed}"),
-                        config,
-                    });
+                    out.push(RunSpec { index: out.len(), name: run_name(&config), config });
                 }
             }
         }
         out
     }
+}
+
+/// The name of a config's run directory: `<algo>-<reward>-seed<seed>`.
+pub fn run_name(cfg: &Config) -> String {
+    format!("{}-{}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed)
+}
+
+/// The shard a process runs, `(index, count)`: the flags when given; for each flag that is
+/// absent, Slurm's job-array variables (read through `var`): the index is
+/// `(SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / SLURM_ARRAY_TASK_STEP` (`--array=0-19:2`
+/// gives the ids 0, 2, .., 18), the count `SLURM_ARRAY_TASK_COUNT`; else shard 0 of 1. A
+/// variable is only read (and only then an error when malformed) when its flag is absent.
+pub fn resolve_shard(
+    index: Option<usize>,
+    count: Option<usize>,
+    var: &dyn Fn(&str) -> Option<String>,
+) -> Result<(usize, usize)> {
+    let num =
+        |name: &str| -> Result<Option<usize>> {
+            match var(name) {
+                None => Ok(None),
+                Some(v) => v.trim().parse().map(Some).map_err(|_| {
+                    Error::InvalidInput(format!("${name} = {v:?}: expected a whole number >= 0"))
+                }),
+            }
+        };
+    let index = match index {
+        Some(i) => i,
+        None => match num("SLURM_ARRAY_TASK_ID")? {
+            None => 0,
+            Some(id) => {
+                let min = num("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+                let step = num("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1);
+                let offset = id.checked_sub(min).ok_or_else(|| {
+                    Error::InvalidInput(format!(
+                        "$SLURM_ARRAY_TASK_ID = {id} is below $SLURM_ARRAY_TASK_MIN = {min}"
+                    ))
+                })?;
+                if step == 0 || offset % step != 0 {
+                    return Err(Error::InvalidInput(format!(
+                        "$SLURM_ARRAY_TASK_ID = {id} is not $SLURM_ARRAY_TASK_MIN = {min} plus a multiple \
+                         of $SLURM_ARRAY_TASK_STEP = {step} (which must be >= 1)"
+                    )));
+                }
+                offset / step
+            }
+        },
+    };
+    let count = match count {
+        Some(c) => c,
+        None => match num("SLURM_ARRAY_TASK_COUNT")? {
+            Some(c) => c,
+            None if index == 0 => 1,
+            None => {
+                return Err(Error::InvalidInput(format!(
+                    "task index {index} needs a task count (--task-count or $SLURM_ARRAY_TASK_COUNT)"
+                )))
+            }
+        },
+    };
+    Ok((index, count))
 }
 
 /// The runs of shard `index` of `count`: those whose sweep position is congruent to `index`.
@@ -207,6 +293,78 @@ pub fn run_one(
     Ok(summary)
 }
 
+/// One run of a sweep, as [`run_sweep`] reports it when the run ends.
+pub struct RunReport<'a> {
+    pub spec: &'a RunSpec,
+    /// Runs ended so far, this one included (in the order they end).
+    pub n: usize,
+    /// Runs in the sweep (or shard).
+    pub total: usize,
+    /// Where the run stood before this session (`None` when that could not be read).
+    pub before: Option<RunStatus>,
+    /// Wall seconds of this session's work on the run.
+    pub wall_s: f64,
+    /// The run's evaluation, or why there is none ([`Error::Interrupted`] on a stop).
+    pub result: &'a Result<EvalSummary>,
+}
+
+/// How a sweep ended.
+#[derive(Debug)]
+pub struct SweepOutcome {
+    /// `<name>: <error>` of each failed run.
+    pub failures: Vec<String>,
+    /// A stop was requested (or a run was interrupted): runs may be left to do.
+    pub interrupted: bool,
+    pub wall_s: f64,
+}
+
+/// Train and evaluate `runs` into `out`, `jobs` at once (threads, each run single-threaded),
+/// taking them in order; a finished run is not repeated (see [`run_one`]). Setting `stop`
+/// interrupts the runs under way (each saves its checkpoint) and starts no other.
+/// `on_run` sees each run as it ends.
+pub fn run_sweep(
+    runs: &[RunSpec],
+    out: &Path,
+    sweep: &SweepSpec,
+    jobs: usize,
+    stop: &AtomicBool,
+    on_run: &(dyn Fn(&RunReport<'_>) + Sync),
+) -> SweepOutcome {
+    let total = runs.len();
+    let (next, done) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
+    let interrupted = AtomicBool::new(false);
+    let start = Instant::now();
+    let worker = || loop {
+        let k = next.fetch_add(1, Ordering::SeqCst);
+        if k >= total || stop.load(Ordering::SeqCst) {
+            break;
+        }
+        let spec = &runs[k];
+        let t0 = Instant::now();
+        let before = status(&out.join(&spec.name), sweep.eval_seed).ok();
+        let opts = TrainOptions { stop: Some(stop) };
+        let result = run_one(spec, out, sweep, &opts, &mut |_| {});
+        match &result {
+            Ok(_) => {}
+            Err(Error::Interrupted { .. }) => interrupted.store(true, Ordering::SeqCst),
+            Err(e) => failures.lock().unwrap_or_else(|p| p.into_inner()).push(format!("{}: {e}", spec.name)),
+        }
+        let n = done.fetch_add(1, Ordering::SeqCst) + 1;
+        on_run(&RunReport { spec, n, total, before, wall_s: t0.elapsed().as_secs_f64(), result: &result });
+    };
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.clamp(1, total.max(1)) {
+            scope.spawn(worker);
+        }
+    });
+    SweepOutcome {
+        failures: failures.into_inner().unwrap_or_else(|p| p.into_inner()),
+        interrupted: interrupted.load(Ordering::SeqCst) || stop.load(Ordering::SeqCst),
+        wall_s: start.elapsed().as_secs_f64(),
+    }
+}
+
 /// Summarise an existing evaluation file.
 pub fn read_eval(dir: &Path, eval_seed: u64) -> Result<EvalSummary> {
     Ok(train::eval::summarize(&train::eval::read_trials_csv(&eval_csv(dir, eval_seed))?))
@@ -238,6 +396,58 @@ mod tests {
         assert_eq!(seen, (0..12).collect::<Vec<_>>());
         assert!(shard(runs.clone(), 5, 5).is_err());
         assert!(shard(runs, 0, 0).is_err());
+    }
+
+    #[test]
+    fn shard_from_flags_or_slurm_with_step() {
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |name: &str| vars.iter().find(|(k, _)| *k == name).map(|(_, v)| v.to_string())
+        };
+        let none = env(&[]);
+        assert_eq!(resolve_shard(None, None, &none).unwrap(), (0, 1));
+        assert_eq!(resolve_shard(Some(2), Some(5), &none).unwrap(), (2, 5));
+        assert!(resolve_shard(Some(2), None, &none).unwrap_err().to_string().contains("task count"));
+        // --array=0-19:2: ids 0, 2, .., 18 are tasks 0 .. 9 of 10.
+        let stepped = env(&[
+            ("SLURM_ARRAY_TASK_ID", "14"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+            ("SLURM_ARRAY_TASK_STEP", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "10"),
+        ]);
+        assert_eq!(resolve_shard(None, None, &stepped).unwrap(), (7, 10));
+        let offset = env(&[
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_STEP", "3"),
+        ]);
+        assert_eq!(resolve_shard(None, Some(4), &offset).unwrap(), (2, 4));
+        let off_grid = env(&[
+            ("SLURM_ARRAY_TASK_ID", "5"),
+            ("SLURM_ARRAY_TASK_STEP", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "10"),
+        ]);
+        let e = resolve_shard(None, None, &off_grid).unwrap_err().to_string();
+        assert!(e.contains("SLURM_ARRAY_TASK_STEP = 2"), "{e}");
+        // Explicit flags win: malformed variables are not even read.
+        let bad = env(&[("SLURM_ARRAY_TASK_ID", "x"), ("SLURM_ARRAY_TASK_COUNT", "-1")]);
+        assert_eq!(resolve_shard(Some(1), Some(3), &bad).unwrap(), (1, 3));
+        let e = resolve_shard(None, Some(3), &bad).unwrap_err().to_string();
+        assert!(e.contains("SLURM_ARRAY_TASK_ID") && e.contains("\"x\""), "{e}");
+        let e = resolve_shard(Some(0), None, &bad).unwrap_err().to_string();
+        assert!(e.contains("SLURM_ARRAY_TASK_COUNT"), "{e}");
+        let below = env(&[("SLURM_ARRAY_TASK_ID", "0"), ("SLURM_ARRAY_TASK_MIN", "1")]);
+        assert!(resolve_shard(None, None, &below).unwrap_err().to_string().contains("below"));
+    }
+
+    #[test]
+    fn bundled_presets_resolve_by_name_and_paths_by_path() {
+        let (p, text) = Preset::resolve("smoke").unwrap();
+        assert_eq!(text, BUNDLED_PRESETS[0].1);
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/smoke.toml");
+        let (q, from_file) = Preset::resolve(path.to_str().unwrap()).unwrap();
+        assert_eq!((p, text), (q, from_file));
+        let e = Preset::resolve("nope").unwrap_err().to_string();
+        assert!(e.contains("nope") && e.contains("smoke, quick, paper"), "{e}");
     }
 
     #[test]

@@ -1,10 +1,6 @@
 use anyhow::{bail, Context, Result};
-use stagerl::experiment::{self, Preset, RunSpec, RunStatus};
-use stagerl::train::TrainOptions;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use stagerl::experiment::{self, Preset, RunReport, RunStatus};
+use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -17,8 +13,8 @@ pub struct Args {
     /// Runs trained at once (threads, each single-threaded).
     #[arg(long, default_value_t = 1)]
     jobs: usize,
-    /// Run only the runs whose index is congruent to this modulo --task-count (default:
-    /// $SLURM_ARRAY_TASK_ID - $SLURM_ARRAY_TASK_MIN when set).
+    /// Run only the runs whose index is congruent to this modulo --task-count (default, when
+    /// set: ($SLURM_ARRAY_TASK_ID - $SLURM_ARRAY_TASK_MIN) / $SLURM_ARRAY_TASK_STEP).
     #[arg(long)]
     task_index: Option<usize>,
     /// Number of shards (default: $SLURM_ARRAY_TASK_COUNT when set, else 1).
@@ -26,59 +22,13 @@ pub struct Args {
     task_count: Option<usize>,
 }
 
-const BUNDLED: [(&str, &str); 3] = [
-    ("smoke", include_str!("../../../../configs/smoke.toml")),
-    ("quick", include_str!("../../../../configs/quick.toml")),
-    ("paper", include_str!("../../../../configs/paper.toml")),
-];
-
-fn load_preset(name: &str) -> Result<(Preset, String)> {
-    if let Some((_, text)) = BUNDLED.iter().find(|(n, _)| *n == name) {
-        return Ok((
-            Preset::from_toml_str(text, Path::new(&format!("configs/{name}.toml")))?,
-            text.to_string(),
-        ));
-    }
-    let path = Path::new(name);
-    if !path.exists() {
-        bail!("preset `{name}`: not one of smoke, quick, paper, and no such file");
-    }
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok((Preset::from_toml_str(&text, path)?, text))
-}
-
-fn env_usize(name: &str) -> Result<Option<usize>> {
-    match std::env::var(name) {
-        Ok(v) => {
-            Ok(Some(v.trim().parse().with_context(|| format!("${name} = {v:?} is not a whole number"))?))
-        }
-        Err(_) => Ok(None),
-    }
-}
-
-/// The shard to run: flags first, then Slurm's job-array variables, else everything.
-fn shard_of(args: &Args) -> Result<(usize, usize)> {
-    let slurm_index = match (env_usize("SLURM_ARRAY_TASK_ID")?, env_usize("SLURM_ARRAY_TASK_MIN")?) {
-        (Some(id), min) => {
-            Some(id.checked_sub(min.unwrap_or(0)).context("SLURM_ARRAY_TASK_ID below SLURM_ARRAY_TASK_MIN")?)
-        }
-        (None, _) => None,
-    };
-    let index = args.task_index.or(slurm_index).unwrap_or(0);
-    let count = match args.task_count.or(env_usize("SLURM_ARRAY_TASK_COUNT")?) {
-        Some(c) => c,
-        None if index == 0 => 1,
-        None => bail!("--task-index {index} needs --task-count"),
-    };
-    Ok((index, count))
-}
-
 pub fn run(args: Args) -> Result<()> {
     if args.jobs == 0 {
         bail!("--jobs 0: need at least 1");
     }
-    let (preset, text) = load_preset(&args.preset)?;
-    let (index, count) = shard_of(&args)?;
+    let (preset, text) = Preset::resolve(&args.preset)?;
+    let (index, count) =
+        experiment::resolve_shard(args.task_index, args.task_count, &|name| std::env::var(name).ok())?;
     let runs = experiment::shard(preset.runs(), index, count)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     stagerl::io::write_atomic(&args.out.join("preset.toml"), text.as_bytes())?;
@@ -93,76 +43,45 @@ pub fn run(args: Args) -> Result<()> {
         args.out.display()
     );
     let stop = super::train::stop_flag()?;
-    let next = AtomicUsize::new(0);
-    let done = AtomicUsize::new(0);
-    let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
-    let interrupted = AtomicBool::new(false);
-    let start = Instant::now();
-    std::thread::scope(|scope| {
-        for _ in 0..args.jobs.min(total.max(1)) {
-            scope.spawn(|| loop {
-                let k = next.fetch_add(1, Ordering::SeqCst);
-                if k >= total || stop.load(Ordering::SeqCst) {
-                    break;
-                }
-                let spec = &runs[k];
-                let t0 = Instant::now();
-                let before = experiment::status(&args.out.join(&spec.name), preset.sweep.eval_seed);
-                let result = one(spec, &args.out, &preset, &stop);
-                let n = done.fetch_add(1, Ordering::SeqCst) + 1;
-                match result {
-                    Ok(s) => {
-                        let what = match before {
-                            Ok(RunStatus::Done) => "already done".to_string(),
-                            Ok(RunStatus::Partial { episode }) => format!("resumed after episode {episode}, done"),
-                            _ => "done".to_string(),
-                        };
-                        println!(
-                            "[{n}/{total}] {}: {what} in {:.0} s: success {:.1} %, mean reward {:.3}, mean steps {}",
-                            spec.name,
-                            t0.elapsed().as_secs_f64(),
-                            100.0 * s.success_rate,
-                            s.mean_reward,
-                            s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into())
-                        );
-                    }
-                    Err(stagerl::Error::Interrupted { episode, .. }) => {
-                        interrupted.store(true, Ordering::SeqCst);
-                        println!("[{n}/{total}] {}: interrupted after episode {episode}, saved", spec.name);
-                    }
-                    Err(e) => {
-                        println!("[{n}/{total}] {}: FAILED: {e}", spec.name);
-                        failures.lock().expect("no poisoning").push(format!("{}: {e}", spec.name));
-                    }
-                }
-            });
-        }
-    });
-    let failures = failures.into_inner().expect("no poisoning");
-    if interrupted.load(Ordering::SeqCst) || stop.load(Ordering::SeqCst) {
+    let outcome = experiment::run_sweep(&runs, &args.out, &preset.sweep, args.jobs, &stop, &print_run);
+    if outcome.interrupted {
         eprintln!(
             "stagerl: interrupted after {:.0} s; finished runs are kept. Run the same command again to continue.",
-            start.elapsed().as_secs_f64()
+            outcome.wall_s
         );
         std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
     }
-    if !failures.is_empty() {
-        bail!("{} of {total} runs failed:\n  {}", failures.len(), failures.join("\n  "));
+    if !outcome.failures.is_empty() {
+        bail!("{} of {total} runs failed:\n  {}", outcome.failures.len(), outcome.failures.join("\n  "));
     }
     println!(
         "all {total} runs done in {:.0} s. Tables and figures: stagerl report {}",
-        start.elapsed().as_secs_f64(),
+        outcome.wall_s,
         args.out.display()
     );
     Ok(())
 }
 
-fn one(
-    spec: &RunSpec,
-    out: &Path,
-    preset: &Preset,
-    stop: &Arc<AtomicBool>,
-) -> stagerl::Result<stagerl::train::EvalSummary> {
-    let opts = TrainOptions { stop: Some(stop) };
-    experiment::run_one(spec, out, &preset.sweep, &opts, &mut |_| {})
+fn print_run(r: &RunReport<'_>) {
+    let (n, total, name) = (r.n, r.total, &r.spec.name);
+    match r.result {
+        Ok(s) => {
+            let what = match r.before {
+                Some(RunStatus::Done) => "already done".to_string(),
+                Some(RunStatus::Partial { episode }) => format!("resumed after episode {episode}, done"),
+                _ => "done".to_string(),
+            };
+            println!(
+                "[{n}/{total}] {name}: {what} in {:.0} s: success {:.1} %, mean reward {:.3}, mean steps {}",
+                r.wall_s,
+                100.0 * s.success_rate,
+                s.mean_reward,
+                s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into())
+            );
+        }
+        Err(stagerl::Error::Interrupted { episode, .. }) => {
+            println!("[{n}/{total}] {name}: interrupted after episode {episode}, saved");
+        }
+        Err(e) => println!("[{n}/{total}] {name}: FAILED: {e}"),
+    }
 }

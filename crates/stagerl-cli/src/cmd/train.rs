@@ -89,7 +89,7 @@ pub fn run(args: Args) -> Result<()> {
     // Without --out, the first free runs/<algo>-<reward>-seed<N>[-k]: running the same command
     // again starts a new run beside the old one instead of failing or overwriting it.
     let out = args.out.unwrap_or_else(|| {
-        let base = format!("{}-{}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed);
+        let base = stagerl::experiment::run_name(&cfg);
         (1..)
             .map(|k| PathBuf::from("runs").join(if k == 1 { base.clone() } else { format!("{base}-{k}") }))
             .find(|p| !p.exists())
