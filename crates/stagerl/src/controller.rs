@@ -8,7 +8,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::env::ReachEnv;
 use crate::robot::Chain;
+use crate::Result;
 
 /// Damped-least-squares Jacobian controller. Holds its scratch so that [`act`](Self::act) does
 /// not allocate.
@@ -25,6 +27,15 @@ impl JacobianController {
     /// A controller for `chain` with gain 1 and damping 0.01 m.
     pub fn new(chain: &Chain) -> Self {
         JacobianController { gain: 1.0, damping_m: 0.01, jac: vec![0.0; 6 * chain.dof()] }
+    }
+
+    /// This controller as a rollout policy on an environment of its arm (for
+    /// [`crate::env::rollout`]).
+    pub fn policy(&mut self) -> impl FnMut(&ReachEnv, &mut [f32]) -> Result<()> + '_ {
+        move |env, action| {
+            self.act(env.chain(), env.joint_positions(), &env.target(), env.task().dt_s, action);
+            Ok(())
+        }
     }
 
     /// Write the action for joint positions `q` (rad) towards `target` (m) into `action`.

@@ -28,7 +28,6 @@ use std::time::Instant;
 
 use crate::agent::Algo;
 use crate::config::Config;
-use crate::env::ReachEnv;
 use crate::reward::RewardFunction;
 use crate::train::{self, EvalSummary, Progress, RunDir, TrainOptions};
 use crate::{Error, Result};
@@ -238,15 +237,10 @@ pub fn shard(runs: Vec<RunSpec>, index: usize, count: usize) -> Result<Vec<RunSp
     Ok(runs.into_iter().filter(|r| r.index % count == index).collect())
 }
 
-/// The evaluation file of a run.
-pub fn eval_csv(dir: &Path, eval_seed: u64) -> PathBuf {
-    dir.join(format!("eval-seed{eval_seed}.csv"))
-}
-
 /// Where the run `dir` stands.
 pub fn status(dir: &Path, eval_seed: u64) -> Result<RunStatus> {
     Ok(match train::checkpointed_episode(dir)? {
-        Some((_, true)) if eval_csv(dir, eval_seed).exists() => RunStatus::Done,
+        Some((_, true)) if RunDir::new(dir).trial_eval(eval_seed).exists() => RunStatus::Done,
         Some((_, true)) => RunStatus::Trained,
         Some((episode, false)) => RunStatus::Partial { episode },
         None => RunStatus::New,
@@ -283,14 +277,7 @@ pub fn run_one(
             train::train_with(&spec.config, &dir, opts, on_episode)?;
         }
     }
-    let checkpoint = run
-        .best_available_checkpoint()
-        .ok_or_else(|| Error::InvalidInput(format!("{}: trained but no checkpoint", dir.display())))?;
-    let mut env = ReachEnv::from_config(&spec.config, 0)?;
-    let mut agent = train::load_agent(&spec.config, &env, &checkpoint)?;
-    let (summary, trials) = train::evaluate(agent.as_mut(), &mut env, sweep.eval_trials, sweep.eval_seed)?;
-    train::eval::write_trials_csv(&eval_csv(&dir, sweep.eval_seed), &trials)?;
-    Ok(summary)
+    Ok(train::evaluate_run(&run, &spec.config, None, sweep.eval_trials, sweep.eval_seed)?.summary)
 }
 
 /// One run of a sweep, as [`run_sweep`] reports it when the run ends.
@@ -367,7 +354,7 @@ pub fn run_sweep(
 
 /// Summarise an existing evaluation file.
 pub fn read_eval(dir: &Path, eval_seed: u64) -> Result<EvalSummary> {
-    Ok(train::eval::summarize(&train::eval::read_trials_csv(&eval_csv(dir, eval_seed))?))
+    train::eval::read_run_eval(&RunDir::new(dir), eval_seed)
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::log::EpisodeRecord;
-use crate::train::TrialRecord;
+use crate::log::TrialRecord;
 use crate::{Error, Result};
 
 /// How `E_start`, the episode at which training "starts to converge", is decided (the paper
@@ -299,28 +299,44 @@ pub fn train_metrics(records: &[EpisodeRecord], e_start: u64) -> Option<TrainMet
     })
 }
 
-/// Evaluation indicators of one run (the paper's 500 trials).
+/// Evaluation indicators of one run (the paper's 500 trials): what an evaluation measured.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct EvalMetrics {
-    pub trials: u64,
+pub struct EvalSummary {
+    pub trials: u32,
     /// Mean eq. 16 reward over all trials.
     pub mean_reward: f64,
     /// Mean steps of the successful trials; `None` when none succeeded.
-    pub mean_steps_success: Option<f64>,
+    #[serde(rename = "mean_steps_success")]
+    pub mean_steps: Option<f64>,
     /// Fraction of trials that reached the target, in [0, 1].
     pub success_rate: f64,
+    /// Median final distance, metres.
+    pub median_final_distance_m: f64,
+    /// Mean final distance, metres.
+    pub mean_final_distance_m: f64,
 }
 
-/// [`EvalMetrics`] of per-trial records; `None` for no trials.
-pub fn eval_metrics(trials: &[TrialRecord]) -> Option<EvalMetrics> {
-    let rewards: Vec<f64> = trials.iter().map(|t| t.reward).collect();
-    let ok: Vec<f64> = trials.iter().filter(|t| t.success).map(|t| f64::from(t.steps)).collect();
-    Some(EvalMetrics {
-        trials: trials.len() as u64,
-        mean_reward: mean(&rewards)?,
-        mean_steps_success: mean(&ok),
-        success_rate: ok.len() as f64 / trials.len() as f64,
-    })
+impl EvalSummary {
+    /// The summary of per-trial records; `None` for no trials.
+    pub fn of(trials: &[TrialRecord]) -> Option<EvalSummary> {
+        if trials.is_empty() {
+            return None;
+        }
+        let rewards: Vec<f64> = trials.iter().map(|t| t.reward).collect();
+        let ok: Vec<f64> = trials.iter().filter(|t| t.success).map(|t| f64::from(t.steps)).collect();
+        let mut d: Vec<f64> = trials.iter().map(|r| r.final_distance_m).collect();
+        d.sort_by(f64::total_cmp);
+        let k = d.len();
+        let median = if k % 2 == 1 { d[k / 2] } else { 0.5 * (d[k / 2 - 1] + d[k / 2]) };
+        Some(EvalSummary {
+            trials: trials.len() as u32,
+            mean_reward: mean(&rewards)?,
+            mean_steps: mean(&ok),
+            success_rate: ok.len() as f64 / trials.len() as f64,
+            median_final_distance_m: median,
+            mean_final_distance_m: mean(&d)?,
+        })
+    }
 }
 
 /// A value aggregated over seeds: the paper's "mean ± std".
@@ -478,18 +494,16 @@ mod tests {
             final_distance_m: 0.0,
             target: [0.0; 3],
         };
-        let e = eval_metrics(&[
+        let e = EvalSummary::of(&[
             t(1, 18.0, 6, true),
             t(2, -4.0, 50, false),
             t(3, 19.0, 4, true),
             t(4, 19.0, 5, true),
         ])
         .unwrap();
-        assert_eq!(
-            (e.trials, e.mean_reward, e.mean_steps_success, e.success_rate),
-            (4, 13.0, Some(5.0), 0.75)
-        );
-        assert!(eval_metrics(&[]).is_none());
+        assert_eq!((e.trials, e.mean_reward, e.mean_steps, e.success_rate), (4, 13.0, Some(5.0), 0.75));
+        assert_eq!((e.median_final_distance_m, e.mean_final_distance_m), (0.0, 0.0));
+        assert!(EvalSummary::of(&[]).is_none());
     }
 
     #[test]

@@ -88,7 +88,7 @@ fn write_run(
                 }
             })
             .collect();
-        write_trials_csv(&dir.join(format!("eval-final-seed{}.csv", 1_000_003)), &trials).unwrap();
+        write_trials_csv(&dir.join(format!("eval-seed{}.csv", 1_000_003)), &trials).unwrap();
         run.trials = Some(trials);
     }
     run

@@ -1,6 +1,8 @@
 use anyhow::{Context, Result};
 use stagerl::controller::JacobianController;
-use stagerl::env::ReachEnv;
+use stagerl::env::{rollout, Flow, Observed, Outcome, Policy, ReachEnv, Scratch, Transition};
+use stagerl::reward::REPORTED_TERMS;
+use stagerl::train::eval::evaluate_with;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -8,7 +10,7 @@ pub struct Args {
     /// A TOML config (arm, task, reward); defaults otherwise.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Seed of the target stream.
+    /// Seed of the target stream (also of the closing evaluation's targets).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Episodes printed step by step.
@@ -23,9 +25,7 @@ pub fn run(args: Args) -> Result<()> {
     let cfg = super::load_config(args.config.as_deref())?;
     let mut env = ReachEnv::from_config(&cfg, args.seed).context("building the environment")?;
     let chain = env.chain().clone();
-    let dt = env.task().dt_s;
     let mut ctl = JacobianController::new(&chain);
-    let mut action = vec![0.0f32; env.act_dim()];
     println!(
         "scripted Jacobian controller on `{}` ({} joints, tip `{}`), reward {}, seed {}",
         cfg.robot.urdf,
@@ -34,6 +34,7 @@ pub fn run(args: Args) -> Result<()> {
         cfg.reward.function,
         args.seed
     );
+    let mut scratch = Scratch::new(&env);
     for ep in 1..=args.show {
         env.reset();
         let t = env.target();
@@ -44,81 +45,35 @@ pub fn run(args: Args) -> Result<()> {
             t.z,
             env.distance()
         );
-        println!(
-            "{:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>6} {:>9} {:>5} {:>9}",
-            "step",
-            "D_PT(m)",
-            "position",
-            "direction",
-            "posture",
-            "move",
-            "stride",
-            "alpha1",
-            "alpha2",
-            "reward",
-            "bonus",
-            "total"
-        );
-        let mut episode_reward = 0.0;
-        loop {
-            ctl.act(&chain, env.joint_positions(), &env.target(), dt, &mut action);
-            let s = env.step(&action)?;
-            let r = s.terms;
-            episode_reward += s.total();
+        // The columns: the step, then every reported term but `reached` (D_PT in metres).
+        let names = REPORTED_TERMS.iter().filter(|n| **n != "reached");
+        let header: String =
+            names.map(|n| format!(" {:>9}", if *n == "distance" { "D_PT(m)" } else { n })).collect();
+        println!("{:>4}{header}", "step");
+        let print_step = |t: &Transition<'_>| {
+            let values = t.step.terms.reported();
+            let row: String = values
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != 1)
+                .map(|(_, v)| format!(" {v:>9.5}"))
+                .collect();
+            println!("{:>4}{row}", t.env.steps());
+            Ok(Flow::Continue)
+        };
+        let outcome = rollout(&mut env, &mut scratch, &mut Observed(ctl.policy(), print_step))?;
+        if let Outcome::Finished { reward, last } = outcome {
             println!(
-                "{:>4} {:>9.5} {:>9.5} {:>9.5} {:>9.5} {:>9.5} {:>9.5} {:>6.3} {:>6.3} {:>9.5} {:>5} {:>9.5}",
-                env.steps(),
-                r.distance,
-                r.position,
-                r.direction,
-                r.posture,
-                r.movement,
-                r.stride,
-                r.alpha1,
-                r.alpha2,
-                r.reward,
-                r.bonus,
-                r.total
+                "{} after {} steps, episode reward (eq. 16) {reward:.4}",
+                if last.terminated { "reached" } else { "truncated" },
+                env.steps()
             );
-            if s.done() {
-                println!(
-                    "{} after {} steps, episode reward (eq. 16) {:.4}",
-                    if s.terminated { "reached" } else { "truncated" },
-                    env.steps(),
-                    episode_reward
-                );
-                break;
-            }
         }
     }
     if args.trials > 0 {
-        let (mut successes, mut success_steps, mut total_reward) = (0u32, 0u64, 0.0);
-        for _ in 0..args.trials {
-            env.reset();
-            let mut r = 0.0;
-            loop {
-                ctl.act(&chain, env.joint_positions(), &env.target(), dt, &mut action);
-                let s = env.step(&action)?;
-                r += s.total();
-                if s.done() {
-                    if s.terminated {
-                        successes += 1;
-                        success_steps += u64::from(env.steps());
-                    }
-                    break;
-                }
-            }
-            total_reward += r;
-        }
-        let n = f64::from(args.trials);
-        let mean_steps = if successes > 0 { success_steps as f64 / f64::from(successes) } else { f64::NAN };
-        println!(
-            "\nevaluation over {} random targets: success {:.1} %, mean episode reward {:.3}, mean steps (successful) {:.2}",
-            args.trials,
-            100.0 * f64::from(successes) / n,
-            total_reward / n,
-            mean_steps
-        );
+        let (s, _) = evaluate_with(&mut env, args.trials, args.seed, &mut Policy(ctl.policy()))?;
+        println!();
+        super::eval::print_summary(&s, false);
     }
     Ok(())
 }

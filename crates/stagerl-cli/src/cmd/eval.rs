@@ -1,6 +1,5 @@
 use anyhow::{Context, Result};
-use stagerl::env::ReachEnv;
-use stagerl::train::{self, evaluate, EvalSummary, RunDir};
+use stagerl::train::{self, EvalSummary, RunDir};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -15,41 +14,27 @@ pub struct Args {
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
     trials: u32,
     /// Seed of the targets.
-    #[arg(long, default_value_t = DEFAULT_SEED)]
+    #[arg(long, default_value_t = train::eval::DEFAULT_EVAL_SEED)]
     seed: u64,
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
 }
 
-/// Seed of the evaluation targets unless told otherwise (differs from `train.eval_seed`, the
-/// targets the best checkpoint is chosen on).
-pub const DEFAULT_SEED: u64 = 0;
-
 pub fn run(args: Args) -> Result<()> {
     let dir = RunDir::new(&args.run);
     let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.display()))?;
-    let checkpoint = match args.checkpoint {
-        Some(c) => c,
-        None => dir
-            .best_available_checkpoint()
-            .with_context(|| format!("{} holds no checkpoint yet", dir.checkpoints().display()))?,
-    };
-    let mut env = ReachEnv::from_config(&cfg, 0)?;
-    let mut agent = train::load_agent(&cfg, &env, &checkpoint)?;
-    let (s, trials) = evaluate(agent.as_mut(), &mut env, args.trials, args.seed)?;
-    let csv = args.run.join(format!("eval-seed{}.csv", args.seed));
-    train::eval::write_trials_csv(&csv, &trials)?;
+    let e = train::evaluate_run(&dir, &cfg, args.checkpoint.as_deref(), args.trials, args.seed)?;
     if !args.json {
         println!(
             "{} on {} trials (seed {}), per-trial CSV {}",
-            checkpoint.display(),
+            e.checkpoint.display(),
             args.trials,
             args.seed,
-            csv.display()
+            e.csv.display()
         );
     }
-    print_summary(&s, args.json);
+    print_summary(&e.summary, args.json);
     Ok(())
 }
 

@@ -1,7 +1,7 @@
 use anyhow::Result;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use stagerl::nalgebra::Vector3 as Vec3;
-use stagerl::reward::{RewardFunction, RewardInput, RewardTerms};
+use stagerl::reward::{Reported, RewardFunction, RewardInput, RewardTerms};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -33,23 +33,6 @@ fn fixed<const N: usize>(key: &str, v: &[f64]) -> Result<[f64; N]> {
     v.try_into().map_err(|_| anyhow::anyhow!("malformed input: `{key}` has {} values, expected {N}", v.len()))
 }
 
-#[derive(Serialize)]
-struct Output {
-    distance: f64,
-    reached: bool,
-    position: f64,
-    direction: f64,
-    posture: f64,
-    #[serde(rename = "move")]
-    movement: f64,
-    stride: f64,
-    alpha1: f64,
-    alpha2: f64,
-    reward: f64,
-    bonus: f64,
-    total: f64,
-}
-
 pub fn run(args: Args) -> Result<()> {
     let mut cfg = super::load_config(args.config.as_deref())?;
     cfg.reward.function = args.function;
@@ -75,20 +58,6 @@ pub fn run(args: Args) -> Result<()> {
         {
             anyhow::bail!("reward.direction = \"displacement\" needs the key `prev_ee_pos`");
         }
-        let t = RewardTerms::compute(&cfg.reward, dt, &input);
-        Ok(Output {
-            distance: t.distance,
-            reached: t.reached,
-            position: t.position,
-            direction: t.direction,
-            posture: t.posture,
-            movement: t.movement,
-            stride: t.stride,
-            alpha1: t.alpha1,
-            alpha2: t.alpha2,
-            reward: t.reward,
-            bonus: t.bonus,
-            total: t.total,
-        })
+        Ok(Reported(RewardTerms::compute(&cfg.reward, dt, &input)))
     })
 }

@@ -2,7 +2,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use stagerl::agent::Algo;
 use stagerl::reward::RewardFunction;
-use stagerl::train::{self, evaluate, Progress, Resumed, RunDir, TrainOptions};
+use stagerl::train::{self, Progress, Resumed, RunDir, TrainOptions};
 use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -165,20 +165,14 @@ fn report_and_evaluate(
     if eval_trials > 0 {
         // The checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0: not
         // the `train.eval_seed` targets the best checkpoint was chosen on.
-        let checkpoint =
-            RunDir::new(out).best_available_checkpoint().unwrap_or(summary.final_checkpoint.clone());
-        let mut env = stagerl::env::ReachEnv::from_config(cfg, 0)?;
-        let mut agent = train::load_agent(cfg, &env, &checkpoint)?;
-        let seed = super::eval::DEFAULT_SEED;
-        let (s, trials) = evaluate(agent.as_mut(), &mut env, eval_trials, seed)?;
-        let csv = out.join(format!("eval-seed{seed}.csv"));
-        train::eval::write_trials_csv(&csv, &trials)?;
+        let seed = train::eval::DEFAULT_EVAL_SEED;
+        let e = train::evaluate_run(&RunDir::new(out), cfg, None, eval_trials, seed)?;
         println!(
             "{} on {eval_trials} new targets (seed {seed}), per-trial CSV {}",
-            checkpoint.display(),
-            csv.display()
+            e.checkpoint.display(),
+            e.csv.display()
         );
-        super::eval::print_summary(&s, false);
+        super::eval::print_summary(&e.summary, false);
     }
     Ok(())
 }

@@ -9,8 +9,10 @@
 //!
 //! [`ReachEnv::step`] allocates nothing.
 
+pub mod rollout;
 mod vec;
 
+pub use rollout::{rollout, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
 pub use vec::VecEnv;
 
 use nalgebra::Vector3;

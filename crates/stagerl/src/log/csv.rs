@@ -1,12 +1,158 @@
-//! `episodes.csv`: one row per training episode.
+//! The CSV files of runs and reports, in one pattern: a row type implements [`CsvRow`] (its
+//! header and how it writes one line) and, when the file is read back, [`CsvRecord`] (how it
+//! parses one); [`to_csv`], [`write_csv`], [`read_csv`] and [`CsvWriter`] do the rest.
+//!
+//! Floats print with Rust's `{}` (the shortest text that parses back to the same value), so equal
+//! values give equal bytes and a file read back gives the values written. Fields hold no commas
+//! (text fields of reports are quoted by their writer).
+//!
+//! This file holds the rows of a run's `episodes.csv` ([`EpisodeRecord`]), `eval.csv`
+//! ([`EvalPoint`]) and per-trial evaluation CSVs ([`TrialRecord`]), each with its reader and
+//! writer; the report's rows live beside the report's tables.
 
+use std::fmt::Write as _;
 use std::fs::{File, OpenOptions};
 use std::io::{BufWriter, Write};
+use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
 use crate::{Error, Result};
 
-/// One training episode.
+/// A row of a CSV file that is written.
+pub trait CsvRow {
+    /// The header line (no newline).
+    const HEADER: &'static str;
+    /// Append this row's fields, comma-separated, without the newline.
+    fn write_row(&self, out: &mut String);
+}
+
+/// A row of a CSV file that is also read back.
+pub trait CsvRecord: CsvRow + Sized {
+    /// Parse the fields of one line (split at commas); `None` when malformed.
+    fn parse_row(fields: &[&str]) -> Option<Self>;
+}
+
+/// Append `row` and a newline to `out`.
+pub fn push_row<R: CsvRow>(out: &mut String, row: &R) {
+    row.write_row(out);
+    out.push('\n');
+}
+
+/// The header and every row, one per line.
+pub fn to_csv<'a, R: CsvRow + 'a>(rows: impl IntoIterator<Item = &'a R>) -> String {
+    let mut s = format!("{}\n", R::HEADER);
+    for r in rows {
+        push_row(&mut s, r);
+    }
+    s
+}
+
+/// Write the header and `rows` to `path` atomically.
+pub fn write_csv<R: CsvRow>(path: &Path, rows: &[R]) -> Result<()> {
+    crate::io::write_atomic(path, to_csv(rows).as_bytes())
+}
+
+/// Parse one line of an `R` file.
+pub fn parse_line<R: CsvRecord>(line: &str, origin: &Path) -> Result<R> {
+    let fields: Vec<&str> = line.trim_end().split(',').collect();
+    R::parse_row(&fields)
+        .ok_or_else(|| Error::InvalidInput(format!("{}: malformed row {line:?}", origin.display())))
+}
+
+/// Parse the text of an `R` file (header first; blank lines are skipped); `origin` names it in
+/// errors.
+pub fn parse_csv<R: CsvRecord>(text: &str, origin: &Path) -> Result<Vec<R>> {
+    let mut lines = text.lines();
+    if lines.next().map(str::trim_end) != Some(R::HEADER) {
+        return Err(Error::InvalidInput(format!(
+            "{}: expected the header {:?}",
+            origin.display(),
+            R::HEADER
+        )));
+    }
+    lines.filter(|l| !l.trim().is_empty()).map(|l| parse_line(l, origin)).collect()
+}
+
+/// Read every row of an `R` file.
+pub fn read_csv<R: CsvRecord>(path: &Path) -> Result<Vec<R>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_csv(&text, path)
+}
+
+/// A `0`/`1` field.
+pub fn parse_bool(s: &str) -> Option<bool> {
+    match s {
+        "1" => Some(true),
+        "0" => Some(false),
+        _ => None,
+    }
+}
+
+/// An optional float: empty for `None`.
+pub fn parse_opt_f64(s: &str) -> Option<Option<f64>> {
+    if s.is_empty() {
+        Some(None)
+    } else {
+        s.parse().ok().map(Some)
+    }
+}
+
+/// Writes an optional float: nothing for `None`.
+pub struct OptF64(pub Option<f64>);
+
+impl std::fmt::Display for OptF64 {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(v) => write!(f, "{v}"),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Appends rows to a CSV file, flushing each one (a run's `episodes.csv`).
+pub struct CsvWriter<R> {
+    out: BufWriter<File>,
+    path: PathBuf,
+    line: String,
+    _row: PhantomData<fn(&R)>,
+}
+
+impl<R: CsvRow> CsvWriter<R> {
+    fn open(file: File, path: &Path) -> CsvWriter<R> {
+        CsvWriter {
+            out: BufWriter::new(file),
+            path: path.to_path_buf(),
+            line: String::new(),
+            _row: PhantomData,
+        }
+    }
+
+    /// Create `path` with its header (replacing any file there).
+    pub fn create(path: &Path) -> Result<CsvWriter<R>> {
+        let file = File::create(path).map_err(|e| Error::io(path, e))?;
+        let mut csv = CsvWriter::open(file, path);
+        writeln!(csv.out, "{}", R::HEADER).and_then(|_| csv.out.flush()).map_err(|e| Error::io(path, e))?;
+        Ok(csv)
+    }
+
+    /// Open an existing file for appending.
+    pub fn append(path: &Path) -> Result<CsvWriter<R>> {
+        let file = OpenOptions::new().append(true).open(path).map_err(|e| Error::io(path, e))?;
+        Ok(CsvWriter::open(file, path))
+    }
+
+    /// Append one row and flush it.
+    pub fn write(&mut self, r: &R) -> Result<()> {
+        self.line.clear();
+        push_row(&mut self.line, r);
+        self.out
+            .write_all(self.line.as_bytes())
+            .and_then(|_| self.out.flush())
+            .map_err(|e| Error::io(&self.path, e))
+    }
+}
+
+/// One training episode (a row of `episodes.csv`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EpisodeRecord {
     /// 1-based episode number.
@@ -21,18 +167,17 @@ pub struct EpisodeRecord {
     pub final_distance_m: f64,
     /// Environment steps since the run began.
     pub env_steps: u64,
-    /// Seconds since the run began (the only column that differs between identical runs).
+    /// Seconds since the run began (the only column that differs between identical runs; written
+    /// to the millisecond).
     pub wall_s: f64,
 }
 
-impl EpisodeRecord {
-    /// The CSV header.
-    pub const HEADER: &'static str = "episode,reward,steps,success,final_distance_m,env_steps,wall_s";
+impl CsvRow for EpisodeRecord {
+    const HEADER: &'static str = "episode,reward,steps,success,final_distance_m,env_steps,wall_s";
 
-    /// One CSV line (no newline). Floats print in Rust's shortest round-trip form, so equal values
-    /// give equal text.
-    pub fn to_csv(&self) -> String {
-        format!(
+    fn write_row(&self, out: &mut String) {
+        let _ = write!(
+            out,
             "{},{},{},{},{},{},{:.3}",
             self.episode,
             self.reward,
@@ -41,77 +186,143 @@ impl EpisodeRecord {
             self.final_distance_m,
             self.env_steps,
             self.wall_s
-        )
+        );
     }
+}
 
-    /// Parse a line written by [`EpisodeRecord::to_csv`].
-    pub fn from_csv(line: &str) -> Result<EpisodeRecord> {
-        let bad = || Error::InvalidInput(format!("episodes.csv: malformed row {line:?}"));
-        let f: Vec<&str> = line.trim_end().split(',').collect();
-        if f.len() != 7 {
-            return Err(bad());
-        }
-        Ok(EpisodeRecord {
-            episode: f[0].parse().map_err(|_| bad())?,
-            reward: f[1].parse().map_err(|_| bad())?,
-            steps: f[2].parse().map_err(|_| bad())?,
-            success: match f[3] {
-                "1" => true,
-                "0" => false,
-                _ => return Err(bad()),
-            },
-            final_distance_m: f[4].parse().map_err(|_| bad())?,
-            env_steps: f[5].parse().map_err(|_| bad())?,
-            wall_s: f[6].parse().map_err(|_| bad())?,
+impl CsvRecord for EpisodeRecord {
+    fn parse_row(f: &[&str]) -> Option<EpisodeRecord> {
+        let [episode, reward, steps, success, dist, env_steps, wall] = f else { return None };
+        Some(EpisodeRecord {
+            episode: episode.parse().ok()?,
+            reward: reward.parse().ok()?,
+            steps: steps.parse().ok()?,
+            success: parse_bool(success)?,
+            final_distance_m: dist.parse().ok()?,
+            env_steps: env_steps.parse().ok()?,
+            wall_s: wall.parse().ok()?,
         })
     }
 }
 
-/// Appends episode rows, flushing each one.
-pub struct EpisodeCsv {
-    out: BufWriter<File>,
-    path: PathBuf,
-}
-
-impl EpisodeCsv {
-    /// Create `path` with its header (replacing any file there).
-    pub fn create(path: &Path) -> Result<EpisodeCsv> {
-        let file = File::create(path).map_err(|e| Error::io(path, e))?;
-        let mut csv = EpisodeCsv { out: BufWriter::new(file), path: path.to_path_buf() };
-        writeln!(csv.out, "{}", EpisodeRecord::HEADER).map_err(|e| Error::io(path, e))?;
-        csv.out.flush().map_err(|e| Error::io(path, e))?;
-        Ok(csv)
-    }
-
-    /// Open an existing file for appending.
-    pub fn append(path: &Path) -> Result<EpisodeCsv> {
-        let file = OpenOptions::new().append(true).open(path).map_err(|e| Error::io(path, e))?;
-        Ok(EpisodeCsv { out: BufWriter::new(file), path: path.to_path_buf() })
-    }
-
-    /// Append one row and flush it.
-    pub fn write(&mut self, r: &EpisodeRecord) -> Result<()> {
-        writeln!(self.out, "{}", r.to_csv())
-            .and_then(|_| self.out.flush())
-            .map_err(|e| Error::io(&self.path, e))
-    }
-}
+/// Appends rows to a run's `episodes.csv`.
+pub type EpisodeCsv = CsvWriter<EpisodeRecord>;
 
 /// Read every row of an `episodes.csv`.
 pub fn read_episodes(path: &Path) -> Result<Vec<EpisodeRecord>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let mut lines = text.lines();
-    match lines.next() {
-        Some(h) if h.trim_end() == EpisodeRecord::HEADER => {}
-        _ => {
-            return Err(Error::InvalidInput(format!(
-                "{}: expected the header {:?}",
-                path.display(),
-                EpisodeRecord::HEADER
-            )))
-        }
+    read_csv(path)
+}
+
+/// One periodic evaluation of the deterministic policy (a row of a run's `eval.csv`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct EvalPoint {
+    pub episode: u64,
+    pub env_steps: u64,
+    /// In [0, 1].
+    pub success_rate: f64,
+    pub mean_reward: f64,
+    /// Mean steps of the successful trials; `None` when none succeeded.
+    pub mean_steps: Option<f64>,
+    pub median_final_distance_m: f64,
+}
+
+impl CsvRow for EvalPoint {
+    const HEADER: &'static str =
+        "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m";
+
+    fn write_row(&self, out: &mut String) {
+        let _ = write!(
+            out,
+            "{},{},{},{},{},{}",
+            self.episode,
+            self.env_steps,
+            self.success_rate,
+            self.mean_reward,
+            OptF64(self.mean_steps),
+            self.median_final_distance_m
+        );
     }
-    lines.filter(|l| !l.trim().is_empty()).map(EpisodeRecord::from_csv).collect()
+}
+
+impl CsvRecord for EvalPoint {
+    fn parse_row(f: &[&str]) -> Option<EvalPoint> {
+        let [episode, env_steps, success_rate, mean_reward, mean_steps, median] = f else { return None };
+        Some(EvalPoint {
+            episode: episode.parse().ok()?,
+            env_steps: env_steps.parse().ok()?,
+            success_rate: success_rate.parse().ok()?,
+            mean_reward: mean_reward.parse().ok()?,
+            mean_steps: parse_opt_f64(mean_steps)?,
+            median_final_distance_m: median.parse().ok()?,
+        })
+    }
+}
+
+/// Read a run's `eval.csv`.
+pub fn read_eval_points(path: &Path) -> Result<Vec<EvalPoint>> {
+    read_csv(path)
+}
+
+/// One evaluation episode (a row of a per-trial evaluation CSV, `eval-seed<N>.csv`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrialRecord {
+    pub trial: u32,
+    /// Eq. 16 episode reward (bonus included).
+    pub reward: f64,
+    pub steps: u32,
+    pub success: bool,
+    /// D_PT at the start, metres.
+    pub start_distance_m: f64,
+    /// D_PT at the end, metres.
+    pub final_distance_m: f64,
+    /// The target, metres.
+    pub target: [f64; 3],
+}
+
+impl CsvRow for TrialRecord {
+    const HEADER: &'static str =
+        "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m";
+
+    fn write_row(&self, out: &mut String) {
+        let _ = write!(
+            out,
+            "{},{},{},{},{},{},{},{},{}",
+            self.trial,
+            self.reward,
+            self.steps,
+            u8::from(self.success),
+            self.start_distance_m,
+            self.final_distance_m,
+            self.target[0],
+            self.target[1],
+            self.target[2]
+        );
+    }
+}
+
+impl CsvRecord for TrialRecord {
+    fn parse_row(f: &[&str]) -> Option<TrialRecord> {
+        let [trial, reward, steps, success, start, fin, x, y, z] = f else { return None };
+        Some(TrialRecord {
+            trial: trial.parse().ok()?,
+            reward: reward.parse().ok()?,
+            steps: steps.parse().ok()?,
+            success: parse_bool(success)?,
+            start_distance_m: start.parse().ok()?,
+            final_distance_m: fin.parse().ok()?,
+            target: [x.parse().ok()?, y.parse().ok()?, z.parse().ok()?],
+        })
+    }
+}
+
+/// Write a per-trial evaluation CSV (atomically).
+pub fn write_trials_csv(path: &Path, records: &[TrialRecord]) -> Result<()> {
+    write_csv(path, records)
+}
+
+/// Read a per-trial evaluation CSV (written by [`write_trials_csv`]).
+pub fn read_trials_csv(path: &Path) -> Result<Vec<TrialRecord>> {
+    read_csv(path)
 }
 
 #[cfg(test)]
@@ -148,11 +359,52 @@ mod tests {
         drop(w);
         let mut w = EpisodeCsv::append(&p).unwrap();
         w.write(&rows[1]).unwrap();
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert_eq!(
+            text,
+            "episode,reward,steps,success,final_distance_m,env_steps,wall_s\n\
+             1,-12.345678901234,50,0,0.1234,50,0.012\n2,19.4,6,1,0.0099,56,0.020\n"
+        );
         let back = read_episodes(&p).unwrap();
         assert_eq!(back.len(), 2);
         assert_eq!(back[0].reward, rows[0].reward);
         assert_eq!(back[1], EpisodeRecord { wall_s: 0.02, ..rows[1] });
-        assert!(EpisodeRecord::from_csv("1,2,3").is_err());
+        assert!(parse_line::<EpisodeRecord>("1,2,3", &p).is_err());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn eval_points_round_trip_with_and_without_mean_steps() {
+        let rows = [
+            EvalPoint {
+                episode: 250,
+                env_steps: 12000,
+                success_rate: 0.5,
+                mean_reward: -3.25,
+                mean_steps: None,
+                median_final_distance_m: 0.1,
+            },
+            EvalPoint { mean_steps: Some(7.5), episode: 500, ..rows_0() },
+        ];
+        let text = to_csv(&rows);
+        assert_eq!(
+            text,
+            "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m\n\
+             250,12000,0.5,-3.25,,0.1\n500,12000,0.5,-3.25,7.5,0.1\n"
+        );
+        assert_eq!(parse_csv::<EvalPoint>(&text, Path::new("eval.csv")).unwrap(), rows);
+        let e = parse_csv::<EvalPoint>("episode\n", Path::new("eval.csv")).unwrap_err().to_string();
+        assert!(e.contains("eval.csv") && e.contains("header"), "{e}");
+    }
+
+    fn rows_0() -> EvalPoint {
+        EvalPoint {
+            episode: 250,
+            env_steps: 12000,
+            success_rate: 0.5,
+            mean_reward: -3.25,
+            mean_steps: None,
+            median_final_distance_m: 0.1,
+        }
     }
 }

@@ -274,7 +274,7 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     if opts.trajectories > 0 {
         let mut sets: Vec<Rollouts> = Vec::new();
         for (run, role, success) in pick_trajectory_runs(&groups, &report.groups) {
-            let seed = run.final_eval.as_ref().and_then(|f| f.seed).unwrap_or(run.config.train.eval_seed);
+            let seed = run.final_eval.as_ref().map_or(run.config.train.eval_seed, |f| f.seed);
             match trajectory::rollout(run, opts.trajectories, seed) {
                 Ok(mut r) => {
                     let rate = success

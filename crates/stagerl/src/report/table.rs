@@ -10,7 +10,7 @@ use super::paper::{self, PaperRow};
 use super::runs::RunData;
 use crate::agent::Algo;
 use crate::config::Config;
-use crate::metrics::{self, Convergence, ConvergenceCriterion, EvalMetrics, MeanStd, TrainMetrics};
+use crate::metrics::{self, Convergence, ConvergenceCriterion, EvalSummary, MeanStd, TrainMetrics};
 use crate::reward::RewardFunction;
 use crate::Result;
 
@@ -171,7 +171,7 @@ pub struct RunSummary {
     /// Mean reward of the tail (the converged level, or where the run ended up).
     pub tail_mean_reward: f64,
     /// From the per-trial evaluation CSV, when there is one.
-    pub eval: Option<EvalMetrics>,
+    pub eval: Option<EvalSummary>,
     pub eval_file: Option<String>,
     pub notes: Vec<String>,
 }
@@ -231,7 +231,7 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
             .and_then(|i| run.episodes.get(i as usize - 1))
             .and_then(|r| metrics::train_metrics(&run.episodes, r.episode));
         let tail = &rewards[rewards.len() - criterion.tail_len(rewards.len()).min(rewards.len())..];
-        let eval = run.final_eval.as_ref().and_then(|f| metrics::eval_metrics(&f.trials));
+        let eval = run.final_eval.as_ref().and_then(|f| EvalSummary::of(&f.trials));
         let eval_file = run
             .final_eval
             .as_ref()
@@ -260,7 +260,7 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
     let tm = |f: &dyn Fn(&TrainMetrics) -> Option<f64>| {
         MeanStd::of_present(conv.iter().map(|r| r.train.as_ref().and_then(f)))
     };
-    let em = |f: &dyn Fn(&EvalMetrics) -> Option<f64>| {
+    let em = |f: &dyn Fn(&EvalSummary) -> Option<f64>| {
         MeanStd::of_present(runs.iter().map(|r| r.eval.as_ref().and_then(f)))
     };
     let mut notes = Vec::new();
@@ -286,7 +286,7 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
     let no_eval: Vec<u64> = runs.iter().filter(|r| r.eval.is_none()).map(|r| r.seed).collect();
     if !no_eval.is_empty() && n > 0 {
         if no_eval.len() == n {
-            notes.push("no per-trial evaluation CSV (eval-final-seed<N>.csv or eval-seed<N>.csv)".into());
+            notes.push("no per-trial evaluation CSV (eval-seed<N>.csv)".into());
         } else {
             notes.push(format!(
                 "no per-trial evaluation CSV for seed(s) {}; the evaluation columns average the others",
@@ -294,7 +294,7 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
             ));
         }
     }
-    let trials: Vec<u64> = runs.iter().filter_map(|r| r.eval.map(|e| e.trials)).collect();
+    let trials: Vec<u64> = runs.iter().filter_map(|r| r.eval.map(|e| u64::from(e.trials))).collect();
     let eval_trials = trials.first().copied();
     if trials.iter().any(|t| Some(*t) != eval_trials) {
         notes.push(format!("evaluation trials differ between seeds: {}", seeds_list(&trials)));
@@ -320,7 +320,7 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
         train_steps: tm(&|t| t.mean_steps_success),
         v_stdev: tm(&|t| t.v_stdev),
         eval_reward: em(&|e| Some(e.mean_reward)),
-        eval_steps: em(&|e| e.mean_steps_success),
+        eval_steps: em(&|e| e.mean_steps),
         success_rate: em(&|e| Some(e.success_rate)),
         eval_trials,
         excluded: group.excluded.clone(),
@@ -565,7 +565,7 @@ pub fn render_markdown(
                 opt(t.and_then(|t| t.mean_steps_success), 1.0, 1),
                 r.tail_mean_reward,
                 opt(e.map(|e| e.mean_reward), 1.0, 3),
-                opt(e.and_then(|e| e.mean_steps_success), 1.0, 1),
+                opt(e.and_then(|e| e.mean_steps), 1.0, 1),
                 e.map_or_else(|| DASH.into(), |e| format!("{:.1} % of {}", 100.0 * e.success_rate, e.trials)),
             );
         }

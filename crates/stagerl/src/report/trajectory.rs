@@ -6,9 +6,10 @@ use std::fmt::Write as _;
 
 use super::runs::RunData;
 use super::table::{algo_title, reward_title};
-use crate::env::ReachEnv;
-use crate::train::{self, RunDir};
-use crate::{Error, Result};
+use crate::env::{Driver, Flow, ReachEnv, Transition};
+use crate::rundir::RunDir;
+use crate::train::eval;
+use crate::Result;
 
 /// One evaluation episode's path.
 #[derive(Clone, Debug, Serialize)]
@@ -34,38 +35,47 @@ pub struct Rollouts {
     pub paths: Vec<TrajectoryPath>,
 }
 
+/// A policy whose end-effector path is recorded, from each reset to the episode's end.
+struct Tracer<P> {
+    policy: P,
+    paths: Vec<Vec<[f64; 3]>>,
+}
+
+impl<P: FnMut(&ReachEnv, &mut [f32]) -> Result<()>> Driver for Tracer<P> {
+    fn act(&mut self, env: &ReachEnv, action: &mut [f32]) -> Result<()> {
+        if env.steps() == 0 {
+            self.paths.push(vec![env.ee_pose().position.into()]);
+        }
+        (self.policy)(env, action)
+    }
+    fn on_step(&mut self, t: &Transition<'_>) -> Result<Flow> {
+        if let Some(path) = self.paths.last_mut() {
+            path.push(t.env.ee_pose().position.into());
+        }
+        Ok(Flow::Continue)
+    }
+}
+
 /// Roll out the first `trials` evaluation episodes of `run`'s deterministic policy from its best
 /// available checkpoint, with the targets of evaluation seed `eval_seed` (the same trials as the
 /// per-trial CSV written with that seed).
 pub fn rollout(run: &RunData, trials: u32, eval_seed: u64) -> Result<Rollouts> {
-    let rd = RunDir::new(&run.dir);
-    let ckpt = rd
-        .best_available_checkpoint()
-        .ok_or_else(|| Error::InvalidInput(format!("{}: no checkpoint", rd.checkpoints().display())))?;
     let cfg = &run.config;
-    let mut env = ReachEnv::from_config(cfg, 0)?;
-    let mut agent = train::load_agent(cfg, &env, &ckpt)?;
-    let mut action = vec![0.0f32; env.act_dim()];
-    env.reset_with_seed(eval_seed);
-    let mut paths = Vec::new();
-    for trial in 0..trials {
-        if trial > 0 {
-            env.reset();
-        }
-        let t = env.target();
-        let mut points = vec![env.ee_pose().position.into()];
-        let mut reward = 0.0;
-        let success = loop {
-            agent.predict(env.observation(), &mut action);
-            let s = env.step(&action)?;
-            reward += s.total();
-            points.push(env.ee_pose().position.into());
-            if s.done() {
-                break s.terminated;
-            }
-        };
-        paths.push(TrajectoryPath { trial: trial + 1, points, target: [t.x, t.y, t.z], success, reward });
-    }
+    let (ckpt, mut env, mut agent) = eval::load_run_agent(&RunDir::new(&run.dir), cfg, None)?;
+    let mut driver = Tracer { policy: eval::deterministic(agent.as_mut()), paths: Vec::new() };
+    let (_, records) = eval::evaluate_with(&mut env, trials, eval_seed, &mut driver)?;
+    let points = driver.paths;
+    let paths: Vec<TrajectoryPath> = records
+        .iter()
+        .zip(points)
+        .map(|(r, points)| TrajectoryPath {
+            trial: r.trial,
+            points,
+            target: r.target,
+            success: r.success,
+            reward: r.reward,
+        })
+        .collect();
     let reached = paths.iter().filter(|p| p.success).count();
     Ok(Rollouts {
         title: format!(

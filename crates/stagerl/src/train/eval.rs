@@ -1,42 +1,24 @@
-//! Evaluation: the deterministic policy on random targets (the paper's 500 trials).
+//! Evaluation: the deterministic policy on random targets (the paper's 500 trials), and the one
+//! path that evaluates a run directory's checkpoint and writes its per-trial CSV.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::agent::Agent;
-use crate::env::ReachEnv;
-use crate::Result;
+use crate::config::Config;
+use crate::env::{rollout, Driver, Outcome, Policy, ReachEnv, Scratch};
+use crate::rundir::RunDir;
+use crate::{Error, Result};
 
-/// One evaluation episode.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TrialRecord {
-    pub trial: u32,
-    /// Eq. 16 episode reward (bonus included).
-    pub reward: f64,
-    pub steps: u32,
-    pub success: bool,
-    /// D_PT at the start, metres.
-    pub start_distance_m: f64,
-    /// D_PT at the end, metres.
-    pub final_distance_m: f64,
-    /// The target, metres.
-    pub target: [f64; 3],
-}
+pub use crate::log::csv::{read_trials_csv, write_trials_csv, TrialRecord};
+pub use crate::metrics::EvalSummary;
 
-/// What an evaluation measured.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct EvalSummary {
-    pub trials: u32,
-    /// Fraction of trials that reached the target, in [0, 1].
-    pub success_rate: f64,
-    /// Mean eq. 16 episode reward over all trials.
-    pub mean_reward: f64,
-    /// Mean steps of the successful trials (`None` when none succeeded).
-    pub mean_steps: Option<f64>,
-    /// Median final distance, metres.
-    pub median_final_distance_m: f64,
-    /// Mean final distance, metres.
-    pub mean_final_distance_m: f64,
-}
+/// The largest evaluation asked for at once (its per-trial records are kept in memory).
+pub const MAX_EVAL_TRIALS: u32 = 10_000_000;
+
+/// Seed of the evaluation targets of `stagerl train`'s closing evaluation and `stagerl eval`
+/// unless told otherwise (differs from `train.eval_seed`, the targets the best checkpoint is
+/// chosen on).
+pub const DEFAULT_EVAL_SEED: u64 = 0;
 
 /// Run `trials` episodes of `agent`'s deterministic policy. The environment's target stream is
 /// reseeded with `seed`, so the same seed gives the same targets whatever ran before.
@@ -46,131 +28,120 @@ pub fn evaluate(
     trials: u32,
     seed: u64,
 ) -> Result<(EvalSummary, Vec<TrialRecord>)> {
-    if trials > super::MAX_EVAL_TRIALS {
-        return Err(crate::Error::InvalidInput(format!(
-            "{trials} evaluation trials: at most {}",
-            super::MAX_EVAL_TRIALS
-        )));
+    evaluate_with(env, trials, seed, &mut Policy(deterministic(agent)))
+}
+
+/// The deterministic policy of `agent` as a rollout policy; a non-finite action is a
+/// numerical fault.
+pub fn deterministic(agent: &mut dyn Agent) -> impl FnMut(&ReachEnv, &mut [f32]) -> Result<()> + '_ {
+    move |env, action| {
+        agent.predict(env.observation(), action);
+        match action.iter().position(|a| !a.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(Error::NumericalFault(format!(
+                "the policy's action[{i}] = {} in evaluation, step {}",
+                action[i],
+                env.steps() + 1
+            ))),
+        }
+    }
+}
+
+/// Run `trials` episodes (eq. 16 rollouts) of `driver` on the targets of `seed` (the
+/// environment's own target stream is left as it was).
+pub fn evaluate_with(
+    env: &mut ReachEnv,
+    trials: u32,
+    seed: u64,
+    driver: &mut impl Driver,
+) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    if trials == 0 || trials > MAX_EVAL_TRIALS {
+        return Err(Error::InvalidInput(format!("{trials} evaluation trials: need 1 to {MAX_EVAL_TRIALS}")));
     }
     let saved_rng = env.rng().clone();
-    env.reset_with_seed(seed);
-    let mut action = vec![0.0f32; env.act_dim()];
+    let mut scratch = Scratch::new(env);
     let mut records = Vec::with_capacity(trials as usize);
-    for trial in 0..trials {
-        if trial > 0 {
+    for trial in 1..=trials {
+        if trial == 1 {
+            env.reset_with_seed(seed);
+        } else {
             env.reset();
         }
-        let start = env.distance();
-        let target = env.target();
-        let mut reward = 0.0;
-        let success = loop {
-            agent.predict(env.observation(), &mut action);
-            if let Some(i) = action.iter().position(|a| !a.is_finite()) {
-                return Err(crate::Error::NumericalFault(format!(
-                    "the policy's action[{i}] = {} in evaluation trial {}, step {}",
-                    action[i],
-                    trial + 1,
-                    env.steps() + 1
-                )));
-            }
-            let s = env.step(&action)?;
-            reward += s.total();
-            if s.done() {
-                break s.terminated;
-            }
+        let (start, target) = (env.distance(), env.target());
+        let result = rollout(env, &mut scratch, driver);
+        let Outcome::Finished { reward, last } = result.map_err(|e| in_trial(e, trial))? else {
+            return Err(Error::Interrupted { episode: 0, checkpoint: PathBuf::new() });
         };
         records.push(TrialRecord {
-            trial: trial + 1,
+            trial,
             reward,
             steps: env.steps(),
-            success,
+            success: last.terminated,
             start_distance_m: start,
             final_distance_m: env.distance(),
             target: [target.x, target.y, target.z],
         });
     }
     env.set_rng(saved_rng);
-    Ok((summarize(&records), records))
+    let summary = EvalSummary::of(&records).expect("at least one trial");
+    Ok((summary, records))
 }
 
-/// Summary statistics of evaluation trials.
-pub fn summarize(records: &[TrialRecord]) -> EvalSummary {
-    let n = records.len().max(1) as f64;
-    let successes: Vec<&TrialRecord> = records.iter().filter(|r| r.success).collect();
-    let mut d: Vec<f64> = records.iter().map(|r| r.final_distance_m).collect();
-    d.sort_by(f64::total_cmp);
-    let median = match d.len() {
-        0 => f64::NAN,
-        k if k % 2 == 1 => d[k / 2],
-        k => 0.5 * (d[k / 2 - 1] + d[k / 2]),
+/// A numerical fault names the trial it happened in.
+fn in_trial(e: Error, trial: u32) -> Error {
+    match e {
+        Error::NumericalFault(m) => Error::NumericalFault(format!("{m} of evaluation trial {trial}")),
+        other => other,
+    }
+}
+
+/// The agent of a run directory's checkpoint (`checkpoint`, else the best available one), with
+/// an environment for it; the checkpoint's path first.
+pub fn load_run_agent(
+    run: &RunDir,
+    cfg: &Config,
+    checkpoint: Option<&Path>,
+) -> Result<(PathBuf, ReachEnv, Box<dyn Agent>)> {
+    let checkpoint = match checkpoint {
+        Some(c) => c.to_path_buf(),
+        None => run.best_available_checkpoint().ok_or_else(|| {
+            Error::InvalidInput(format!("{} holds no checkpoint yet", run.checkpoints().display()))
+        })?,
     };
-    EvalSummary {
-        trials: records.len() as u32,
-        success_rate: successes.len() as f64 / n,
-        mean_reward: records.iter().map(|r| r.reward).sum::<f64>() / n,
-        mean_steps: (!successes.is_empty())
-            .then(|| successes.iter().map(|r| f64::from(r.steps)).sum::<f64>() / successes.len() as f64),
-        median_final_distance_m: median,
-        mean_final_distance_m: d.iter().sum::<f64>() / n,
-    }
+    let env = ReachEnv::from_config(cfg, 0)?;
+    let agent = super::load_agent(cfg, &env, &checkpoint)?;
+    Ok((checkpoint, env, agent))
 }
 
-/// The header of the per-trial evaluation CSV.
-pub const TRIALS_HEADER: &str =
-    "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m";
-
-/// Write trial records as CSV (atomically).
-pub fn write_trials_csv(path: &Path, records: &[TrialRecord]) -> Result<()> {
-    let mut s = format!("{TRIALS_HEADER}\n");
-    for r in records {
-        s.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{}\n",
-            r.trial,
-            r.reward,
-            r.steps,
-            u8::from(r.success),
-            r.start_distance_m,
-            r.final_distance_m,
-            r.target[0],
-            r.target[1],
-            r.target[2]
-        ));
-    }
-    crate::io::write_atomic(path, s.as_bytes())
+/// What [`evaluate_run`] did.
+#[derive(Clone, Debug)]
+pub struct RunEval {
+    /// The checkpoint evaluated.
+    pub checkpoint: PathBuf,
+    pub summary: EvalSummary,
+    /// The per-trial CSV written.
+    pub csv: PathBuf,
 }
 
-/// Read a per-trial evaluation CSV (written by [`write_trials_csv`]).
-pub fn read_trials_csv(path: &Path) -> Result<Vec<TrialRecord>> {
-    let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
-    let mut lines = text.lines();
-    if lines.next().map(str::trim_end) != Some(TRIALS_HEADER) {
-        return Err(crate::Error::InvalidInput(format!(
-            "{}: expected the header {TRIALS_HEADER:?}",
-            path.display()
-        )));
-    }
-    lines
-        .filter(|l| !l.trim().is_empty())
-        .map(|line| {
-            let bad = || crate::Error::InvalidInput(format!("{}: malformed row {line:?}", path.display()));
-            let f: Vec<&str> = line.trim_end().split(',').collect();
-            if f.len() != 9 {
-                return Err(bad());
-            }
-            let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad());
-            Ok(TrialRecord {
-                trial: f[0].parse().map_err(|_| bad())?,
-                reward: num(1)?,
-                steps: f[2].parse().map_err(|_| bad())?,
-                success: match f[3] {
-                    "1" => true,
-                    "0" => false,
-                    _ => return Err(bad()),
-                },
-                start_distance_m: num(4)?,
-                final_distance_m: num(5)?,
-                target: [num(6)?, num(7)?, num(8)?],
-            })
-        })
-        .collect()
+/// Evaluate a run directory's checkpoint (`checkpoint`, else the best available: best, final,
+/// latest) on `trials` targets of `seed` and write the per-trial CSV, `eval-seed<seed>.csv`.
+pub fn evaluate_run(
+    run: &RunDir,
+    cfg: &Config,
+    checkpoint: Option<&Path>,
+    trials: u32,
+    seed: u64,
+) -> Result<RunEval> {
+    let (checkpoint, mut env, mut agent) = load_run_agent(run, cfg, checkpoint)?;
+    let (summary, records) = evaluate(agent.as_mut(), &mut env, trials, seed)?;
+    let csv = run.trial_eval(seed);
+    write_trials_csv(&csv, &records)?;
+    Ok(RunEval { checkpoint, summary, csv })
+}
+
+/// Summarise a run's per-trial evaluation on the targets of `seed`.
+pub fn read_run_eval(run: &RunDir, seed: u64) -> Result<EvalSummary> {
+    let path = run.trial_eval(seed);
+    EvalSummary::of(&read_trials_csv(&path)?)
+        .ok_or_else(|| Error::InvalidInput(format!("{}: holds no trials", path.display())))
 }

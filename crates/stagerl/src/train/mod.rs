@@ -28,19 +28,18 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use crate::agent::{self, Agent, UpdateStats};
+use crate::agent::{self, Agent, AgentConfig, UpdateStats};
 use crate::checkpoint::Checkpoint;
 use crate::config::Config;
-use crate::env::{EnvState, ReachEnv};
-use crate::log::{EpisodeCsv, EpisodeRecord, EventWriter};
+use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
+use crate::log::csv::{parse_line, push_row, CsvRow};
+use crate::log::{EpisodeCsv, EpisodeRecord, EvalPoint, EventWriter};
 use crate::replay::{Batch, ReplayBuffer};
 use crate::rng::Rng;
 use crate::{Error, Result};
 
-pub use eval::{evaluate, EvalSummary, TrialRecord};
-
-/// The largest evaluation asked for at once (its per-trial records are kept in memory).
-pub const MAX_EVAL_TRIALS: u32 = 10_000_000;
+pub use crate::rundir::RunDir;
+pub use eval::{evaluate, evaluate_run, EvalSummary, RunEval, TrialRecord, MAX_EVAL_TRIALS};
 
 /// Training settings (the `[train]` section).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -128,50 +127,6 @@ pub fn config_hash(cfg: &Config) -> String {
     format!("{h:016x}")
 }
 
-/// Paths inside a run directory.
-pub struct RunDir {
-    pub root: PathBuf,
-}
-
-impl RunDir {
-    pub fn new(root: &Path) -> RunDir {
-        RunDir { root: root.to_path_buf() }
-    }
-    pub fn config(&self) -> PathBuf {
-        self.root.join("config.toml")
-    }
-    pub fn episodes(&self) -> PathBuf {
-        self.root.join("episodes.csv")
-    }
-    pub fn eval(&self) -> PathBuf {
-        self.root.join("eval.csv")
-    }
-    pub fn tb(&self) -> PathBuf {
-        self.root.join("tb")
-    }
-    pub fn checkpoints(&self) -> PathBuf {
-        self.root.join("checkpoints")
-    }
-    pub fn latest(&self) -> PathBuf {
-        self.checkpoints().join("latest.safetensors")
-    }
-    pub fn final_checkpoint(&self) -> PathBuf {
-        self.checkpoints().join("final.safetensors")
-    }
-    /// The agent of the best periodic evaluation (success rate, then mean reward).
-    pub fn best(&self) -> PathBuf {
-        self.checkpoints().join("best.safetensors")
-    }
-    /// The checkpoint a run is evaluated from: best, else final, else latest.
-    pub fn best_available_checkpoint(&self) -> Option<PathBuf> {
-        [self.best(), self.final_checkpoint(), self.latest()].into_iter().find(|p| p.exists())
-    }
-    /// Read the run's resolved config.
-    pub fn load_config(&self) -> Result<Config> {
-        Config::load(&self.config())
-    }
-}
-
 /// Build the agent a config describes for `env`, seeded by the run's seed.
 pub fn build_agent(cfg: &Config, env: &ReachEnv) -> Result<Box<dyn Agent>> {
     agent::build(&cfg.agent, env.obs_dim(), env.act_dim(), Rng::derived(cfg.train.seed, 3).next_u64())
@@ -239,9 +194,6 @@ struct Trainer {
     eval_csv: String,
 }
 
-/// The header of a run's `eval.csv`.
-pub const EVAL_HEADER: &str = "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m";
-
 impl Trainer {
     /// A fresh run.
     fn new(cfg: &Config, dir: RunDir) -> Result<Trainer> {
@@ -274,7 +226,7 @@ impl Trainer {
             env,
             agent,
             state,
-            eval_csv: format!("{EVAL_HEADER}\n"),
+            eval_csv: format!("{}\n", EvalPoint::HEADER),
         })
     }
 
@@ -351,12 +303,12 @@ impl Trainer {
         let mut lines = text.lines();
         let mut out = String::new();
         match lines.next() {
-            Some(h) if h == EpisodeRecord::HEADER => out.push_str(h),
+            Some(h) if h == <EpisodeRecord as CsvRow>::HEADER => out.push_str(h),
             _ => return Err(Error::InvalidInput(format!("{}: not an episodes.csv", path.display()))),
         }
         out.push('\n');
         let rows: Vec<&str> = lines.take(keep).collect();
-        if rows.len() < keep || rows.iter().any(|r| EpisodeRecord::from_csv(r).is_err()) {
+        if rows.len() < keep || rows.iter().any(|r| parse_line::<EpisodeRecord>(r, &path).is_err()) {
             return Err(Error::InvalidInput(format!(
                 "{}: holds fewer complete rows than the checkpoint's {keep} episodes",
                 path.display()
@@ -370,189 +322,184 @@ impl Trainer {
         crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())
     }
 
-    fn check_loss(&self, what: &str, v: Option<f64>) -> Result<()> {
-        match v {
-            Some(v) if !v.is_finite() => Err(Error::NumericalFault(format!(
-                "{what} = {v} at episode {}, step {} (update {}); the last good checkpoint is left in place",
-                self.state.episode + 1,
-                self.env.steps(),
-                self.state.updates
-            ))),
-            _ => Ok(()),
-        }
-    }
-
     /// Train until `train.episodes` episodes are done or `stop` is set.
     fn run(
         &mut self,
         opts: &TrainOptions<'_>,
         on_episode: &mut dyn FnMut(&Progress<'_>),
     ) -> Result<TrainSummary> {
-        let cfg = self.cfg.clone();
-        for d in [self.dir.root.clone(), self.dir.tb(), self.dir.checkpoints()] {
-            std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
-        }
-        let mut csv = if self.state.episode == 0 && !self.state.in_episode {
-            EpisodeCsv::create(&self.dir.episodes())?
-        } else {
-            EpisodeCsv::append(&self.dir.episodes())?
-        };
-        let mut tb = EventWriter::create(&self.dir.tb())?;
-        let start = Instant::now();
-        let wall0 = self.state.wall_s;
-        let (od, ad) = (self.env.obs_dim(), self.env.act_dim());
-        let mut obs = vec![0.0f32; od];
-        let mut action = vec![0.0f32; ad];
-        let mut last_stats: Option<UpdateStats> = None;
+        let mut logs = self.open_logs()?;
+        let (start, wall0) = (Instant::now(), self.state.wall_s);
+        let wall = || wall0 + start.elapsed().as_secs_f64();
         let stop_requested = || opts.stop.is_some_and(|s| s.load(Ordering::SeqCst));
-        let interrupted = |t: &mut Trainer, wall: f64| -> Error {
-            t.state.wall_s = wall;
-            match t.save_latest() {
-                Ok(()) => Error::Interrupted { episode: t.state.episode, checkpoint: t.dir.latest() },
-                Err(e) => e,
-            }
-        };
-
-        while self.state.episode < cfg.train.episodes {
-            if self.state.in_episode {
-                obs.copy_from_slice(self.env.observation());
-            } else {
-                obs.copy_from_slice(self.env.reset());
-                self.agent.begin_episode();
-                self.state.episode_reward = 0.0;
-                self.state.in_episode = true;
-            }
-            let step = loop {
-                if self.state.env_steps < cfg.agent.learning_starts {
-                    for a in action.iter_mut() {
-                        *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;
-                    }
-                } else {
-                    self.agent.act(&obs, &mut action);
-                    if let Some(i) = action.iter().position(|a| !a.is_finite()) {
-                        return Err(Error::NumericalFault(format!(
-                            "the actor's action[{i}] = {} at episode {}, step {} (update {}); \
-                             the last good checkpoint is left in place",
-                            action[i],
-                            self.state.episode + 1,
-                            self.env.steps() + 1,
-                            self.state.updates
-                        )));
-                    }
-                }
-                let s = self.env.step(&action)?;
-                self.state.episode_reward += s.total();
-                self.buffer.push(&obs, &action, s.total(), self.env.observation(), s.terminated);
-                obs.copy_from_slice(self.env.observation());
-                self.state.env_steps += 1;
-                if self.state.env_steps >= cfg.agent.learning_starts {
-                    for _ in 0..cfg.agent.updates_per_step {
-                        self.buffer.sample_into(&mut self.state.replay_rng, &mut self.batch);
-                        let stats = self.agent.update(&self.batch);
-                        self.state.updates += 1;
-                        self.check_loss("critic loss", Some(stats.critic_loss))?;
-                        self.check_loss("actor loss", stats.actor_loss)?;
-                        last_stats = Some(stats);
-                    }
-                }
-                if s.done() {
-                    break s;
-                }
-                if stop_requested() {
-                    return Err(interrupted(self, wall0 + start.elapsed().as_secs_f64()));
-                }
+        let mut scratch = Scratch::new(&self.env);
+        let mut last_stats: Option<UpdateStats> = None;
+        let episodes = self.cfg.train.episodes;
+        while self.state.episode < episodes {
+            let Some(last) = self.collect_episode(&mut scratch, &mut last_stats, &stop_requested)? else {
+                return Err(self.interrupted(wall()));
             };
-            if let Some(fault) = self.agent.first_non_finite() {
-                return Err(Error::NumericalFault(format!(
-                    "{fault} at episode {}, step {}; the last good checkpoint is left in place",
-                    self.state.episode + 1,
-                    self.env.steps()
-                )));
+            let record = self.end_episode(&last, wall(), &mut logs, last_stats.as_ref())?;
+            let eval = self.evaluate_and_keep_best(&mut logs.tb)?;
+            self.checkpoint(&record)?;
+            on_episode(&Progress { record: &record, stats: last_stats, eval: eval.as_ref(), episodes });
+            if record.episode % 50 == 0 {
+                logs.tb.flush()?;
             }
-            self.state.in_episode = false;
-            self.state.episode += 1;
-            let episode = self.state.episode;
-            let record = EpisodeRecord {
-                episode,
-                reward: self.state.episode_reward,
-                steps: self.env.steps(),
-                success: step.terminated,
-                final_distance_m: step.terms.distance,
-                env_steps: self.state.env_steps,
-                wall_s: wall0 + start.elapsed().as_secs_f64(),
-            };
-            csv.write(&record)?;
-            let ep = episode as i64;
-            tb.scalar("train/episode_reward", ep, record.reward)?;
-            tb.scalar("train/steps", ep, f64::from(record.steps))?;
-            tb.scalar("train/success", ep, f64::from(u8::from(record.success)))?;
-            tb.scalar("train/final_distance_m", ep, record.final_distance_m)?;
-            if let Some(st) = &last_stats {
-                tb.scalar("loss/critic", ep, st.critic_loss)?;
-                for (tag, v) in
-                    [("loss/actor", st.actor_loss), ("sac/alpha", st.alpha), ("sac/entropy", st.entropy)]
-                {
-                    if let Some(v) = v {
-                        tb.scalar(tag, ep, v)?;
-                    }
-                }
-            }
-            let every = cfg.train.eval_every_episodes;
-            let eval = if every > 0 && (episode % every == 0 || episode == cfg.train.episodes) {
-                let (summary, _) = evaluate(
-                    self.agent.as_mut(),
-                    &mut self.eval_env,
-                    cfg.train.eval_trials,
-                    cfg.train.eval_seed,
-                )?;
-                self.eval_csv.push_str(&format!(
-                    "{episode},{},{},{},{},{}\n",
-                    self.state.env_steps,
-                    summary.success_rate,
-                    summary.mean_reward,
-                    summary.mean_steps.map(|s| s.to_string()).unwrap_or_default(),
-                    summary.median_final_distance_m
-                ));
-                crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
-                tb.scalar("eval/success_rate", ep, summary.success_rate)?;
-                tb.scalar("eval/mean_reward", ep, summary.mean_reward)?;
-                tb.scalar("eval/median_final_distance_m", ep, summary.median_final_distance_m)?;
-                let score = (summary.success_rate, summary.mean_reward);
-                if self.state.best_eval.is_none_or(|best| score > best) {
-                    self.state.best_eval = Some(score);
-                    let mut ck = self.checkpoint_base();
-                    ck.put_json("eval_success_rate", &summary.success_rate);
-                    ck.put_json("eval_mean_reward", &summary.mean_reward);
-                    ck.save(&self.dir.best())?;
-                }
-                Some(summary)
-            } else {
-                None
-            };
-            let k = cfg.train.checkpoint_every_episodes;
-            if k > 0 && episode % k == 0 && episode < cfg.train.episodes {
-                self.state.wall_s = record.wall_s;
-                self.save_latest()?;
-            }
-            on_episode(&Progress {
-                record: &record,
-                stats: last_stats,
-                eval: eval.as_ref(),
-                episodes: cfg.train.episodes,
-            });
-            if episode % 50 == 0 {
-                tb.flush()?;
-            }
-            if stop_requested() && episode < cfg.train.episodes {
-                return Err(interrupted(self, record.wall_s));
+            if stop_requested() && record.episode < episodes {
+                return Err(self.interrupted(record.wall_s));
             }
         }
-        tb.flush()?;
-        self.state.wall_s = wall0 + start.elapsed().as_secs_f64();
+        logs.tb.flush()?;
+        self.state.wall_s = wall();
         self.state.finished = true;
         self.checkpoint_base().save(&self.dir.final_checkpoint())?;
         self.save_latest()?;
         Ok(self.summary())
+    }
+
+    /// Create the run's directories and open its logs (`episodes.csv` continued on a resume).
+    fn open_logs(&self) -> Result<Logs> {
+        for d in [self.dir.root.clone(), self.dir.tb(), self.dir.checkpoints()] {
+            std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
+        }
+        let episodes = if self.state.episode == 0 && !self.state.in_episode {
+            EpisodeCsv::create(&self.dir.episodes())?
+        } else {
+            EpisodeCsv::append(&self.dir.episodes())?
+        };
+        Ok(Logs { episodes, tb: EventWriter::create(&self.dir.tb())? })
+    }
+
+    /// Save the run on a stop request; the error to return.
+    fn interrupted(&mut self, wall_s: f64) -> Error {
+        self.state.wall_s = wall_s;
+        match self.save_latest() {
+            Ok(()) => Error::Interrupted { episode: self.state.episode, checkpoint: self.dir.latest() },
+            Err(e) => e,
+        }
+    }
+
+    /// Collect a step at a time until the episode under way (or a new one) ends: the eq. 16
+    /// rollout of the exploring agent, storing every transition and updating after each step.
+    /// `None` when a stop request left it unfinished.
+    fn collect_episode(
+        &mut self,
+        scratch: &mut Scratch,
+        last_stats: &mut Option<UpdateStats>,
+        stop_requested: &dyn Fn() -> bool,
+    ) -> Result<Option<Step>> {
+        if !self.state.in_episode {
+            self.env.reset();
+            self.agent.begin_episode();
+            self.state.episode_reward = 0.0;
+            self.state.in_episode = true;
+        }
+        let mut collector = Collector {
+            agent: self.agent.as_mut(),
+            buffer: &mut self.buffer,
+            batch: &mut self.batch,
+            state: &mut self.state,
+            cfg: &self.cfg.agent,
+            last_stats,
+            stop_requested,
+        };
+        match rollout(&mut self.env, scratch, &mut collector)? {
+            Outcome::Finished { last, .. } => Ok(Some(last)),
+            Outcome::Stopped => Ok(None),
+        }
+    }
+
+    /// End an episode: check the networks, count it, write its row and its TensorBoard scalars.
+    fn end_episode(
+        &mut self,
+        last: &Step,
+        wall_s: f64,
+        logs: &mut Logs,
+        stats: Option<&UpdateStats>,
+    ) -> Result<EpisodeRecord> {
+        if let Some(fault) = self.agent.first_non_finite() {
+            return Err(Error::NumericalFault(format!(
+                "{fault} at episode {}, step {}; the last good checkpoint is left in place",
+                self.state.episode + 1,
+                self.env.steps()
+            )));
+        }
+        self.state.in_episode = false;
+        self.state.episode += 1;
+        let record = EpisodeRecord {
+            episode: self.state.episode,
+            reward: self.state.episode_reward,
+            steps: self.env.steps(),
+            success: last.terminated,
+            final_distance_m: last.terms.distance,
+            env_steps: self.state.env_steps,
+            wall_s,
+        };
+        logs.episodes.write(&record)?;
+        let (ep, tb) = (record.episode as i64, &mut logs.tb);
+        tb.scalar("train/episode_reward", ep, record.reward)?;
+        tb.scalar("train/steps", ep, f64::from(record.steps))?;
+        tb.scalar("train/success", ep, f64::from(u8::from(record.success)))?;
+        tb.scalar("train/final_distance_m", ep, record.final_distance_m)?;
+        if let Some(st) = stats {
+            tb.scalar("loss/critic", ep, st.critic_loss)?;
+            for (tag, v) in
+                [("loss/actor", st.actor_loss), ("sac/alpha", st.alpha), ("sac/entropy", st.entropy)]
+            {
+                if let Some(v) = v {
+                    tb.scalar(tag, ep, v)?;
+                }
+            }
+        }
+        Ok(record)
+    }
+
+    /// At an evaluation point: evaluate the deterministic policy on the `eval_seed` targets,
+    /// append the row to `eval.csv` and keep the agent as `best.safetensors` when it is the best
+    /// so far (success rate, then mean reward).
+    fn evaluate_and_keep_best(&mut self, tb: &mut EventWriter) -> Result<Option<EvalSummary>> {
+        let (train, episode) = (&self.cfg.train, self.state.episode);
+        let every = train.eval_every_episodes;
+        if every == 0 || (episode % every != 0 && episode != train.episodes) {
+            return Ok(None);
+        }
+        let (summary, _) =
+            evaluate(self.agent.as_mut(), &mut self.eval_env, train.eval_trials, train.eval_seed)?;
+        let point = EvalPoint {
+            episode,
+            env_steps: self.state.env_steps,
+            success_rate: summary.success_rate,
+            mean_reward: summary.mean_reward,
+            mean_steps: summary.mean_steps,
+            median_final_distance_m: summary.median_final_distance_m,
+        };
+        push_row(&mut self.eval_csv, &point);
+        crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
+        let ep = episode as i64;
+        tb.scalar("eval/success_rate", ep, summary.success_rate)?;
+        tb.scalar("eval/mean_reward", ep, summary.mean_reward)?;
+        tb.scalar("eval/median_final_distance_m", ep, summary.median_final_distance_m)?;
+        let score = (summary.success_rate, summary.mean_reward);
+        if self.state.best_eval.is_none_or(|best| score > best) {
+            self.state.best_eval = Some(score);
+            let mut ck = self.checkpoint_base();
+            ck.put_json("eval_success_rate", &summary.success_rate);
+            ck.put_json("eval_mean_reward", &summary.mean_reward);
+            ck.save(&self.dir.best())?;
+        }
+        Ok(Some(summary))
+    }
+
+    /// Every `checkpoint_every_episodes` episodes (but the last, which [`Trainer::run`] saves
+    /// with the final agent): the full state to `latest.safetensors`.
+    fn checkpoint(&mut self, record: &EpisodeRecord) -> Result<()> {
+        let k = self.cfg.train.checkpoint_every_episodes;
+        if k > 0 && record.episode % k == 0 && record.episode < self.cfg.train.episodes {
+            self.state.wall_s = record.wall_s;
+            self.save_latest()?;
+        }
+        Ok(())
     }
 
     fn summary(&self) -> TrainSummary {
@@ -563,6 +510,79 @@ impl Trainer {
             wall_s: self.state.wall_s,
             final_checkpoint: self.dir.final_checkpoint(),
         }
+    }
+}
+
+/// The open logs of a training session.
+struct Logs {
+    episodes: EpisodeCsv,
+    tb: EventWriter,
+}
+
+/// Algorithm 1 at each step of a training episode: explore (uniform actions before
+/// `learning_starts`, then the agent's exploring policy), store the transition, update.
+struct Collector<'a> {
+    agent: &'a mut dyn Agent,
+    buffer: &'a mut ReplayBuffer,
+    batch: &'a mut Batch,
+    state: &'a mut LoopState,
+    cfg: &'a AgentConfig,
+    last_stats: &'a mut Option<UpdateStats>,
+    stop_requested: &'a dyn Fn() -> bool,
+}
+
+impl Collector<'_> {
+    fn check_loss(&self, what: &str, v: Option<f64>, env: &ReachEnv) -> Result<()> {
+        match v {
+            Some(v) if !v.is_finite() => Err(Error::NumericalFault(format!(
+                "{what} = {v} at episode {}, step {} (update {}); the last good checkpoint is left in place",
+                self.state.episode + 1,
+                env.steps(),
+                self.state.updates
+            ))),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Driver for Collector<'_> {
+    fn act(&mut self, env: &ReachEnv, action: &mut [f32]) -> Result<()> {
+        if self.state.env_steps < self.cfg.learning_starts {
+            for a in action.iter_mut() {
+                *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;
+            }
+            return Ok(());
+        }
+        self.agent.act(env.observation(), action);
+        match action.iter().position(|a| !a.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(Error::NumericalFault(format!(
+                "the actor's action[{i}] = {} at episode {}, step {} (update {}); \
+                 the last good checkpoint is left in place",
+                action[i],
+                self.state.episode + 1,
+                env.steps() + 1,
+                self.state.updates
+            ))),
+        }
+    }
+
+    fn on_step(&mut self, t: &Transition<'_>) -> Result<Flow> {
+        let reward = t.step.total();
+        self.state.episode_reward += reward;
+        self.buffer.push(t.obs, t.action, reward, t.env.observation(), t.step.terminated);
+        self.state.env_steps += 1;
+        if self.state.env_steps >= self.cfg.learning_starts {
+            for _ in 0..self.cfg.updates_per_step {
+                self.buffer.sample_into(&mut self.state.replay_rng, self.batch);
+                let stats = self.agent.update(self.batch);
+                self.state.updates += 1;
+                self.check_loss("critic loss", Some(stats.critic_loss), t.env)?;
+                self.check_loss("actor loss", stats.actor_loss, t.env)?;
+                *self.last_stats = Some(stats);
+            }
+        }
+        Ok(if (self.stop_requested)() { Flow::Stop } else { Flow::Continue })
     }
 }
 
