@@ -36,6 +36,7 @@ pub mod reward;
 pub mod rng;
 pub mod robot;
 pub mod rundir;
+pub mod schedule;
 pub mod train;
 
 pub use error::{Error, Result};

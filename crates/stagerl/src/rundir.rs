@@ -6,8 +6,8 @@
 //! - `episodes.csv`: one row per episode ([`crate::log::EpisodeRecord`]);
 //! - `eval.csv`: the periodic evaluations ([`crate::log::EvalPoint`]);
 //! - `eval-seed<N>.csv`: per-trial evaluations of the run's best checkpoint on the targets of
-//!   seed `N` ([`crate::train::TrialRecord`]), written by `stagerl train`, `stagerl eval` and
-//!   `stagerl reproduce` (see [`crate::train::eval::evaluate_run`]);
+//!   seed `N` ([`crate::log::TrialRecord`]), written by `stagerl train`, `stagerl eval` and
+//!   `stagerl reproduce` (by `train::evaluate_run`);
 //! - `tb/`: TensorBoard event files with the same scalars and the losses;
 //! - `checkpoints/latest.safetensors`: everything the run needs to continue (networks, targets,
 //!   optimiser moments, the replay buffer, every random state, the counters, where the logs

@@ -10,6 +10,7 @@
 //! [`ReachEnv::step`] allocates nothing.
 
 pub mod rollout;
+pub mod task;
 mod vec;
 
 pub use rollout::{rollout, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
@@ -19,11 +20,11 @@ use nalgebra::Vector3;
 use std::f64::consts::PI;
 use std::sync::Arc;
 
-use crate::config::{Config, ObservationKind, ResolvedTask};
 use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::rng::Rng;
 use crate::robot::{Chain, Pose};
 use crate::{Error, Result};
+pub use task::{ObservationKind, ResolvedTask, TaskConfig};
 
 /// The outcome of one step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -114,14 +115,6 @@ impl ReachEnv {
         };
         env.write_observation();
         Ok(env)
-    }
-
-    /// Build the arm, resolve the task and create the environment from a whole config.
-    pub fn from_config(cfg: &Config, seed: u64) -> Result<ReachEnv> {
-        cfg.validate()?;
-        let chain = Arc::new(cfg.robot.load()?);
-        let task = cfg.task.resolve(&chain)?;
-        ReachEnv::new(chain, task, cfg.reward.clone(), seed)
     }
 
     /// Start a new episode: home pose, new target from the environment's random stream.
@@ -323,12 +316,19 @@ impl ReachEnv {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::reward::RewardFunction;
 
+    /// The default task on the UR5 with `reward`.
+    pub(crate) fn ur5_env(reward: RewardConfig, seed: u64) -> ReachEnv {
+        let chain = Arc::new(Chain::ur5());
+        let task = TaskConfig::default().resolve(&chain).unwrap();
+        ReachEnv::new(chain, task, reward, seed).unwrap()
+    }
+
     fn env(seed: u64) -> ReachEnv {
-        ReachEnv::from_config(&Config::default(), seed).unwrap()
+        ur5_env(RewardConfig::default(), seed)
     }
 
     #[test]
@@ -337,7 +337,7 @@ mod tests {
         let mut dists = Vec::new();
         for _ in 0..300 {
             e.reset();
-            assert_eq!(e.joint_positions(), &crate::config::UR5_HOME_POSE_RAD);
+            assert_eq!(e.joint_positions(), &task::UR5_HOME_POSE_RAD);
             assert!(e.target().z > 0.05);
             dists.push(e.distance());
         }
@@ -493,11 +493,7 @@ mod tests {
     #[test]
     fn reward_function_selects_the_reward() {
         for f in RewardFunction::ALL {
-            let cfg = Config {
-                reward: RewardConfig { function: f, ..RewardConfig::default() },
-                ..Config::default()
-            };
-            let mut e = ReachEnv::from_config(&cfg, 8).unwrap();
+            let mut e = ur5_env(RewardConfig { function: f, ..RewardConfig::default() }, 8);
             e.reset();
             let s = e.step(&[0.1; 6]).unwrap();
             let t = s.terms;

@@ -2,8 +2,8 @@
 
 use std::sync::Arc;
 
+use super::ResolvedTask;
 use super::{ReachEnv, Step};
-use crate::config::{Config, ResolvedTask};
 use crate::reward::RewardConfig;
 use crate::rng::Rng;
 use crate::robot::Chain;
@@ -59,14 +59,6 @@ impl VecEnv {
             v.obs[i * d..(i + 1) * d].copy_from_slice(v.envs[i].observation());
         }
         Ok(v)
-    }
-
-    /// From a whole config.
-    pub fn from_config(n: usize, cfg: &Config, seed: u64) -> Result<VecEnv> {
-        cfg.validate()?;
-        let chain = Arc::new(cfg.robot.load()?);
-        let task = cfg.task.resolve(&chain)?;
-        VecEnv::new(n, chain, task, cfg.reward.clone(), seed)
     }
 
     /// Step every environment with `actions` (`len() * act_dim()` values, row-major).
@@ -150,14 +142,19 @@ impl VecEnv {
 mod tests {
     use super::*;
 
+    fn ur5_vec(n: usize, seed: u64) -> Result<VecEnv> {
+        let chain = Arc::new(Chain::ur5());
+        let task = super::super::TaskConfig::default().resolve(&chain).unwrap();
+        VecEnv::new(n, chain, task, RewardConfig::default(), seed)
+    }
+
     #[test]
     fn matches_independent_envs_and_autoresets() {
-        let cfg = Config::default();
         let n = 3;
-        let mut v = VecEnv::from_config(n, &cfg, 5).unwrap();
+        let mut v = ur5_vec(n, 5).unwrap();
         let mut singles: Vec<ReachEnv> = (0..n)
             .map(|i| {
-                let mut e = ReachEnv::from_config(&cfg, 0).unwrap();
+                let mut e = crate::env::tests::ur5_env(RewardConfig::default(), 0);
                 e.set_rng(Rng::derived(5, i as u64));
                 e.reset();
                 e
@@ -188,13 +185,13 @@ mod tests {
 
     #[test]
     fn rejects_bad_actions_before_stepping_any_env() {
-        let mut v = VecEnv::from_config(2, &Config::default(), 1).unwrap();
+        let mut v = ur5_vec(2, 1).unwrap();
         assert!(v.step(&[0.0; 11]).is_err());
         let mut a = [0.0f32; 12];
         a[8] = f32::NAN;
         let e = v.step(&a).unwrap_err().to_string();
         assert!(e.contains("environment 1, joint 2"), "{e}");
         assert!(v.envs().iter().all(|e| e.steps() == 0));
-        assert!(VecEnv::from_config(0, &Config::default(), 1).is_err());
+        assert!(ur5_vec(0, 1).is_err());
     }
 }

@@ -12,7 +12,32 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use std::path::Path;
 
+use serde::{Deserialize, Serialize};
+
 use crate::{Error, Result};
+
+/// Which arm.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RobotConfig {
+    /// `"ur5"` for the bundled UR5, or a path to a URDF file.
+    pub urdf: String,
+    /// Tip link of the chain; unset takes the URDF's only leaf link.
+    pub tip: Option<String>,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        RobotConfig { urdf: "ur5".into(), tip: None }
+    }
+}
+
+impl RobotConfig {
+    /// Load the configured arm.
+    pub fn load(&self) -> Result<Chain> {
+        Chain::load(&self.urdf, self.tip.as_deref())
+    }
+}
 
 mod kin;
 #[cfg(test)]

@@ -39,62 +39,8 @@ use crate::rng::Rng;
 use crate::{Error, Result};
 
 pub use crate::rundir::RunDir;
-pub use eval::{evaluate, evaluate_run, EvalSummary, RunEval, TrialRecord, MAX_EVAL_TRIALS};
-
-/// Training settings (the `[train]` section).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TrainConfig {
-    /// The run's seed: environment targets, initial weights, exploration, replay sampling.
-    pub seed: u64,
-    /// Training episodes (paper: 10000). Default 5000: DDPG + SAR reaches 99 % by then, SAC + SAR
-    /// by about 1500.
-    pub episodes: u64,
-    /// Evaluate the deterministic policy every this many episodes; 0 disables.
-    pub eval_every_episodes: u64,
-    /// Trials of each periodic evaluation.
-    pub eval_trials: u32,
-    /// Seed of the evaluation targets (the same targets at every evaluation point).
-    pub eval_seed: u64,
-    /// Write `checkpoints/latest.safetensors` every this many episodes; 0 only at the end.
-    pub checkpoint_every_episodes: u64,
-}
-
-impl Default for TrainConfig {
-    fn default() -> Self {
-        TrainConfig {
-            seed: 0,
-            episodes: 5000,
-            eval_every_episodes: 250,
-            eval_trials: 100,
-            eval_seed: 1_000_003,
-            checkpoint_every_episodes: 250,
-        }
-    }
-}
-
-impl TrainConfig {
-    pub fn validate(&self) -> Result<()> {
-        if self.episodes == 0 {
-            return Err(Error::config("train.episodes", 0, "an integer >= 1"));
-        }
-        if self.eval_trials > MAX_EVAL_TRIALS {
-            return Err(Error::config(
-                "train.eval_trials",
-                self.eval_trials,
-                format!("at most {MAX_EVAL_TRIALS}"),
-            ));
-        }
-        if self.eval_every_episodes > 0 && self.eval_trials == 0 {
-            return Err(Error::config(
-                "train.eval_trials",
-                0,
-                "an integer >= 1 (or set train.eval_every_episodes = 0 to disable evaluation)",
-            ));
-        }
-        Ok(())
-    }
-}
+pub use crate::schedule::{TrainConfig, MAX_EVAL_TRIALS};
+pub use eval::{evaluate, evaluate_run, EvalSummary, RunEval, TrialRecord};
 
 /// What the loop reports after each episode.
 pub struct Progress<'a> {
@@ -460,8 +406,7 @@ impl Trainer {
     /// so far (success rate, then mean reward).
     fn evaluate_and_keep_best(&mut self, tb: &mut EventWriter) -> Result<Option<EvalSummary>> {
         let (train, episode) = (&self.cfg.train, self.state.episode);
-        let every = train.eval_every_episodes;
-        if every == 0 || (episode % every != 0 && episode != train.episodes) {
+        if !train.is_eval_point(episode) {
             return Ok(None);
         }
         let (summary, _) =
@@ -494,8 +439,7 @@ impl Trainer {
     /// Every `checkpoint_every_episodes` episodes (but the last, which [`Trainer::run`] saves
     /// with the final agent): the full state to `latest.safetensors`.
     fn checkpoint(&mut self, record: &EpisodeRecord) -> Result<()> {
-        let k = self.cfg.train.checkpoint_every_episodes;
-        if k > 0 && record.episode % k == 0 && record.episode < self.cfg.train.episodes {
+        if self.cfg.train.is_checkpoint_point(record.episode) {
             self.state.wall_s = record.wall_s;
             self.save_latest()?;
         }
