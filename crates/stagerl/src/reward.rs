@@ -235,55 +235,40 @@ pub struct RewardTerms {
     pub total: f64,
 }
 
-/// The terms `stagerl reward` writes and the demo tabulates, in this order (`movement` as
-/// `move`).
-pub const REPORTED_TERMS: [&str; 12] = [
-    "distance",
-    "reached",
-    "position",
-    "direction",
-    "posture",
-    "move",
-    "stride",
-    "alpha1",
-    "alpha2",
-    "reward",
-    "bonus",
-    "total",
-];
-
 impl RewardTerms {
-    /// The values of [`REPORTED_TERMS`], in order (`reached` as 0 or 1).
-    pub fn reported(&self) -> [f64; 12] {
+    /// The terms `stagerl reward` writes and the demo tabulates, named and in that order
+    /// (`movement` as `move`, `reached` as 0 or 1).
+    pub fn reported(&self) -> [(&'static str, f64); 12] {
         let t = self;
         [
-            t.distance,
-            f64::from(u8::from(t.reached)),
-            t.position,
-            t.direction,
-            t.posture,
-            t.movement,
-            t.stride,
-            t.alpha1,
-            t.alpha2,
-            t.reward,
-            t.bonus,
-            t.total,
+            ("distance", t.distance),
+            ("reached", f64::from(u8::from(t.reached))),
+            ("position", t.position),
+            ("direction", t.direction),
+            ("posture", t.posture),
+            ("move", t.movement),
+            ("stride", t.stride),
+            ("alpha1", t.alpha1),
+            ("alpha2", t.alpha2),
+            ("reward", t.reward),
+            ("bonus", t.bonus),
+            ("total", t.total),
         ]
     }
 }
 
-/// [`RewardTerms`] serialised as its [`REPORTED_TERMS`]: an object with those keys in that
-/// order, `reached` a boolean.
+/// [`RewardTerms`] serialised as its [`RewardTerms::reported`] terms: an object with those keys
+/// in that order, `reached` a boolean.
 #[derive(Clone, Copy, Debug)]
 pub struct Reported(pub RewardTerms);
 
 impl Serialize for Reported {
     fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
         use serde::ser::SerializeMap;
-        let mut m = s.serialize_map(Some(REPORTED_TERMS.len()))?;
-        for (key, value) in REPORTED_TERMS.iter().zip(self.0.reported()) {
-            if *key == "reached" {
+        let terms = self.0.reported();
+        let mut m = s.serialize_map(Some(terms.len()))?;
+        for (key, value) in terms {
+            if key == "reached" {
                 m.serialize_entry(key, &self.0.reached)?;
             } else {
                 m.serialize_entry(key, &value)?;

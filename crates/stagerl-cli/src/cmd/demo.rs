@@ -1,7 +1,6 @@
 use anyhow::{Context, Result};
 use stagerl::controller::JacobianController;
 use stagerl::env::{rollout, Flow, Observed, Outcome, Policy, ReachEnv, Scratch, Transition};
-use stagerl::reward::REPORTED_TERMS;
 use stagerl::train::eval::evaluate_with;
 use std::path::PathBuf;
 
@@ -46,18 +45,14 @@ pub fn run(args: Args) -> Result<()> {
             env.distance()
         );
         // The columns: the step, then every reported term but `reached` (D_PT in metres).
-        let names = REPORTED_TERMS.iter().filter(|n| **n != "reached");
-        let header: String =
-            names.map(|n| format!(" {:>9}", if *n == "distance" { "D_PT(m)" } else { n })).collect();
+        let columns =
+            |t: &stagerl::reward::RewardTerms| t.reported().into_iter().filter(|(n, _)| *n != "reached");
+        let header: String = columns(&Default::default())
+            .map(|(n, _)| format!(" {:>9}", if n == "distance" { "D_PT(m)" } else { n }))
+            .collect();
         println!("{:>4}{header}", "step");
         let print_step = |t: &Transition<'_>| {
-            let values = t.step.terms.reported();
-            let row: String = values
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| *i != 1)
-                .map(|(_, v)| format!(" {v:>9.5}"))
-                .collect();
+            let row: String = columns(&t.step.terms).map(|(_, v)| format!(" {v:>9.5}")).collect();
             println!("{:>4}{row}", t.env.steps());
             Ok(Flow::Continue)
         };

@@ -79,6 +79,11 @@ pub fn read_csv<R: CsvRecord>(path: &Path) -> Result<Vec<R>> {
     parse_csv(&text, path)
 }
 
+/// A float field.
+pub fn num(s: &str) -> Option<f64> {
+    s.parse().ok()
+}
+
 /// A `0`/`1` field.
 pub fn parse_bool(s: &str) -> Option<bool> {
     match s {
@@ -176,32 +181,20 @@ impl CsvRow for EpisodeRecord {
     const HEADER: &'static str = "episode,reward,steps,success,final_distance_m,env_steps,wall_s";
 
     fn write_row(&self, out: &mut String) {
-        let _ = write!(
-            out,
-            "{},{},{},{},{},{},{:.3}",
-            self.episode,
-            self.reward,
-            self.steps,
-            u8::from(self.success),
-            self.final_distance_m,
-            self.env_steps,
-            self.wall_s
-        );
+        let EpisodeRecord { episode, reward, steps, success, final_distance_m: d, env_steps, wall_s } = *self;
+        let success = u8::from(success);
+        let _ = write!(out, "{episode},{reward},{steps},{success},{d},{env_steps},{wall_s:.3}");
     }
 }
 
 impl CsvRecord for EpisodeRecord {
     fn parse_row(f: &[&str]) -> Option<EpisodeRecord> {
-        let [episode, reward, steps, success, dist, env_steps, wall] = f else { return None };
-        Some(EpisodeRecord {
-            episode: episode.parse().ok()?,
-            reward: reward.parse().ok()?,
-            steps: steps.parse().ok()?,
-            success: parse_bool(success)?,
-            final_distance_m: dist.parse().ok()?,
-            env_steps: env_steps.parse().ok()?,
-            wall_s: wall.parse().ok()?,
-        })
+        let [episode, reward, steps, success, final_distance_m, env_steps, wall_s] = f else { return None };
+        let (episode, steps, env_steps) =
+            (episode.parse().ok()?, steps.parse().ok()?, env_steps.parse().ok()?);
+        let (reward, final_distance_m, wall_s) = (num(reward)?, num(final_distance_m)?, num(wall_s)?);
+        let success = parse_bool(success)?;
+        Some(EpisodeRecord { episode, reward, steps, success, final_distance_m, env_steps, wall_s })
     }
 }
 
@@ -231,30 +224,27 @@ impl CsvRow for EvalPoint {
         "episode,env_steps,success_rate,mean_reward,mean_steps,median_final_distance_m";
 
     fn write_row(&self, out: &mut String) {
-        let _ = write!(
-            out,
-            "{},{},{},{},{},{}",
-            self.episode,
-            self.env_steps,
-            self.success_rate,
-            self.mean_reward,
-            OptF64(self.mean_steps),
-            self.median_final_distance_m
-        );
+        let EvalPoint {
+            episode,
+            env_steps,
+            success_rate,
+            mean_reward,
+            mean_steps,
+            median_final_distance_m: d,
+        } = *self;
+        let mean_steps = OptF64(mean_steps);
+        let _ = write!(out, "{episode},{env_steps},{success_rate},{mean_reward},{mean_steps},{d}");
     }
 }
 
 impl CsvRecord for EvalPoint {
     fn parse_row(f: &[&str]) -> Option<EvalPoint> {
         let [episode, env_steps, success_rate, mean_reward, mean_steps, median] = f else { return None };
-        Some(EvalPoint {
-            episode: episode.parse().ok()?,
-            env_steps: env_steps.parse().ok()?,
-            success_rate: success_rate.parse().ok()?,
-            mean_reward: mean_reward.parse().ok()?,
-            mean_steps: parse_opt_f64(mean_steps)?,
-            median_final_distance_m: median.parse().ok()?,
-        })
+        let (episode, env_steps) = (episode.parse().ok()?, env_steps.parse().ok()?);
+        let (success_rate, mean_reward, mean_steps) =
+            (num(success_rate)?, num(mean_reward)?, parse_opt_f64(mean_steps)?);
+        let median_final_distance_m = num(median)?;
+        Some(EvalPoint { episode, env_steps, success_rate, mean_reward, mean_steps, median_final_distance_m })
     }
 }
 
@@ -284,34 +274,20 @@ impl CsvRow for TrialRecord {
         "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m";
 
     fn write_row(&self, out: &mut String) {
-        let _ = write!(
-            out,
-            "{},{},{},{},{},{},{},{},{}",
-            self.trial,
-            self.reward,
-            self.steps,
-            u8::from(self.success),
-            self.start_distance_m,
-            self.final_distance_m,
-            self.target[0],
-            self.target[1],
-            self.target[2]
-        );
+        let TrialRecord { trial, reward, steps, success, start_distance_m: d0, final_distance_m: d, target } =
+            *self;
+        let ([x, y, z], success) = (target, u8::from(success));
+        let _ = write!(out, "{trial},{reward},{steps},{success},{d0},{d},{x},{y},{z}");
     }
 }
 
 impl CsvRecord for TrialRecord {
     fn parse_row(f: &[&str]) -> Option<TrialRecord> {
         let [trial, reward, steps, success, start, fin, x, y, z] = f else { return None };
-        Some(TrialRecord {
-            trial: trial.parse().ok()?,
-            reward: reward.parse().ok()?,
-            steps: steps.parse().ok()?,
-            success: parse_bool(success)?,
-            start_distance_m: start.parse().ok()?,
-            final_distance_m: fin.parse().ok()?,
-            target: [x.parse().ok()?, y.parse().ok()?, z.parse().ok()?],
-        })
+        let (trial, steps, success) = (trial.parse().ok()?, steps.parse().ok()?, parse_bool(success)?);
+        let (reward, start_distance_m, final_distance_m) = (num(reward)?, num(start)?, num(fin)?);
+        let target = [num(x)?, num(y)?, num(z)?];
+        Some(TrialRecord { trial, reward, steps, success, start_distance_m, final_distance_m, target })
     }
 }
 
@@ -375,17 +351,7 @@ mod tests {
 
     #[test]
     fn eval_points_round_trip_with_and_without_mean_steps() {
-        let rows = [
-            EvalPoint {
-                episode: 250,
-                env_steps: 12000,
-                success_rate: 0.5,
-                mean_reward: -3.25,
-                mean_steps: None,
-                median_final_distance_m: 0.1,
-            },
-            EvalPoint { mean_steps: Some(7.5), episode: 500, ..rows_0() },
-        ];
+        let rows = [rows_0(), EvalPoint { mean_steps: Some(7.5), episode: 500, ..rows_0() }];
         let text = to_csv(&rows);
         assert_eq!(
             text,

@@ -244,15 +244,9 @@ impl<T: Scalar> Mlp<T> {
         let ws = &mut self.train;
         grow(&mut ws.input, x.len());
         ws.input[..x.len()].copy_from_slice(x);
-        run_forward(
-            &self.layers,
-            self.hidden,
-            self.output,
-            &self.params,
-            &ws.input[..x.len()],
-            batch,
-            &mut ws.acts,
-        );
+        let net =
+            Net { layers: &self.layers, hidden: self.hidden, output: self.output, params: &self.params };
+        net.forward(&ws.input[..x.len()], batch, &mut ws.acts);
         ws.batch = batch;
         ws.ready = true;
         self.output()
@@ -306,12 +300,14 @@ impl<T: Scalar> Mlp<T> {
     /// cache is left untouched. Returns `batch x out`.
     pub fn predict(&mut self, x: &[T], batch: usize) -> &[T] {
         let Mlp { layers, hidden, output, params, infer, .. } = self;
-        predict_impl(layers, *hidden, *output, params, x, batch, infer)
+        Net { layers, hidden: *hidden, output: *output, params }.predict(x, batch, infer)
     }
 
     /// Inference on `x` (`batch x in`) into a caller-owned workspace, so that `&self` suffices.
     pub fn predict_with<'w>(&self, x: &[T], batch: usize, ws: &'w mut Workspace<T>) -> &'w [T] {
-        predict_impl(&self.layers, self.hidden, self.output, &self.params, x, batch, ws)
+        let net =
+            Net { layers: &self.layers, hidden: self.hidden, output: self.output, params: &self.params };
+        net.predict(x, batch, ws)
     }
 
     /// Back-propagation: dL/dz_l = dL/dy_l * f'(z_l); dW_l += dz_l^T x_l; db_l += sum dz_l;
@@ -353,44 +349,41 @@ impl<T: Scalar> Mlp<T> {
     }
 }
 
-/// Forward through every layer, writing layer outputs into `acts` (grown as needed).
-fn run_forward<T: Scalar>(
-    layers: &[Linear],
+/// The layers, activations and parameters a forward pass needs.
+#[derive(Clone, Copy)]
+struct Net<'a, T> {
+    layers: &'a [Linear],
     hidden: Activation,
     output: Activation,
-    params: &[T],
-    x: &[T],
-    batch: usize,
-    acts: &mut [Vec<T>],
-) {
-    let n_layers = layers.len();
-    for (l, layer) in layers.iter().enumerate() {
-        let (done, rest) = acts.split_at_mut(l);
-        let input: &[T] = if l == 0 { x } else { &done[l - 1] };
-        let out = &mut rest[0];
-        let n = batch * layer.out_features;
-        grow(out, n);
-        layer.forward_no_bias(params, input, batch, out);
-        let act = if l + 1 == n_layers { output } else { hidden };
-        act.add_bias_apply(&mut out[..n], &params[layer.bias_range()]);
-    }
+    params: &'a [T],
 }
 
-fn predict_impl<'w, T: Scalar>(
-    layers: &[Linear],
-    hidden: Activation,
-    output: Activation,
-    params: &[T],
-    x: &[T],
-    batch: usize,
-    ws: &'w mut Workspace<T>,
-) -> &'w [T] {
-    assert_eq!(x.len(), batch * layers[0].in_features, "Mlp::predict: input size");
-    if ws.acts.len() != layers.len() {
-        ws.acts.resize(layers.len(), Vec::new());
+impl<T: Scalar> Net<'_, T> {
+    /// Forward through every layer, writing layer outputs into `acts` (grown as needed).
+    fn forward(self, x: &[T], batch: usize, acts: &mut [Vec<T>]) {
+        let n_layers = self.layers.len();
+        for (l, layer) in self.layers.iter().enumerate() {
+            let (done, rest) = acts.split_at_mut(l);
+            let input: &[T] = if l == 0 { x } else { &done[l - 1] };
+            let out = &mut rest[0];
+            let n = batch * layer.out_features;
+            grow(out, n);
+            layer.forward_no_bias(self.params, input, batch, out);
+            let act = if l + 1 == n_layers { self.output } else { self.hidden };
+            act.add_bias_apply(&mut out[..n], &self.params[layer.bias_range()]);
+        }
     }
-    run_forward(layers, hidden, output, params, x, batch, &mut ws.acts);
-    ws.batch = batch;
-    let n = batch * layers[layers.len() - 1].out_features;
-    &ws.acts[layers.len() - 1][..n]
+
+    /// Inference into `ws`; returns `batch x out`.
+    fn predict<'w>(self, x: &[T], batch: usize, ws: &'w mut Workspace<T>) -> &'w [T] {
+        let layers = self.layers;
+        assert_eq!(x.len(), batch * layers[0].in_features, "Mlp::predict: input size");
+        if ws.acts.len() != layers.len() {
+            ws.acts.resize(layers.len(), Vec::new());
+        }
+        self.forward(x, batch, &mut ws.acts);
+        ws.batch = batch;
+        let n = batch * layers[layers.len() - 1].out_features;
+        &ws.acts[layers.len() - 1][..n]
+    }
 }

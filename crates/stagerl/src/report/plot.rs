@@ -9,6 +9,7 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
+use super::runs::{EvalPoint, RunData};
 use super::table::{algo_title, reward_title, Group, GroupSummary, ALGO_ORDER};
 use super::trajectory::Rollouts;
 use crate::agent::Algo;
@@ -328,6 +329,23 @@ fn thin(curve: Vec<(f64, f64)>, max_points: usize) -> Vec<(f64, f64)> {
     out
 }
 
+/// One series per primary reward function of algorithm `a`: `curve` of each run, the mean and
+/// the min-max band over the runs.
+fn algo_series(
+    groups: &[Group],
+    a: Algo,
+    curve: impl Fn(&RunData) -> Vec<(f64, f64)>,
+) -> Vec<(RewardFunction, String, Band)> {
+    groups
+        .iter()
+        .filter(|g| g.primary && g.algo == a && !g.runs.is_empty())
+        .map(|g| {
+            let curves: Vec<Vec<(f64, f64)>> = g.runs.iter().map(&curve).collect();
+            (g.reward, series_label(g), Band::from_curves(&curves))
+        })
+        .collect()
+}
+
 /// Figure 7: training episode reward and steps against the episode, moving average over
 /// `window` episodes, mean over seeds with the min-max band; one column per algorithm, one
 /// colour per reward function (primary configurations only), a dashed line at the mean E_start
@@ -343,25 +361,17 @@ pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize) -> C
             .enumerate()
     {
         for &a in &algos {
-            let mut series = Vec::new();
-            for g in groups.iter().filter(|g| g.primary && g.algo == a && !g.runs.is_empty()) {
-                let curves: Vec<Vec<(f64, f64)>> = g
-                    .runs
+            let series = algo_series(groups, a, |r| {
+                // Non-finite rewards (reported in the table) would poison the running sum.
+                let (xs, ys): (Vec<f64>, Vec<f64>) = r
+                    .episodes
                     .iter()
-                    .map(|r| {
-                        // Non-finite rewards (reported in the table) would poison the running sum.
-                        let (xs, ys): (Vec<f64>, Vec<f64>) = r
-                            .episodes
-                            .iter()
-                            .map(|e| (e.episode as f64, if row == 0 { e.reward } else { f64::from(e.steps) }))
-                            .filter(|(_, y)| y.is_finite())
-                            .unzip();
-                        let sm = trailing_moving_average(&ys, window);
-                        thin(xs.into_iter().zip(sm).collect(), 1200)
-                    })
-                    .collect();
-                series.push((g.reward, series_label(g), Band::from_curves(&curves)));
-            }
+                    .map(|e| (e.episode as f64, if row == 0 { e.reward } else { f64::from(e.steps) }))
+                    .filter(|(_, y)| y.is_finite())
+                    .unzip();
+                let sm = trailing_moving_average(&ys, window);
+                thin(xs.into_iter().zip(sm).collect(), 1200)
+            });
             let marks = summaries
                 .iter()
                 .filter(|s| s.primary && s.algo == a)
@@ -404,30 +414,15 @@ pub fn figure8(groups: &[Group]) -> CurveFigure {
     ];
     for (row, (what, unit)) in rows.into_iter().enumerate() {
         for &a in &algos {
-            let mut series = Vec::new();
-            for g in groups.iter().filter(|g| g.primary && g.algo == a && !g.runs.is_empty()) {
-                let curves: Vec<Vec<(f64, f64)>> = g
-                    .runs
-                    .iter()
-                    .map(|r| {
-                        r.eval_points
-                            .iter()
-                            .filter_map(|p| {
-                                let y = match row {
-                                    0 => Some(100.0 * p.success_rate),
-                                    1 => Some(p.mean_reward),
-                                    _ => p.mean_steps,
-                                };
-                                y.map(|y| (p.episode as f64, y))
-                            })
-                            .collect()
-                    })
-                    .collect();
-                let band = Band::from_curves(&curves);
-                if !band.x.is_empty() {
-                    series.push((g.reward, series_label(g), band));
-                }
-            }
+            let mut series = algo_series(groups, a, |r| {
+                let y = |p: &EvalPoint| match row {
+                    0 => Some(100.0 * p.success_rate),
+                    1 => Some(p.mean_reward),
+                    _ => p.mean_steps,
+                };
+                r.eval_points.iter().filter_map(|p| y(p).map(|y| (p.episode as f64, y))).collect()
+            });
+            series.retain(|(_, _, band)| !band.x.is_empty());
             let range = match row {
                 0 => Some((0.0, 102.0)),
                 1 => None,
