@@ -208,54 +208,49 @@ fn seeds_list(seeds: &[u64]) -> String {
     seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", ")
 }
 
+/// One run's indicators (problems met become its notes).
+fn summarize_run(run: &RunData, criterion: &ConvergenceCriterion) -> RunSummary {
+    let rewards: Vec<f64> = run.episodes.iter().map(|r| r.reward).collect();
+    let mut notes = run.notes.clone();
+    let convergence = metrics::convergence(&rewards, criterion).unwrap_or_else(|e| {
+        notes.push(format!("episodes.csv: {e}"));
+        Convergence {
+            outcome: metrics::ConvergenceOutcome::InvalidData,
+            e_start: None,
+            tail_mean: f64::NAN,
+            tail_std: f64::NAN,
+            band: f64::NAN,
+            first_window_mean: f64::NAN,
+        }
+    });
+    let train = convergence
+        .e_start
+        .and_then(|i| run.episodes.get(i as usize - 1))
+        .and_then(|r| metrics::train_metrics(&run.episodes, r.episode));
+    let tail = &rewards[rewards.len() - criterion.tail_len(rewards.len()).min(rewards.len())..];
+    let eval = run.final_eval.as_ref().and_then(|f| EvalSummary::of(&f.trials));
+    let eval_file =
+        run.final_eval.as_ref().and_then(|f| f.path.file_name()).map(|n| n.to_string_lossy().into_owned());
+    if !run.complete {
+        notes.push(format!("incomplete: {} of {} episodes", run.episodes.len(), run.config.train.episodes));
+    }
+    RunSummary {
+        name: run.name.clone(),
+        seed: run.seed(),
+        episodes: run.episodes.len() as u64,
+        convergence,
+        train,
+        tail_mean_reward: metrics::mean(tail).unwrap_or(f64::NAN),
+        eval,
+        eval_file,
+        notes,
+    }
+}
+
 /// Compute a group's indicators.
 pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<GroupSummary> {
     criterion.validate()?;
-    let mut runs = Vec::new();
-    for run in &group.runs {
-        let rewards: Vec<f64> = run.episodes.iter().map(|r| r.reward).collect();
-        let mut notes = run.notes.clone();
-        let convergence = metrics::convergence(&rewards, criterion).unwrap_or_else(|e| {
-            notes.push(format!("episodes.csv: {e}"));
-            Convergence {
-                outcome: metrics::ConvergenceOutcome::InvalidData,
-                e_start: None,
-                tail_mean: f64::NAN,
-                tail_std: f64::NAN,
-                band: f64::NAN,
-                first_window_mean: f64::NAN,
-            }
-        });
-        let train = convergence
-            .e_start
-            .and_then(|i| run.episodes.get(i as usize - 1))
-            .and_then(|r| metrics::train_metrics(&run.episodes, r.episode));
-        let tail = &rewards[rewards.len() - criterion.tail_len(rewards.len()).min(rewards.len())..];
-        let eval = run.final_eval.as_ref().and_then(|f| EvalSummary::of(&f.trials));
-        let eval_file = run
-            .final_eval
-            .as_ref()
-            .and_then(|f| f.path.file_name())
-            .map(|n| n.to_string_lossy().into_owned());
-        if !run.complete {
-            notes.push(format!(
-                "incomplete: {} of {} episodes",
-                run.episodes.len(),
-                run.config.train.episodes
-            ));
-        }
-        runs.push(RunSummary {
-            name: run.name.clone(),
-            seed: run.seed(),
-            episodes: run.episodes.len() as u64,
-            convergence,
-            train,
-            tail_mean_reward: metrics::mean(tail).unwrap_or(f64::NAN),
-            eval,
-            eval_file,
-            notes,
-        });
-    }
+    let runs: Vec<RunSummary> = group.runs.iter().map(|run| summarize_run(run, criterion)).collect();
     let conv: Vec<&RunSummary> = runs.iter().filter(|r| r.train.is_some()).collect();
     let tm = |f: &dyn Fn(&TrainMetrics) -> Option<f64>| {
         MeanStd::of_present(conv.iter().map(|r| r.train.as_ref().and_then(f)))
@@ -263,15 +258,42 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
     let em = |f: &dyn Fn(&EvalSummary) -> Option<f64>| {
         MeanStd::of_present(runs.iter().map(|r| r.eval.as_ref().and_then(f)))
     };
+    let n = runs.len();
+    let (notes, eval_trials) = group_notes(group, &runs, conv.len());
+    Ok(GroupSummary {
+        algo: group.algo,
+        reward: group.reward,
+        variant: group.variant.clone(),
+        primary: group.primary,
+        episodes: group.runs.first().map_or(0, |r| r.config.train.episodes),
+        seeds: n,
+        converged: conv.len(),
+        e_start: tm(&|t| Some(t.e_start as f64)),
+        train_reward: tm(&|t| Some(t.mean_reward)),
+        train_steps: tm(&|t| t.mean_steps_success),
+        v_stdev: tm(&|t| t.v_stdev),
+        eval_reward: em(&|e| Some(e.mean_reward)),
+        eval_steps: em(&|e| e.mean_steps),
+        success_rate: em(&|e| Some(e.success_rate)),
+        eval_trials,
+        excluded: group.excluded.clone(),
+        runs,
+        notes,
+    })
+}
+
+/// The caveats of a group (convergence, missing or uneven evaluations, excluded runs, the runs'
+/// own notes) and its evaluation trials.
+fn group_notes(group: &Group, runs: &[RunSummary], converged: usize) -> (Vec<String>, Option<u64>) {
     let mut notes = Vec::new();
     let n = runs.len();
     if n == 0 {
         notes.push("no complete run".to_string());
-    } else if conv.is_empty() {
+    } else if converged == 0 {
         let why: Vec<String> =
             runs.iter().map(|r| format!("seed {}: {}", r.seed, r.convergence.outcome.describe())).collect();
         notes.push(format!("no seed converged ({}); no E_start or training columns", why.join("; ")));
-    } else if conv.len() < n {
+    } else if converged < n {
         let why: Vec<String> = runs
             .iter()
             .filter(|r| r.train.is_none())
@@ -279,7 +301,7 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
             .collect();
         notes.push(format!(
             "{} of {n} seeds converged ({}); E_start and the training columns average the converged seeds",
-            conv.len(),
+            converged,
             why.join("; ")
         ));
     }
@@ -302,31 +324,12 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
     for ex in &group.excluded {
         notes.push(format!("{} (seed {}) excluded: {}", ex.name, ex.seed, ex.reason));
     }
-    for r in &runs {
+    for r in runs {
         for note in &r.notes {
             notes.push(format!("{} (seed {}): {note}", r.name, r.seed));
         }
     }
-    Ok(GroupSummary {
-        algo: group.algo,
-        reward: group.reward,
-        variant: group.variant.clone(),
-        primary: group.primary,
-        episodes: group.runs.first().map_or(0, |r| r.config.train.episodes),
-        seeds: n,
-        converged: conv.len(),
-        e_start: tm(&|t| Some(t.e_start as f64)),
-        train_reward: tm(&|t| Some(t.mean_reward)),
-        train_steps: tm(&|t| t.mean_steps_success),
-        v_stdev: tm(&|t| t.v_stdev),
-        eval_reward: em(&|e| Some(e.mean_reward)),
-        eval_steps: em(&|e| e.mean_steps),
-        success_rate: em(&|e| Some(e.success_rate)),
-        eval_trials,
-        excluded: group.excluded.clone(),
-        runs,
-        notes,
-    })
+    (notes, eval_trials)
 }
 
 /// The primary group of `(algo, reward)`, if any.
@@ -449,6 +452,21 @@ pub fn render_markdown(
 ) -> String {
     let mut s = String::new();
     let mut notes = Notes(Vec::new());
+    intro_markdown(&mut s, groups, criterion, input);
+    primary_markdown(&mut s, groups, paper_rows, &mut notes);
+    others_markdown(&mut s, groups, &mut notes);
+    per_run_markdown(&mut s, groups);
+    if !notes.0.is_empty() {
+        let _ = writeln!(s, "\n## Notes\n");
+        for (i, n) in notes.0.iter().enumerate() {
+            let _ = writeln!(s, "{}. {n}", i + 1);
+        }
+    }
+    s
+}
+
+/// The title and the paragraphs that explain the columns.
+fn intro_markdown(s: &mut String, groups: &[GroupSummary], criterion: &ConvergenceCriterion, input: &str) {
     let _ = writeln!(s, "# Table 1: ours beside the paper's\n");
     let total_runs: usize = groups.iter().map(|g| g.seeds).sum();
     let _ = writeln!(
@@ -472,6 +490,10 @@ pub fn render_markdown(
         f = criterion.band_floor,
         t = 100.0 * criterion.tail_fraction,
     );
+}
+
+/// Our row above the paper's, for every algorithm and reward function.
+fn primary_markdown(s: &mut String, groups: &[GroupSummary], paper_rows: &[PaperRow], notes: &mut Notes) {
     s.push_str(HEADER);
     let algos: Vec<Algo> = ALGO_ORDER
         .into_iter()
@@ -516,6 +538,10 @@ pub fn render_markdown(
             }
         }
     }
+}
+
+/// The groups of other configurations than the primary ones.
+fn others_markdown(s: &mut String, groups: &[GroupSummary], notes: &mut Notes) {
     let others: Vec<&GroupSummary> = groups.iter().filter(|g| !g.primary).collect();
     if !others.is_empty() {
         let _ = writeln!(
@@ -541,6 +567,10 @@ pub fn render_markdown(
             );
         }
     }
+}
+
+/// Every run's indicators.
+fn per_run_markdown(s: &mut String, groups: &[GroupSummary]) {
     let _ = writeln!(s, "\n## Per run\n");
     let _ = writeln!(
         s,
@@ -570,13 +600,6 @@ pub fn render_markdown(
             );
         }
     }
-    if !notes.0.is_empty() {
-        let _ = writeln!(s, "\n## Notes\n");
-        for (i, n) in notes.0.iter().enumerate() {
-            let _ = writeln!(s, "{}. {n}", i + 1);
-        }
-    }
-    s
 }
 
 fn csv_field(s: &str) -> String {

@@ -37,117 +37,222 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     if robot.links.is_empty() {
         return Err(urdf_err(format!("robot `{}` has no links", robot.name)));
     }
+    let tree = Tree::index(robot)?;
+    let root = tree.root()?;
+    let tip = tree.tip(tip)?;
+    let path = tree.path(root, tip)?;
+    fold_chain(&path, root, tip)
+}
 
-    // Links, in document order, unique.
-    let mut links: HashSet<&str> = HashSet::new();
-    for l in &robot.links {
-        if !links.insert(l.name.as_str()) {
-            return Err(urdf_err(format!("link `{}` is defined twice", l.name)));
-        }
-    }
+/// The links and joints of a URDF, checked to form a tree.
+struct Tree<'r> {
+    robot: &'r urdf_rs::Robot,
+    links: HashSet<&'r str>,
+    /// The joint whose child each link is.
+    parent_joint: HashMap<&'r str, &'r urdf_rs::Joint>,
+    /// Links that are the parent of some joint.
+    has_children: HashSet<&'r str>,
+}
 
-    // Joints: unique names, existing links, at most one parent joint per link.
-    let mut joint_names: HashSet<&str> = HashSet::new();
-    let mut parent_joint: HashMap<&str, &urdf_rs::Joint> = HashMap::new();
-    let mut has_children: HashSet<&str> = HashSet::new();
-    for j in &robot.joints {
-        if !joint_names.insert(j.name.as_str()) {
-            return Err(urdf_err(format!("joint `{}` is defined twice", j.name)));
-        }
-        for (role, link) in [("parent", &j.parent.link), ("child", &j.child.link)] {
-            if !links.contains(link.as_str()) {
-                return Err(urdf_err(format!(
-                    "joint `{}` names {role} link `{link}`, which does not exist",
-                    j.name
-                )));
+impl<'r> Tree<'r> {
+    fn index(robot: &'r urdf_rs::Robot) -> Result<Tree<'r>> {
+        // Links, in document order, unique.
+        let mut links: HashSet<&str> = HashSet::new();
+        for l in &robot.links {
+            if !links.insert(l.name.as_str()) {
+                return Err(urdf_err(format!("link `{}` is defined twice", l.name)));
             }
         }
-        if let Some(other) = parent_joint.insert(j.child.link.as_str(), j) {
-            return Err(urdf_err(format!(
-                "link `{}` is the child of two joints, `{}` and `{}`; a URDF must be a tree",
-                j.child.link, other.name, j.name
-            )));
-        }
-        has_children.insert(j.parent.link.as_str());
-    }
 
-    // Exactly one root.
-    let roots: Vec<&str> =
-        robot.links.iter().map(|l| l.name.as_str()).filter(|l| !parent_joint.contains_key(l)).collect();
-    let root = match roots.as_slice() {
-        [r] => *r,
-        [] => {
-            return Err(urdf_err(
-                "no root link: every link is the child of a joint, so the joints form a cycle",
-            ))
-        }
-        _ => {
-            return Err(urdf_err(format!(
-                "more than one root link ({}); a URDF must be a tree with a single root",
-                quoted_list(roots.iter().copied())
-            )))
-        }
-    };
-
-    // The tip.
-    let tip: &str = match tip {
-        Some(t) => {
-            if !links.contains(t) {
-                return Err(urdf_err(format!(
-                    "unknown tip link `{t}`; the links are {}",
-                    quoted_list(robot.links.iter().map(|l| l.name.as_str()))
-                )));
+        // Joints: unique names, existing links, at most one parent joint per link.
+        let mut joint_names: HashSet<&str> = HashSet::new();
+        let mut parent_joint: HashMap<&str, &urdf_rs::Joint> = HashMap::new();
+        let mut has_children: HashSet<&str> = HashSet::new();
+        for j in &robot.joints {
+            if !joint_names.insert(j.name.as_str()) {
+                return Err(urdf_err(format!("joint `{}` is defined twice", j.name)));
             }
-            t
-        }
-        None => {
-            let leaves: Vec<&str> =
-                robot.links.iter().map(|l| l.name.as_str()).filter(|l| !has_children.contains(l)).collect();
-            match leaves.as_slice() {
-                [leaf] => leaf,
-                [] => {
-                    return Err(urdf_err(
-                        "no leaf link: every link is the parent of a joint; pass the tip link",
-                    ))
-                }
-                _ => {
+            for (role, link) in [("parent", &j.parent.link), ("child", &j.child.link)] {
+                if !links.contains(link.as_str()) {
                     return Err(urdf_err(format!(
-                        "several leaf links ({}); pass the tip link to use",
-                        quoted_list(leaves.iter().copied())
-                    )))
+                        "joint `{}` names {role} link `{link}`, which does not exist",
+                        j.name
+                    )));
                 }
             }
+            if let Some(other) = parent_joint.insert(j.child.link.as_str(), j) {
+                return Err(urdf_err(format!(
+                    "link `{}` is the child of two joints, `{}` and `{}`; a URDF must be a tree",
+                    j.child.link, other.name, j.name
+                )));
+            }
+            has_children.insert(j.parent.link.as_str());
         }
-    };
+        Ok(Tree { robot, links, parent_joint, has_children })
+    }
 
-    // Walk from the tip up to the root.
-    let mut path: Vec<&urdf_rs::Joint> = Vec::new();
-    let mut link = tip;
-    let mut seen: HashSet<&str> = HashSet::new();
-    while link != root {
-        if !seen.insert(link) {
-            let cycle: Vec<&str> =
-                path.iter().skip_while(|j| j.child.link != link).map(|j| j.name.as_str()).collect();
+    /// The only link that is no joint's child.
+    fn root(&self) -> Result<&'r str> {
+        let (robot, parent_joint) = (self.robot, &self.parent_joint);
+        let roots: Vec<&str> =
+            robot.links.iter().map(|l| l.name.as_str()).filter(|l| !parent_joint.contains_key(l)).collect();
+        let root = match roots.as_slice() {
+            [r] => *r,
+            [] => {
+                return Err(urdf_err(
+                    "no root link: every link is the child of a joint, so the joints form a cycle",
+                ))
+            }
+            _ => {
+                return Err(urdf_err(format!(
+                    "more than one root link ({}); a URDF must be a tree with a single root",
+                    quoted_list(roots.iter().copied())
+                )))
+            }
+        };
+        Ok(root)
+    }
+
+    /// The tip link: the one given, else the only leaf.
+    fn tip(&self, tip: Option<&'r str>) -> Result<&'r str> {
+        let (robot, links, has_children) = (self.robot, &self.links, &self.has_children);
+        let tip: &str = match tip {
+            Some(t) => {
+                if !links.contains(t) {
+                    return Err(urdf_err(format!(
+                        "unknown tip link `{t}`; the links are {}",
+                        quoted_list(robot.links.iter().map(|l| l.name.as_str()))
+                    )));
+                }
+                t
+            }
+            None => {
+                let leaves: Vec<&str> = robot
+                    .links
+                    .iter()
+                    .map(|l| l.name.as_str())
+                    .filter(|l| !has_children.contains(l))
+                    .collect();
+                match leaves.as_slice() {
+                    [leaf] => leaf,
+                    [] => {
+                        return Err(urdf_err(
+                            "no leaf link: every link is the parent of a joint; pass the tip link",
+                        ))
+                    }
+                    _ => {
+                        return Err(urdf_err(format!(
+                            "several leaf links ({}); pass the tip link to use",
+                            quoted_list(leaves.iter().copied())
+                        )))
+                    }
+                }
+            }
+        };
+        Ok(tip)
+    }
+
+    /// The joints from `root` down to `tip`.
+    fn path(&self, root: &'r str, tip: &'r str) -> Result<Vec<&'r urdf_rs::Joint>> {
+        let parent_joint = &self.parent_joint;
+        let mut path: Vec<&urdf_rs::Joint> = Vec::new();
+        let mut link = tip;
+        let mut seen: HashSet<&str> = HashSet::new();
+        while link != root {
+            if !seen.insert(link) {
+                let cycle: Vec<&str> =
+                    path.iter().skip_while(|j| j.child.link != link).map(|j| j.name.as_str()).collect();
+                return Err(urdf_err(format!(
+                    "link `{tip}` has no path to the root link `{root}`: joints {} form a cycle",
+                    quoted_list(cycle)
+                )));
+            }
+            // Every non-root link has a parent joint (the root is the only link without one).
+            let Some(j) = parent_joint.get(link) else {
+                return Err(urdf_err(format!("link `{link}` has no path to the root link `{root}`")));
+            };
+            path.push(j);
+            link = j.parent.link.as_str();
+        }
+        path.reverse();
+        Ok(path)
+    }
+}
+
+/// An actuated joint's kind, unit axis and limits (lower, upper, velocity); `None` for a fixed
+/// joint; an error for what the chain cannot hold.
+fn actuated(
+    j: &urdf_rs::Joint,
+    root: &str,
+    tip: &str,
+) -> Result<Option<(JointKind, [f64; 3], (f64, f64, f64))>> {
+    let kind = match j.joint_type {
+        JointType::Fixed => return Ok(None),
+        JointType::Revolute | JointType::Continuous => JointKind::Revolute,
+        JointType::Prismatic => JointKind::Prismatic,
+        JointType::Floating | JointType::Planar | JointType::Spherical => {
             return Err(urdf_err(format!(
-                "link `{tip}` has no path to the root link `{root}`: joints {} form a cycle",
-                quoted_list(cycle)
+                "joint `{}` on the chain from `{root}` to `{tip}` has unsupported type {:?}; \
+                 only revolute, continuous, prismatic and fixed joints are supported",
+                j.name, j.joint_type
             )));
         }
-        // Every non-root link has a parent joint (the root is the only link without one).
-        let Some(j) = parent_joint.get(link) else {
-            return Err(urdf_err(format!("link `{link}` has no path to the root link `{root}`")));
-        };
-        path.push(j);
-        link = j.parent.link.as_str();
+    };
+    if let Some(m) = &j.mimic {
+        return Err(urdf_err(format!(
+            "joint `{}` on the chain from `{root}` to `{tip}` mimics joint `{}`; \
+             mimic joints are not supported",
+            j.name, m.joint
+        )));
     }
-    path.reverse();
+    let axis = j.axis.xyz.0;
+    if axis.iter().any(|v| !v.is_finite()) {
+        return Err(urdf_err(format!("joint `{}` has a non-finite axis {axis:?}", j.name)));
+    }
+    let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+    if norm < 1e-9 {
+        return Err(urdf_err(format!(
+            "joint `{}` has a zero axis {axis:?}; an actuated joint needs a nonzero axis",
+            j.name
+        )));
+    }
+    let axis = [axis[0] / norm, axis[1] / norm, axis[2] / norm];
+    let lim = &j.limit;
+    let (lower, upper, velocity) = if j.joint_type == JointType::Continuous {
+        if !(lim.velocity.is_finite() && lim.velocity > 0.0) {
+            return Err(urdf_err(format!(
+                "continuous joint `{}` has no usable velocity limit (velocity = {}); \
+                 a finite <limit velocity> > 0 is required",
+                j.name, lim.velocity
+            )));
+        }
+        (f64::NEG_INFINITY, f64::INFINITY, lim.velocity)
+    } else {
+        let usable = lim.lower.is_finite()
+            && lim.upper.is_finite()
+            && lim.velocity.is_finite()
+            && lim.lower < lim.upper
+            && lim.velocity > 0.0;
+        if !usable {
+            return Err(urdf_err(format!(
+                "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
+                 velocity = {}; finite lower < upper and velocity > 0 are required",
+                j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
+            )));
+        }
+        (lim.lower, lim.upper, lim.velocity)
+    };
+    Ok(Some((kind, axis, (lower, upper, velocity))))
+}
 
-    // Compile: fold fixed joints and the axis-alignment rotations into the constants.
+/// Compile the joints of `path`: fold fixed joints and the axis-alignment rotations into the
+/// constants of the kinematics.
+fn fold_chain(path: &[&urdf_rs::Joint], root: &str, tip: &str) -> Result<Compiled> {
     let mut joints = Vec::new();
     let mut steps = Vec::new();
     let mut base: Option<Tf> = None;
     let mut pending: Tf = kin::IDENTITY;
-    for j in &path {
+    for j in path {
         let xyz = j.origin.xyz.0;
         let rpy = j.origin.rpy.0;
         if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite()) {
@@ -157,62 +262,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
             )));
         }
         pending = kin::mul(&pending, &kin::origin(xyz, rpy));
-        let kind = match j.joint_type {
-            JointType::Fixed => continue,
-            JointType::Revolute | JointType::Continuous => JointKind::Revolute,
-            JointType::Prismatic => JointKind::Prismatic,
-            JointType::Floating | JointType::Planar | JointType::Spherical => {
-                return Err(urdf_err(format!(
-                    "joint `{}` on the chain from `{root}` to `{tip}` has unsupported type {:?}; \
-                     only revolute, continuous, prismatic and fixed joints are supported",
-                    j.name, j.joint_type
-                )));
-            }
-        };
-        if let Some(m) = &j.mimic {
-            return Err(urdf_err(format!(
-                "joint `{}` on the chain from `{root}` to `{tip}` mimics joint `{}`; \
-                 mimic joints are not supported",
-                j.name, m.joint
-            )));
-        }
-        let axis = j.axis.xyz.0;
-        if axis.iter().any(|v| !v.is_finite()) {
-            return Err(urdf_err(format!("joint `{}` has a non-finite axis {axis:?}", j.name)));
-        }
-        let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-        if norm < 1e-9 {
-            return Err(urdf_err(format!(
-                "joint `{}` has a zero axis {axis:?}; an actuated joint needs a nonzero axis",
-                j.name
-            )));
-        }
-        let axis = [axis[0] / norm, axis[1] / norm, axis[2] / norm];
-        let lim = &j.limit;
-        let (lower, upper, velocity) = if j.joint_type == JointType::Continuous {
-            if !(lim.velocity.is_finite() && lim.velocity > 0.0) {
-                return Err(urdf_err(format!(
-                    "continuous joint `{}` has no usable velocity limit (velocity = {}); \
-                     a finite <limit velocity> > 0 is required",
-                    j.name, lim.velocity
-                )));
-            }
-            (f64::NEG_INFINITY, f64::INFINITY, lim.velocity)
-        } else {
-            let usable = lim.lower.is_finite()
-                && lim.upper.is_finite()
-                && lim.velocity.is_finite()
-                && lim.lower < lim.upper
-                && lim.velocity > 0.0;
-            if !usable {
-                return Err(urdf_err(format!(
-                    "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
-                     velocity = {}; finite lower < upper and velocity > 0 are required",
-                    j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
-                )));
-            }
-            (lim.lower, lim.upper, lim.velocity)
-        };
+        let Some((kind, axis, (lower, upper, velocity))) = actuated(j, root, tip)? else { continue };
         joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity });
 
         let a = kin::basis_for_axis(axis);
