@@ -1,0 +1,203 @@
+//! The shape of the code itself: no function in `crates/*/src` longer than 100 lines, and no
+//! import cycle between the library's top-level modules (module A uses B and B uses A, directly
+//! or through others), as the project's standards require.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+const MAX_FN_LINES: usize = 100;
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()) {
+        if e.is_dir() {
+            rust_files(&e, out);
+        } else if e.extension().is_some_and(|x| x == "rs") {
+            out.push(e);
+        }
+    }
+}
+
+fn crates_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// A line without its string and char literals and its `//` comment, for counting braces.
+fn code_of(line: &str) -> String {
+    let mut out = String::new();
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '"' => {
+                while let Some(d) = chars.next() {
+                    match d {
+                        '\\' => {
+                            chars.next();
+                        }
+                        '"' => break,
+                        _ => {}
+                    }
+                }
+            }
+            '\'' => {
+                // A char literal ('x', '\n', '{'); a lifetime ('a) has no closing quote nearby.
+                let rest: String = chars.clone().take(4).collect();
+                if let Some(end) = rest.find('\'').filter(|&i| i > 0 && i <= 3) {
+                    for _ in 0..=end {
+                        chars.next();
+                    }
+                }
+            }
+            '/' if chars.peek() == Some(&'/') => break,
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// `(lines, name, first line)` of every function with a body in `text`.
+fn functions(text: &str) -> Vec<(usize, String, usize)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut found = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let code = code_of(line);
+        let Some(at) =
+            code.find("fn ").filter(|&k| k == 0 || !code.as_bytes()[k - 1].is_ascii_alphanumeric())
+        else {
+            continue;
+        };
+        let name: String = code[at + 3..].chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        if name.is_empty() {
+            continue;
+        }
+        let (mut depth, mut started) = (0i64, false);
+        for (j, l) in lines.iter().enumerate().skip(i) {
+            let c = code_of(l);
+            let from = if j == i { at } else { 0 };
+            for ch in c[from..].chars() {
+                match ch {
+                    '{' => {
+                        depth += 1;
+                        started = true;
+                    }
+                    '}' => depth -= 1,
+                    ';' if !started => break,
+                    _ => {}
+                }
+            }
+            if !started && c[from..].contains(';') {
+                break;
+            }
+            if started && depth <= 0 {
+                found.push((j - i + 1, name.clone(), i + 1));
+                break;
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn no_function_longer_than_100_lines() {
+    let mut files = Vec::new();
+    for krate in std::fs::read_dir(crates_dir()).unwrap().map(|e| e.unwrap().path()) {
+        if krate.join("src").is_dir() {
+            rust_files(&krate.join("src"), &mut files);
+        }
+    }
+    assert!(files.len() > 20, "found the sources: {files:?}");
+    let mut long = Vec::new();
+    let mut longest = (0, String::new());
+    for f in &files {
+        for (n, name, line) in functions(&std::fs::read_to_string(f).unwrap()) {
+            let place = format!("{}:{line} {name}", f.display());
+            if n > longest.0 {
+                longest = (n, place.clone());
+            }
+            if n > MAX_FN_LINES {
+                long.push(format!("{place}: {n} lines"));
+            }
+        }
+    }
+    assert!(long.is_empty(), "functions over {MAX_FN_LINES} lines:\n{}", long.join("\n"));
+    println!("longest function: {} lines, {}", longest.0, longest.1);
+}
+
+#[test]
+fn the_counter_sees_function_bodies() {
+    let text =
+        "fn a() {\n    let s = \"}\";\n    let c = '{';\n}\n\nfn b<'x>(v: &'x str) -> &'x str {\n    v\n}\n\
+                trait T {\n    fn c(&self);\n}\n";
+    let f = functions(text);
+    assert_eq!(f, [(4, "a".to_string(), 1), (3, "b".to_string(), 6)]);
+}
+
+/// The top-level modules each library module names through `crate::<module>` in its code.
+fn module_uses() -> BTreeMap<String, BTreeSet<String>> {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut uses: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for f in files {
+        let rel = f.strip_prefix(&src).unwrap();
+        let top = rel
+            .components()
+            .next()
+            .unwrap()
+            .as_os_str()
+            .to_string_lossy()
+            .trim_end_matches(".rs")
+            .to_string();
+        if top == "lib" {
+            continue;
+        }
+        // Code only: a doc link to another module is no dependency.
+        let text: String = std::fs::read_to_string(&f).unwrap().lines().map(|l| code_of(l) + "\n").collect();
+        let edges = uses.entry(top.clone()).or_default();
+        for (k, _) in text.match_indices("crate::") {
+            let rest = &text[k + "crate::".len()..];
+            let names: Vec<&str> = if let Some(group) = rest.strip_prefix('{') {
+                group
+                    .split('}')
+                    .next()
+                    .unwrap()
+                    .split(',')
+                    .map(|n| n.split("::").next().unwrap().trim())
+                    .collect()
+            } else {
+                vec![rest.split(|c: char| !(c.is_alphanumeric() || c == '_')).next().unwrap()]
+            };
+            for n in names {
+                let is_module = n.chars().next().is_some_and(|c| c.is_ascii_lowercase());
+                if is_module && n != top && n != "self" {
+                    edges.insert(n.to_string());
+                }
+            }
+        }
+    }
+    uses
+}
+
+#[test]
+fn no_import_cycle_between_modules() {
+    let uses = module_uses();
+    assert!(uses.get("train").is_some_and(|u| u.contains("config")), "the scan sees imports: {uses:?}");
+    // A cycle exists when some module reaches itself.
+    let mut cycles = Vec::new();
+    for start in uses.keys() {
+        let mut stack: Vec<Vec<&str>> = vec![vec![start.as_str()]];
+        let mut seen = BTreeSet::new();
+        while let Some(path) = stack.pop() {
+            let last = *path.last().unwrap();
+            for next in uses.get(last).into_iter().flatten() {
+                if next == start {
+                    cycles.push(format!("{} -> {start}", path.join(" -> ")));
+                } else if seen.insert(next.as_str()) {
+                    let mut p = path.clone();
+                    p.push(next);
+                    stack.push(p);
+                }
+            }
+        }
+    }
+    assert!(cycles.is_empty(), "import cycles:\n{}", cycles.join("\n"));
+}
