@@ -10,6 +10,7 @@ use super::paper::{self, PaperRow};
 use super::runs::RunData;
 use crate::agent::Algo;
 use crate::config::Config;
+use crate::log::csv::{to_csv, CsvRow};
 use crate::metrics::{self, Convergence, ConvergenceCriterion, EvalSummary, MeanStd, TrainMetrics};
 use crate::reward::RewardFunction;
 use crate::Result;
@@ -626,56 +627,75 @@ fn csv_opt(v: Option<f64>) -> String {
 /// The CSV header of [`render_csv`].
 pub const CSV_HEADER: &str = "source,algorithm,reward,configuration,primary,seeds,converged,episodes,e_start,e_start_std,train_reward,train_reward_std,train_steps,train_steps_std,v_stdev,v_stdev_std,eval_reward,eval_reward_std,eval_steps,eval_steps_std,success_rate_pct,success_rate_pct_std,notes";
 
-/// Table 1 as CSV: one row per group of ours (`source = ours`) and per row of the paper
+/// A row of `table1.csv`: a group of ours (`source = ours`) or a row of the paper
 /// (`source = paper`); empty fields are unknown or not applicable.
+pub enum Table1Row<'a> {
+    Ours(&'a GroupSummary),
+    Paper(&'a PaperRow),
+}
+
+impl CsvRow for Table1Row<'_> {
+    const HEADER: &'static str = CSV_HEADER;
+
+    fn write_row(&self, s: &mut String) {
+        match self {
+            Table1Row::Ours(g) => write_ours(s, g),
+            Table1Row::Paper(p) => write_paper(s, p),
+        }
+    }
+}
+
+fn write_ours(s: &mut String, g: &GroupSummary) {
+    let _ = write!(
+        s,
+        "ours,{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        g.algo,
+        g.reward,
+        csv_field(&g.variant),
+        u8::from(g.primary),
+        g.seeds,
+        g.converged,
+        g.episodes,
+        csv_ms(&g.e_start, 1.0),
+        csv_ms(&g.train_reward, 1.0),
+        csv_ms(&g.train_steps, 1.0),
+        csv_ms(&g.v_stdev, 1.0),
+        csv_ms(&g.eval_reward, 1.0),
+        csv_ms(&g.eval_steps, 1.0),
+        csv_ms(&g.success_rate, 100.0),
+        csv_field(&g.notes.join("; "))
+    );
+}
+
+fn write_paper(s: &mut String, p: &PaperRow) {
+    let (tr, ts) = p.train_reward.unzip();
+    let (vm, vs) = p.v_stdev.unzip();
+    let _ = write!(
+        s,
+        "paper,{},{},paper,1,{},{},{},{},,{},{},{},,{},{},{},,{},,{},,{}",
+        p.algo,
+        p.reward,
+        paper::PAPER_RUNS,
+        if p.converged() { paper::PAPER_RUNS } else { 0 },
+        paper::PAPER_EPISODES,
+        csv_opt(p.e_start),
+        csv_opt(tr),
+        csv_opt(ts),
+        csv_opt(p.train_steps),
+        csv_opt(vm),
+        csv_opt(vs),
+        csv_opt(p.eval_reward),
+        csv_opt(p.eval_steps),
+        csv_opt(p.success_rate.map(|x| 100.0 * x)),
+        if p.converged() { "" } else { "did not converge" }
+    );
+}
+
+/// Table 1 as CSV: one row per group of ours, then one per row of the paper.
 pub fn render_csv(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> String {
-    let mut s = String::from(CSV_HEADER);
-    s.push('\n');
-    for g in groups {
-        let _ = writeln!(
-            s,
-            "ours,{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            g.algo,
-            g.reward,
-            csv_field(&g.variant),
-            u8::from(g.primary),
-            g.seeds,
-            g.converged,
-            g.episodes,
-            csv_ms(&g.e_start, 1.0),
-            csv_ms(&g.train_reward, 1.0),
-            csv_ms(&g.train_steps, 1.0),
-            csv_ms(&g.v_stdev, 1.0),
-            csv_ms(&g.eval_reward, 1.0),
-            csv_ms(&g.eval_steps, 1.0),
-            csv_ms(&g.success_rate, 100.0),
-            csv_field(&g.notes.join("; "))
-        );
-    }
-    for p in paper_rows {
-        let (tr, ts) = p.train_reward.unzip();
-        let (vm, vs) = p.v_stdev.unzip();
-        let _ = writeln!(
-            s,
-            "paper,{},{},paper,1,{},{},{},{},,{},{},{},,{},{},{},,{},,{},,{}",
-            p.algo,
-            p.reward,
-            paper::PAPER_RUNS,
-            if p.converged() { paper::PAPER_RUNS } else { 0 },
-            paper::PAPER_EPISODES,
-            csv_opt(p.e_start),
-            csv_opt(tr),
-            csv_opt(ts),
-            csv_opt(p.train_steps),
-            csv_opt(vm),
-            csv_opt(vs),
-            csv_opt(p.eval_reward),
-            csv_opt(p.eval_steps),
-            csv_opt(p.success_rate.map(|x| 100.0 * x)),
-            if p.converged() { "" } else { "did not converge" }
-        );
-    }
-    s
+    let rows: Vec<Table1Row<'_>> =
+        groups.iter().map(Table1Row::Ours).chain(paper_rows.iter().map(Table1Row::Paper)).collect();
+    to_csv(&rows)
 }
 
 #[cfg(test)]

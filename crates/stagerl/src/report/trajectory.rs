@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 use super::runs::RunData;
 use super::table::{algo_title, reward_title};
 use crate::env::{Driver, Flow, ReachEnv, Transition};
+use crate::log::csv::{self, CsvRow};
 use crate::rundir::RunDir;
 use crate::train::eval;
 use crate::Result;
@@ -93,27 +94,34 @@ pub fn rollout(run: &RunData, trials: u32, eval_seed: u64) -> Result<Rollouts> {
     })
 }
 
-/// The paths as CSV: `run,trial,step,x_m,y_m,z_m,target_x_m,target_y_m,target_z_m,success`.
-pub fn to_csv(sets: &[Rollouts]) -> String {
-    let mut s = String::from("run,trial,step,x_m,y_m,z_m,target_x_m,target_y_m,target_z_m,success\n");
-    for set in sets {
-        for p in &set.paths {
-            for (k, q) in p.points.iter().enumerate() {
-                let _ = writeln!(
-                    s,
-                    "{},{},{k},{},{},{},{},{},{},{}",
-                    set.run,
-                    p.trial,
-                    q[0],
-                    q[1],
-                    q[2],
-                    p.target[0],
-                    p.target[1],
-                    p.target[2],
-                    u8::from(p.success)
-                );
-            }
-        }
+/// A row of `trajectories.csv`: one point of one evaluation path.
+pub struct TrajectoryRow<'a> {
+    pub run: &'a str,
+    pub path: &'a TrajectoryPath,
+    /// 0 at the reset.
+    pub step: usize,
+}
+
+impl CsvRow for TrajectoryRow<'_> {
+    const HEADER: &'static str = "run,trial,step,x_m,y_m,z_m,target_x_m,target_y_m,target_z_m,success";
+
+    fn write_row(&self, out: &mut String) {
+        let TrajectoryRow { run, path, step } = *self;
+        let ([x, y, z], [tx, ty, tz]) = (path.points[step], path.target);
+        let (trial, success) = (path.trial, u8::from(path.success));
+        let _ = write!(out, "{run},{trial},{step},{x},{y},{z},{tx},{ty},{tz},{success}");
     }
-    s
+}
+
+/// The paths as CSV, one row per point ([`TrajectoryRow`]).
+pub fn to_csv(sets: &[Rollouts]) -> String {
+    let rows: Vec<TrajectoryRow<'_>> = sets
+        .iter()
+        .flat_map(|set| {
+            set.paths.iter().flat_map(move |path| {
+                (0..path.points.len()).map(move |step| TrajectoryRow { run: &set.run, path, step })
+            })
+        })
+        .collect();
+    csv::to_csv(&rows)
 }
