@@ -458,14 +458,12 @@ mod tests {
 
     #[test]
     fn bundled_presets_parse() {
-        for name in ["smoke", "quick", "paper"] {
-            let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../configs/{name}.toml"));
-            let p = Preset::load(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+        for (name, _) in BUNDLED_PRESETS {
+            let (p, _) = Preset::resolve(name).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(p.sweep.algorithms, vec![Algo::Ddpg, Algo::Sac], "{name}");
             assert_eq!(p.sweep.rewards.len(), 5, "{name}");
         }
-        let paper =
-            Preset::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/paper.toml")).unwrap();
+        let (paper, _) = Preset::resolve("paper").unwrap();
         assert_eq!(
             (paper.sweep.seeds.len(), paper.base.train.episodes, paper.sweep.eval_trials),
             (20, 10000, 500)

@@ -8,14 +8,18 @@
 //! - [`robot`]: serial kinematic chains loaded from URDF (UR5 bundled), forward kinematics and the
 //!   geometric Jacobian.
 //! - [`reward`]: the paper's reward functions, eqs. 1-15 and 18, with every term exposed.
-//! - [`env`](mod@env): the random-target reaching task (single and vectorised).
-//! - [`config`]: the TOML schema, its defaults (the paper's where it gives them) and validation.
+//! - [`env`](mod@env): the random-target reaching task (single and vectorised), its `[task]`
+//!   section, and the one episode rollout of eq. 16 ([`env::rollout`]).
+//! - [`config`]: the TOML schema assembled from the sections the modules own, its defaults (the
+//!   paper's where it gives them) and validation; [`schedule`]: the `[train]` section.
 //! - [`controller`]: a scripted Jacobian controller, the reference the learned policies are
 //!   measured against.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
 //! - [`agent`]: DDPG, TD3 and SAC; [`replay`]: their replay buffer; [`train`]: the off-policy
-//!   loop, evaluation and the run directory; [`checkpoint`], [`log`], [`io`]: what runs write.
+//!   loop and evaluation; [`rundir`]: the run directory; [`checkpoint`], [`log`] (the CSV files
+//!   and TensorBoard), [`io`]: what runs write; [`experiment`]: sweeps; [`metrics`], [`report`]:
+//!   the paper's indicators, tables and figures.
 //!
 //! Units: metres, radians, seconds; quaternions are `(x, y, z, w)` on every interface.
 

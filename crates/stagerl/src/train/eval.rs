@@ -48,7 +48,9 @@ pub fn deterministic(agent: &mut dyn Agent) -> impl FnMut(&ReachEnv, &mut [f32])
 }
 
 /// Run `trials` episodes (eq. 16 rollouts) of `driver` on the targets of `seed` (the
-/// environment's own target stream is left as it was).
+/// environment's own target stream is left as it was). A driver that stops a rollout
+/// ([`crate::env::Flow::Stop`]) ends the evaluation with [`Error::Interrupted`] (episode 0, no
+/// checkpoint), for the caller that owns the stop request to report.
 pub fn evaluate_with(
     env: &mut ReachEnv,
     trials: u32,
