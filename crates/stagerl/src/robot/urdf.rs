@@ -179,13 +179,12 @@ impl<'r> Tree<'r> {
     }
 }
 
+/// An actuated joint's kind, unit axis and limits `(lower, upper, velocity)`.
+type Actuated = (JointKind, [f64; 3], (f64, f64, f64));
+
 /// An actuated joint's kind, unit axis and limits (lower, upper, velocity); `None` for a fixed
 /// joint; an error for what the chain cannot hold.
-fn actuated(
-    j: &urdf_rs::Joint,
-    root: &str,
-    tip: &str,
-) -> Result<Option<(JointKind, [f64; 3], (f64, f64, f64))>> {
+fn actuated(j: &urdf_rs::Joint, root: &str, tip: &str) -> Result<Option<Actuated>> {
     let kind = match j.joint_type {
         JointType::Fixed => return Ok(None),
         JointType::Revolute | JointType::Continuous => JointKind::Revolute,
