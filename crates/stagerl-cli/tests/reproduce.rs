@@ -81,6 +81,18 @@ fn killed_sweep_loses_and_repeats_nothing() {
     std::fs::remove_dir_all(&root).ok();
 }
 
+/// The names of the directories in `out`, sorted.
+fn run_dirs(out: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().is_dir())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
 fn finished_or_empty(out: &Path) -> usize {
     if out.exists() {
         finished(out).len()
@@ -100,14 +112,7 @@ fn sharding_splits_the_sweep_and_bad_arguments_are_refused() {
         .unwrap();
     assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
     // Smoke: 10 runs (ddpg then sac; basic, posture, stride, har, sar); shard 1 of 3 holds runs 1, 4, 7.
-    let mut names: Vec<String> = std::fs::read_dir(&out)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .filter(|e| e.path().is_dir())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    assert_eq!(names, ["ddpg-posture-seed1", "ddpg-sar-seed1", "sac-stride-seed1"]);
+    assert_eq!(run_dirs(&out), ["ddpg-posture-seed1", "ddpg-sar-seed1", "sac-stride-seed1"]);
     // Slurm's variables select the shard when no flag does.
     let out2 = root.join("o2");
     let b = bin()
@@ -139,16 +144,6 @@ fn sharding_splits_the_sweep_and_bad_arguments_are_refused() {
 #[test]
 fn slurm_step_and_explicit_flags_over_the_environment() {
     let root = scratch("repro-slurm");
-    let names = |out: &Path| -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(out)
-            .unwrap()
-            .filter_map(|e| e.ok())
-            .filter(|e| e.path().is_dir())
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    };
     // Task id 4 of --array=0-19:2 is task 2 of 10: smoke's run 2.
     let stepped = root.join("stepped");
     let r = bin()
@@ -160,7 +155,7 @@ fn slurm_step_and_explicit_flags_over_the_environment() {
         .output()
         .unwrap();
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    assert_eq!(names(&stepped), ["ddpg-stride-seed1"]);
+    assert_eq!(run_dirs(&stepped), ["ddpg-stride-seed1"]);
     let flags = root.join("flags");
     let r = bin()
         .args(["reproduce", "--preset", "smoke", "--out", flags.to_str().unwrap()])
@@ -170,7 +165,7 @@ fn slurm_step_and_explicit_flags_over_the_environment() {
         .output()
         .unwrap();
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    assert_eq!(names(&flags), ["sac-sar-seed1"]);
+    assert_eq!(run_dirs(&flags), ["sac-sar-seed1"]);
     // Without the flags the malformed variable is an error that names it.
     let r = bin()
         .args(["reproduce", "--preset", "smoke", "--out", root.join("bad").to_str().unwrap()])
