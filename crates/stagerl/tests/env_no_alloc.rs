@@ -1,21 +1,34 @@
 //! `ReachEnv::step` and `VecEnv::step` allocate nothing: counted with a global allocator.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
 struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+thread_local! {
+    /// Allocations made by this thread (tests run in parallel threads).
+    static COUNT: Cell<usize> = const { Cell::new(0) };
+}
+
+fn count() {
+    let _ = COUNT.try_with(|c| c.set(c.get() + 1));
+}
+
+/// Allocations made by the calling thread so far.
+fn allocs() -> usize {
+    COUNT.with(Cell::get)
+}
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.alloc(l) }
     }
     unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
         unsafe { System.dealloc(p, l) }
     }
     unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.realloc(p, l, n) }
     }
 }
@@ -30,7 +43,7 @@ fn stepping_and_resetting_allocate_nothing() {
     let mut venv = stagerl::env::VecEnv::from_config(4, &cfg, 1).unwrap();
     let actions: Vec<f32> = (0..4 * 6).map(|i| ((i * 7919) % 200) as f32 / 100.0 - 1.0).collect();
     env.reset();
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = allocs();
     let mut episodes = 0;
     for k in 0..10_000 {
         let a = &actions[(k % 4) * 6..(k % 4 + 1) * 6];
@@ -40,7 +53,66 @@ fn stepping_and_resetting_allocate_nothing() {
         }
         venv.step(&actions).unwrap();
     }
-    let after = ALLOCS.load(Ordering::Relaxed);
+    let after = allocs();
     assert!(episodes > 100, "resets were exercised: {episodes}");
     assert_eq!(after - before, 0, "allocations during 10 000 steps");
+}
+
+/// The eq. 16 rollout with the scripted controller and an observer allocates nothing either,
+/// and its episode reward is the sum of the step rewards it observed.
+#[test]
+fn rollouts_allocate_nothing() {
+    use stagerl::env::{rollout, Flow, Observed, Outcome, Scratch, Transition};
+    let cfg = stagerl::config::Config::default();
+    let mut env = stagerl::env::ReachEnv::from_config(&cfg, 2).unwrap();
+    let mut ctl = stagerl::controller::JacobianController::new(env.chain());
+    let mut scratch = Scratch::new(&env);
+    let (mut reached, mut observed, mut total) = (0, 0.0f64, 0.0f64);
+    env.reset();
+    let before = allocs();
+    for _ in 0..200 {
+        env.reset();
+        let (mut sum, mut steps) = (0.0, 0u32);
+        let observe = |t: &Transition<'_>| {
+            sum += t.step.total();
+            steps += 1;
+            assert_eq!(t.env.steps(), steps);
+            Ok(Flow::Continue)
+        };
+        let Outcome::Finished { reward, last } =
+            rollout(&mut env, &mut scratch, &mut Observed(ctl.policy(), observe)).unwrap()
+        else {
+            panic!("nothing stops these rollouts")
+        };
+        assert!(last.done());
+        reached += usize::from(last.terminated);
+        (observed, total) = (observed + sum, total + reward);
+    }
+    let after = allocs();
+    assert_eq!(after - before, 0, "allocations during 200 rollouts");
+    drop(std::hint::black_box(vec![1u8; 8]));
+    assert!(allocs() > after, "the counter counts this thread's allocations");
+    assert_eq!(observed, total, "the episode reward is the sum of the observed step rewards");
+    assert!(reached > 190, "the controller reaches: {reached} of 200");
+}
+
+/// A driver's stop leaves the episode under way; the next rollout continues it.
+#[test]
+fn a_stopped_rollout_continues_where_it_stopped() {
+    use stagerl::env::{rollout, Flow, Observed, Outcome, Scratch};
+    let cfg = stagerl::config::Config::default();
+    let mut env = stagerl::env::ReachEnv::from_config(&cfg, 3).unwrap();
+    let mut scratch = Scratch::new(&env);
+    env.reset();
+    let zero = |_: &stagerl::env::ReachEnv, a: &mut [f32]| {
+        a.fill(0.0);
+        Ok(())
+    };
+    let stop_at_3 =
+        |t: &stagerl::env::Transition<'_>| Ok(if t.env.steps() == 3 { Flow::Stop } else { Flow::Continue });
+    let first = rollout(&mut env, &mut scratch, &mut Observed(zero, stop_at_3)).unwrap();
+    assert_eq!((first, env.steps()), (Outcome::Stopped, 3));
+    let rest = rollout(&mut env, &mut scratch, &mut stagerl::env::Policy(zero)).unwrap();
+    assert!(matches!(rest, Outcome::Finished { last, .. } if last.truncated));
+    assert_eq!(env.steps(), cfg.task.max_steps);
 }
