@@ -166,6 +166,12 @@ impl Preset {
     }
 }
 
+/// Create the sweep directory `out` and record the preset's text in it (`preset.toml`).
+pub fn write_preset(out: &Path, text: &str) -> Result<()> {
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    crate::io::write_atomic(&out.join("preset.toml"), text.as_bytes())
+}
+
 /// The name of a config's run directory: `<algo>-<reward>-seed<seed>`.
 pub fn run_name(cfg: &Config) -> String {
     format!("{}-{}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed)

@@ -22,7 +22,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::config::Config;
-use crate::Result;
+use crate::{Error, Result};
 
 /// Paths inside a run directory.
 #[derive(Clone, Debug)]
@@ -85,10 +85,31 @@ impl RunDir {
     pub fn load_config(&self) -> Result<Config> {
         Config::load(&self.config())
     }
+    /// The directory holds a run (its `config.toml` exists).
+    pub fn holds_run(&self) -> bool {
+        self.config().exists()
+    }
+    /// Create the directory and check that files can be written in it, before any work goes
+    /// into a run that could not be saved.
+    pub fn ensure_writable(&self) -> Result<()> {
+        std::fs::create_dir_all(&self.root).map_err(|e| Error::io(&self.root, e))?;
+        let probe = self.root.join(format!(".write-test-{}", std::process::id()));
+        std::fs::write(&probe, b"").map_err(|e| Error::io(&self.root, e))?;
+        std::fs::remove_file(&probe).map_err(|e| Error::io(&probe, e))
+    }
     /// A directory is a run when it holds `config.toml` and `episodes.csv`.
     pub fn is_run(&self) -> bool {
         self.config().is_file() && self.episodes().is_file()
     }
+}
+
+/// The first directory `parent/<name>`, `parent/<name>-2`, ... that does not exist (a new run
+/// beside the old ones instead of over them).
+pub fn first_free(parent: &Path, name: &str) -> PathBuf {
+    (1..)
+        .map(|k| parent.join(if k == 1 { name.to_string() } else { format!("{name}-{k}") }))
+        .find(|p| !p.exists())
+        .expect("some directory name is free")
 }
 
 /// The seed in a per-trial evaluation file's name, `eval-seed<N>.csv`.

@@ -1,4 +1,4 @@
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use stagerl::experiment::{self, Preset, RunReport, RunStatus};
 use std::path::PathBuf;
 
@@ -30,8 +30,7 @@ pub fn run(args: Args) -> Result<()> {
     let (index, count) =
         experiment::resolve_shard(args.task_index, args.task_count, &|name| std::env::var(name).ok())?;
     let runs = experiment::shard(preset.runs(), index, count)?;
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    stagerl::io::write_atomic(&args.out.join("preset.toml"), text.as_bytes())?;
+    experiment::write_preset(&args.out, &text)?;
     let total = runs.len();
     println!(
         "reproduce `{}`: {} runs in this shard ({} of {}), {} at once -> {}",

@@ -5,7 +5,7 @@ use stagerl::reward::RewardFunction;
 use stagerl::train::{self, Progress, Resumed, RunDir, TrainOptions};
 use std::collections::VecDeque;
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -89,24 +89,16 @@ pub fn run(args: Args) -> Result<()> {
     // Without --out, the first free runs/<algo>-<reward>-seed<N>[-k]: running the same command
     // again starts a new run beside the old one instead of failing or overwriting it.
     let out = args.out.unwrap_or_else(|| {
-        let base = stagerl::experiment::run_name(&cfg);
-        (1..)
-            .map(|k| PathBuf::from("runs").join(if k == 1 { base.clone() } else { format!("{base}-{k}") }))
-            .find(|p| !p.exists())
-            .expect("some directory name is free")
+        stagerl::rundir::first_free(Path::new("runs"), &stagerl::experiment::run_name(&cfg))
     });
     let dir = RunDir::new(&out);
-    if dir.config().exists() && !args.force {
+    if dir.holds_run() && !args.force {
         bail!(
             "{} already holds a run (its config.toml exists): pass --force to replace it, or choose another --out",
             out.display()
         );
     }
-    std::fs::create_dir_all(&out).with_context(|| format!("creating the run directory {}", out.display()))?;
-    let probe = out.join(".write-test");
-    std::fs::write(&probe, b"")
-        .with_context(|| format!("the run directory {} is not writable", out.display()))?;
-    std::fs::remove_file(&probe).ok();
+    dir.ensure_writable().with_context(|| format!("the run directory {} is not writable", out.display()))?;
 
     println!(
         "training {} with reward {} on `{}`, seed {}, {} episodes -> {}",
