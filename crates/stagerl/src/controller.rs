@@ -30,7 +30,7 @@ impl JacobianController {
     }
 
     /// This controller as a rollout policy on an environment of its arm (for
-    /// [`crate::env::rollout`]).
+    /// [`crate::env::rollout()`]).
     pub fn policy(&mut self) -> impl FnMut(&ReachEnv, &mut [f32]) -> Result<()> + '_ {
         move |env, action| {
             self.act(env.chain(), env.joint_positions(), &env.target(), env.task().dt_s, action);

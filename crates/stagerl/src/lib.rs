@@ -9,7 +9,7 @@
 //!   geometric Jacobian.
 //! - [`reward`]: the paper's reward functions, eqs. 1-15 and 18, with every term exposed.
 //! - [`env`](mod@env): the random-target reaching task (single and vectorised), its `[task]`
-//!   section, and the one episode rollout of eq. 16 ([`env::rollout`]).
+//!   section, and the one episode rollout of eq. 16 ([`env::rollout()`]).
 //! - [`config`]: the TOML schema assembled from the sections the modules own, its defaults (the
 //!   paper's where it gives them) and validation; [`schedule`]: the `[train]` section.
 //! - [`controller`]: a scripted Jacobian controller, the reference the learned policies are
