@@ -36,6 +36,7 @@ pub mod reward;
 pub mod rng;
 pub mod robot;
 pub mod train;
+pub mod validate;
 
 pub use error::{Error, Result};
 /// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).

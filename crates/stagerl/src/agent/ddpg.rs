@@ -19,12 +19,13 @@ use super::{AgentConfig, Algo};
 /// DDPG's place in the TD3 family. Its critic keeps DDPG's checkpoint names (`critic`,
 /// `critic_target`, `critic_opt`).
 pub fn family(cfg: &AgentConfig) -> Family {
+    let d = cfg.ddpg();
     Family {
         algo: Algo::Ddpg,
         critics: &[["critic", "critic_target", "critic_opt"]],
         policy_delay: 1,
         target_smoothing: None,
-        noise: (cfg.noise, cfg.noise_sigma(), cfg.ou_theta),
+        noise: (d.noise, d.noise_sigma, d.ou_theta),
         salts: (0xDD96, 0xDD961),
     }
 }

@@ -11,7 +11,9 @@ mod parts;
 pub mod sac;
 pub mod td3;
 
-pub use config::{AgentConfig, Algo, NoiseKind, MAX_BATCH_VALUES, MAX_BUFFER_SIZE};
+pub use config::{
+    AgentConfig, Algo, DdpgConfig, NoiseKind, SacConfig, Td3Config, MAX_BATCH_VALUES, MAX_BUFFER_SIZE,
+};
 pub use parts::Learned;
 
 use crate::checkpoint::Checkpoint;

@@ -66,14 +66,14 @@ impl Sac {
         let q1 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
         let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
         let (q1_target, q2_target) = (q1.clone(), q2.clone());
-        let b = cfg.batch_size;
+        let (b, own) = (cfg.batch_size, cfg.sac());
         Sac {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
             q1_opt: Adam::new(q1.num_params(), cfg.critic_lr()),
             q2_opt: Adam::new(q2.num_params(), cfg.critic_lr()),
-            log_alpha: [cfg.init_alpha.ln() as f32],
-            alpha_opt: Adam::new(1, cfg.alpha_lr),
-            target_entropy: (cfg.target_entropy_per_dim * act_dim as f64) as f32,
+            log_alpha: [own.init_alpha.ln() as f32],
+            alpha_opt: Adam::new(1, own.alpha_lr),
+            target_entropy: (own.target_entropy_per_dim * act_dim as f64) as f32,
             head: SquashedGaussian::new(act_dim, LOG_STD),
             rng: Rng::derived(seed, 0x5AC1),
             eps: vec![0.0; b * act_dim],
@@ -192,7 +192,7 @@ impl Agent for Sac {
 
         // 3. Entropy coefficient.
         let mean_logp = self.next_logp[..b].iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64;
-        if !self.cfg.fixed_alpha {
+        if !self.cfg.sac().fixed_alpha {
             let grad = [-(mean_logp as f32 + self.target_entropy)];
             self.alpha_opt.step(&mut self.log_alpha, &grad);
         }

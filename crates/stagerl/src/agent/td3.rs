@@ -44,12 +44,13 @@ pub struct Family {
 impl Family {
     /// TD3 with the config's settings.
     pub fn td3(cfg: &AgentConfig) -> Family {
+        let t = cfg.td3();
         Family {
             algo: Algo::Td3,
             critics: &[["q1", "q1_target", "q1_opt"], ["q2", "q2_target", "q2_opt"]],
-            policy_delay: cfg.policy_delay,
-            target_smoothing: Some((cfg.target_noise, cfg.target_noise_clip)),
-            noise: (cfg.noise, cfg.noise_sigma(), cfg.ou_theta),
+            policy_delay: t.policy_delay,
+            target_smoothing: Some((t.target_noise, t.target_noise_clip)),
+            noise: (t.noise, t.noise_sigma, t.ou_theta),
             salts: (0x7D3, 0x7D31),
         }
     }
