@@ -9,12 +9,13 @@
 //!   geometric Jacobian.
 //! - [`reward`]: the paper's reward functions, eqs. 1-15 and 18, with every term exposed.
 //! - [`env`](mod@env): the random-target reaching task (single and vectorised).
-//! - [`config`]: the TOML schema, its defaults (the paper's where it gives them) and validation.
+//! - [`config`]: the TOML schema, its defaults (the paper's where it gives them) and validation;
+//!   [`validate`]: the value checks every section shares.
 //! - [`controller`]: a scripted Jacobian controller, the reference the learned policies are
 //!   measured against.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
-//! - [`agent`]: DDPG, TD3 and SAC; [`replay`]: their replay buffer; [`train`]: the off-policy
+//! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer; [`train`]: the off-policy
 //!   loop, evaluation and the run directory; [`checkpoint`], [`log`], [`io`]: what runs write.
 //!
 //! Units: metres, radians, seconds; quaternions are `(x, y, z, w)` on every interface.

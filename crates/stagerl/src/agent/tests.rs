@@ -143,15 +143,29 @@ fn part_names(agent: &dyn Agent) -> (Vec<String>, Vec<String>) {
 
 #[test]
 fn one_list_of_parts_drives_save_load_and_the_guard() {
-    let expected_nets: [(Algo, &[&str]); 3] = [
-        (Algo::Ddpg, &["actor", "critic", "actor_target", "critic_target"]),
-        (Algo::Td3, &["actor", "q1", "q2", "actor_target", "q1_target", "q2_target"]),
-        (Algo::Sac, &["actor", "q1", "q2", "q1_target", "q2_target"]),
+    // DDPG keeps its checkpoint names (`critic`, ...), TD3 and SAC theirs (`q1`, `q2`, ...).
+    let expected: [(Algo, &[&str], &[&str]); 3] = [
+        (
+            Algo::Ddpg,
+            &["actor", "critic", "actor_target", "critic_target"],
+            &["actor_opt", "critic_opt", "agent_rng", "agent_noise", "agent_updates"],
+        ),
+        (
+            Algo::Td3,
+            &["actor", "q1", "q2", "actor_target", "q1_target", "q2_target"],
+            &["actor_opt", "q1_opt", "q2_opt", "agent_rng", "agent_noise", "agent_updates"],
+        ),
+        (
+            Algo::Sac,
+            &["actor", "q1", "q2", "q1_target", "q2_target"],
+            &["log_alpha", "actor_opt", "q1_opt", "q2_opt", "alpha_opt", "agent_rng"],
+        ),
     ];
-    for (algo, nets) in expected_nets {
+    for (algo, nets, rest) in expected {
         let mut agent = build(&small_cfg(algo), 16, 6, 5).unwrap();
         let (names, others) = part_names(agent.as_ref());
         assert_eq!(names, nets, "{algo}");
+        assert_eq!(others, rest, "{algo}");
         // Saving writes every part of the list, and nothing else.
         let mut ck = Checkpoint::new();
         agent.save(&mut ck);
