@@ -190,7 +190,8 @@ impl Default for AgentConfig {
 }
 
 impl PartialEq for AgentConfig {
-    /// Equal when they describe the same agents: an absent section equals its defaults.
+    /// Equal when they describe the same agents: an absent section equals its defaults. (Every
+    /// field is compared; a new field must be added here.)
     fn eq(&self, other: &Self) -> bool {
         let shared = |c: &Self| {
             (
@@ -375,4 +376,50 @@ impl AgentConfig {
 fn validate_noise(section: &str, sigma: f64, theta: f64) -> Result<()> {
     non_negative(&format!("{section}.noise_sigma"), sigma)?;
     non_negative(&format!("{section}.ou_theta"), theta)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_absent_section_equals_its_defaults_and_only_the_runs_own_is_allowed() {
+        let td3 = AgentConfig::new(Algo::Td3);
+        let explicit = AgentConfig { td3: Some(Td3Config::default()), ..td3.clone() };
+        assert_eq!(td3, explicit);
+        let delayed =
+            AgentConfig { td3: Some(Td3Config { policy_delay: 3, ..Td3Config::default() }), ..td3.clone() };
+        assert_ne!(td3, delayed);
+        assert_ne!(td3, AgentConfig { gamma: 0.9, ..td3.clone() });
+        assert_ne!(td3, AgentConfig::new(Algo::Ddpg));
+        delayed.validate().unwrap();
+        // A SAC config with TD3's section is refused, naming both.
+        let sac = AgentConfig { algo: Algo::Sac, ..delayed.clone() };
+        let e = sac.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("`agent.td3`") && e.contains("[agent.sac]") && e.contains("agent.algo = \"sac\""),
+            "{e}"
+        );
+        sac.validate_values().unwrap();
+        // A run of a preset keeps its own section and drops the others.
+        let preset =
+            AgentConfig { sac: Some(SacConfig { fixed_alpha: true, ..SacConfig::default() }), ..sac };
+        let run = preset.for_algo(Algo::Td3);
+        assert_eq!((run.algo, run.sections()), (Algo::Td3, vec![Algo::Td3]));
+        assert_eq!(run.td3().policy_delay, 3);
+        let run = preset.for_algo(Algo::Ddpg);
+        assert_eq!(run.sections(), vec![]);
+        assert_eq!(run.resolved().sections(), vec![Algo::Ddpg]);
+    }
+
+    #[test]
+    fn a_moved_key_says_where_it_belongs() {
+        for (key, home) in MOVED_KEYS {
+            let table: toml::Table = toml::from_str(&format!("{key} = 1\n")).unwrap();
+            let m = AgentConfig::misplaced_key(&table).unwrap();
+            assert!(m.contains(&format!("`{key}` in [agent]")) && m.contains(home), "{m}");
+        }
+        let shared: toml::Table = toml::from_str("gamma = 0.9\nhidden = [8]\n").unwrap();
+        assert_eq!(AgentConfig::misplaced_key(&shared), None);
+    }
 }
