@@ -1,8 +1,8 @@
 //! The off-policy agents. Each algorithm reads top to bottom in its own file: [`td3`] (with
 //! DDPG, [`ddpg`], as its one-critic case, as in Stable-Baselines3) and [`sac`]. What they share
 //! (the [`Agent`] verbs, the one list of learned parts that drives saving, loading and the
-//! non-finite guard, exploration noise) lives here once. The replay buffer and the training loop are in [`crate::replay`] and
-//! [`crate::train`].
+//! non-finite guard, exploration noise) lives here once. The replay buffer and the training loop
+//! are in [`crate::replay`] and [`crate::train`].
 
 mod config;
 pub mod ddpg;
