@@ -35,33 +35,49 @@ pub struct Config {
 }
 
 impl Config {
-    /// Parse a TOML document; `origin` names it in error messages.
+    /// Parse a TOML document; `origin` names it in error messages. Every value is checked; a
+    /// section of another algorithm than `agent.algo` is allowed here (a command-line `--algo`
+    /// may pick the run's algorithm later; a preset holds one for each algorithm of its sweep)
+    /// and refused by [`Config::validate`], which every run calls.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Config> {
-        let cfg: Config = toml::from_str(text)
-            .map_err(|e| Error::ConfigParse { path: origin.to_path_buf(), message: e.to_string() })?;
-        cfg.validate()?;
+        let cfg: Config = toml::from_str(text).map_err(|e| {
+            let raw: Option<toml::Table> = toml::from_str(text).ok();
+            let agent = raw.as_ref().and_then(|t| t.get("agent")).and_then(toml::Value::as_table);
+            let message = agent.and_then(AgentConfig::misplaced_key).unwrap_or_else(|| e.to_string());
+            Error::ConfigParse { path: origin.to_path_buf(), message }
+        })?;
+        cfg.validate_values()?;
         Ok(cfg)
     }
 
-    /// Read, parse and validate a TOML file.
+    /// Read, parse and check a TOML file (see [`Config::from_toml_str`]).
     pub fn load(path: &Path) -> Result<Config> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         Config::from_toml_str(&text, path)
     }
 
-    /// The configuration as TOML, every field written out (the resolved config of a run).
+    /// The configuration as TOML, every field written out (the resolved config of a run); of
+    /// the agent's algorithm sections only the run's own.
     pub fn to_toml_string(&self) -> String {
-        toml::to_string_pretty(self).expect("the config is always representable in TOML")
+        let resolved = Config { agent: self.agent.resolved(), ..self.clone() };
+        toml::to_string_pretty(&resolved).expect("the config is always representable in TOML")
     }
 
-    /// Chain-independent checks of every section.
+    /// The checks of a run's config: every value, and no agent section of another algorithm
+    /// than the run's.
     pub fn validate(&self) -> Result<()> {
+        self.validate_values()?;
+        self.agent.validate()
+    }
+
+    /// Chain-independent checks of every value of every section.
+    fn validate_values(&self) -> Result<()> {
         if self.robot.urdf.trim().is_empty() {
             return Err(Error::config("robot.urdf", "\"\"", "\"ur5\" or a path to a URDF file"));
         }
         self.task.validate()?;
         self.reward.validate()?;
-        self.agent.validate()?;
+        self.agent.validate_values()?;
         self.train.validate()?;
         Ok(())
     }
@@ -148,6 +164,24 @@ mod tests {
         for (text, needle) in cases {
             let e = parse(text).expect_err(text).to_string();
             assert!(e.contains(needle), "error for {text:?} was {e:?}, expected it to mention {needle:?}");
+        }
+    }
+
+    #[test]
+    fn the_printed_default_holds_only_its_algorithms_section_and_round_trips() {
+        // `stagerl config` prints this; `train --config` must read it back unchanged.
+        let text = Config::default().to_toml_string();
+        assert!(text.contains("[agent.sac]") && text.contains("init_alpha = 1.0"), "{text}");
+        assert!(!text.contains("[agent.ddpg]") && !text.contains("[agent.td3]"), "{text}");
+        let back = parse(&text).unwrap();
+        back.validate().unwrap();
+        assert_eq!(back, Config::default());
+        assert_eq!(back.to_toml_string(), text);
+        for algo in crate::agent::Algo::ALL {
+            let c = Config { agent: AgentConfig::new(algo), ..Config::default() };
+            let text = c.to_toml_string();
+            assert!(text.contains(&format!("[agent.{algo}]")), "{text}");
+            assert_eq!(parse(&text).unwrap(), c, "{algo}");
         }
     }
 

@@ -2,7 +2,8 @@
 //! then evaluated on random targets, resumable and shardable across machines.
 //!
 //! A preset is a TOML file with a `[sweep]` section and, beside it, any sections of an ordinary
-//! [`Config`] that every run shares:
+//! [`Config`] that every run shares; `[agent.ddpg]`, `[agent.td3]` and `[agent.sac]` for each
+//! algorithm of the sweep, each run keeping only its own:
 //!
 //! ```toml
 //! [sweep]
@@ -13,6 +14,9 @@
 //!
 //! [train]
 //! episodes = 10000
+//!
+//! [agent.ddpg]
+//! noise = "ou"
 //! ```
 //!
 //! Run `i` of the sweep (algorithm-major, then reward, then seed) lives in
@@ -145,6 +149,17 @@ impl Preset {
         if s.eval_trials == 0 {
             return Err(Error::config("sweep.eval_trials", 0, "an integer >= 1"));
         }
+        if let Some(a) = self.base.agent.sections().into_iter().find(|a| !s.algorithms.contains(a)) {
+            let algos: Vec<&str> = s.algorithms.iter().map(|a| a.name()).collect();
+            return Err(Error::config(
+                format!("agent.{a}"),
+                format!("a [agent.{a}] section"),
+                format!("sections of the sweep's algorithms only ({})", algos.join(", ")),
+            ));
+        }
+        for &algo in &s.algorithms {
+            self.base.agent.for_algo(algo).validate()?;
+        }
         Ok(())
     }
 
@@ -155,7 +170,7 @@ impl Preset {
             for &reward in &self.sweep.rewards {
                 for &seed in &self.sweep.seeds {
                     let mut config = self.base.clone();
-                    config.agent.algo = algo;
+                    config.agent = self.base.agent.for_algo(algo);
                     config.reward.function = reward;
                     config.train.seed = seed;
                     out.push(RunSpec { index: out.len(), name: run_name(&config), config });
@@ -460,6 +475,52 @@ mod tests {
             let e = Preset::from_toml_str(text, Path::new("p.toml")).unwrap_err().to_string();
             assert!(e.contains(needle), "{text:?}: {e}");
         }
+    }
+
+    #[test]
+    fn each_run_keeps_only_its_algorithms_section() {
+        let text = format!(
+            "{PRESET}[agent]\ngamma = 0.9\n[agent.ddpg]\nnoise = \"ou\"\n[agent.sac]\ninit_alpha = 0.5\n"
+        );
+        let p = Preset::from_toml_str(&text, Path::new("p.toml")).unwrap();
+        for run in p.runs() {
+            let agent = &run.config.agent;
+            assert_eq!(agent.gamma, 0.9, "{}", run.name);
+            assert_eq!(agent.sections(), vec![agent.algo], "{}", run.name);
+            run.config.validate().unwrap();
+            let written = run.config.to_toml_string();
+            match agent.algo {
+                Algo::Ddpg => {
+                    assert_eq!(agent.ddpg().noise, crate::agent::NoiseKind::Ou);
+                    assert!(
+                        written.contains("[agent.ddpg]") && !written.contains("[agent.sac]"),
+                        "{written}"
+                    );
+                }
+                Algo::Sac => {
+                    assert_eq!(agent.sac().init_alpha, 0.5);
+                    assert!(
+                        written.contains("[agent.sac]") && !written.contains("[agent.ddpg]"),
+                        "{written}"
+                    );
+                }
+                Algo::Td3 => unreachable!("not in the sweep"),
+            }
+            // The run's resolved config.toml reads back as the same config.
+            assert_eq!(Config::from_toml_str(&written, Path::new("config.toml")).unwrap(), run.config);
+        }
+        // A section of an algorithm outside the sweep is refused, naming it and the sweep's.
+        let e =
+            Preset::from_toml_str(&format!("{PRESET}[agent.td3]\npolicy_delay = 3\n"), Path::new("p.toml"))
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("agent.td3") && e.contains("ddpg, sac"), "{e}");
+        // A section's values are checked like a run's.
+        let e =
+            Preset::from_toml_str(&format!("{PRESET}[agent.ddpg]\nnoise_sigma = -1\n"), Path::new("p.toml"))
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("agent.ddpg.noise_sigma"), "{e}");
     }
 
     #[test]

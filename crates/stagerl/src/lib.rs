@@ -11,15 +11,16 @@
 //! - [`env`](mod@env): the random-target reaching task (single and vectorised), its `[task]`
 //!   section, and the one episode rollout of eq. 16 ([`env::rollout()`]).
 //! - [`config`]: the TOML schema assembled from the sections the modules own, its defaults (the
-//!   paper's where it gives them) and validation; [`schedule`]: the `[train]` section.
+//!   paper's where it gives them) and validation; [`schedule`]: the `[train]` section;
+//!   [`validate`]: the value checks every section shares.
 //! - [`controller`]: a scripted Jacobian controller, the reference the learned policies are
 //!   measured against.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
-//! - [`agent`]: DDPG, TD3 and SAC; [`replay`]: their replay buffer; [`train`]: the off-policy
-//!   loop and evaluation; [`rundir`]: the run directory; [`checkpoint`], [`log`] (the CSV files
-//!   and TensorBoard), [`io`]: what runs write; [`experiment`]: sweeps; [`metrics`], [`report`]:
-//!   the paper's indicators, tables and figures.
+//! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
+//!   [`train`]: the off-policy loop and evaluation; [`rundir`]: the run directory; [`checkpoint`],
+//!   [`log`] (the CSV files and TensorBoard), [`io`]: what runs write; [`experiment`]: sweeps;
+//!   [`metrics`], [`report`]: the paper's indicators, tables and figures.
 //!
 //! Units: metres, radians, seconds; quaternions are `(x, y, z, w)` on every interface.
 
@@ -42,6 +43,7 @@ pub mod robot;
 pub mod rundir;
 pub mod schedule;
 pub mod train;
+pub mod validate;
 
 pub use error::{Error, Result};
 /// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).

@@ -127,24 +127,9 @@ impl Default for RewardConfig {
 impl RewardConfig {
     /// Check every value; the error names the field, the value and what is allowed.
     pub fn validate(&self) -> Result<()> {
-        let positive = |field: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::config(field, v, "a finite number > 0"))
-            }
-        };
-        let non_negative = |field: &str, v: f64| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(Error::config(field, v, "a finite number >= 0"))
-            }
-        };
+        use crate::validate::{finite, non_negative, positive};
         positive("reward.beta_m", self.beta_m)?;
-        if !self.success_bonus.is_finite() {
-            return Err(Error::config("reward.success_bonus", self.success_bonus, "a finite number"));
-        }
+        finite("reward.success_bonus", self.success_bonus)?;
         non_negative("reward.har_boundary_m", self.har_boundary_m)?;
         non_negative("reward.sar_sigma1", self.sar_sigma1)?;
         non_negative("reward.sar_sigma2", self.sar_sigma2)?;

@@ -80,7 +80,7 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[train]\nepisodes = -5\n", expect: "episodes" },
     Cfg { toml: "[agent]\nalgo = \"ppo\"\n", expect: "ppo" },
     Cfg { toml: "[reward]\nfunction = \"SAR\"\n", expect: "SAR" },
-    Cfg { toml: "[agent]\nnoise = \"pink\"\n", expect: "pink" },
+    Cfg { toml: "[agent.ddpg]\nnoise = \"pink\"\n", expect: "pink" },
     Cfg { toml: "[task]\nobservation = \"pixels\"\n", expect: "pixels" },
     Cfg { toml: "reward = 3\n", expect: "reward" },
     // Malformed TOML: the message names the file and the line.
@@ -89,7 +89,7 @@ const CONFIGS: &[Cfg] = &[
     // Unknown fields and sections.
     Cfg { toml: "[task]\nmax_step = 10\n", expect: "unknown field `max_step`" },
     Cfg { toml: "[optimizer]\nlr = 1e-3\n", expect: "unknown field `optimizer`" },
-    Cfg { toml: "[agent.sac]\nalpha = 0.2\n", expect: "unknown field `sac`" },
+    Cfg { toml: "[agent.sac]\nalpha = 0.2\n", expect: "unknown field `alpha`" },
     // Out-of-range values.
     Cfg { toml: "[task]\ndt_s = -0.05\n", expect: "task.dt_s" },
     Cfg { toml: "[task]\nmax_steps = 0\n", expect: "task.max_steps" },
@@ -133,9 +133,15 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[agent]\nbatch_size = 100000000000\n", expect: "agent.batch_size" },
     Cfg { toml: "[agent]\nbuffer_size = 100000000000000\n", expect: "agent.buffer_size" },
     Cfg { toml: "[agent]\nupdates_per_step = 0\n", expect: "agent.updates_per_step" },
-    Cfg { toml: "[agent]\npolicy_delay = 0\n", expect: "agent.policy_delay" },
-    Cfg { toml: "[agent]\nnoise_sigma = -0.1\n", expect: "agent.noise_sigma" },
-    Cfg { toml: "[agent]\ninit_alpha = 0\n", expect: "agent.init_alpha" },
+    Cfg { toml: "[agent]\nalgo = \"td3\"\n[agent.td3]\npolicy_delay = 0\n", expect: "agent.td3.policy_delay" },
+    Cfg { toml: "[agent]\nalgo = \"ddpg\"\n[agent.ddpg]\nnoise_sigma = -0.1\n", expect: "agent.ddpg.noise_sigma" },
+    Cfg { toml: "[agent.td3]\nou_theta = nan\n", expect: "agent.td3.ou_theta" },
+    Cfg { toml: "[agent.sac]\ninit_alpha = 0\n", expect: "agent.sac.init_alpha" },
+    // Algorithm settings belong in their algorithm's section.
+    Cfg { toml: "[agent]\npolicy_delay = 2\n", expect: "`policy_delay` in [agent] (= 2): it is an algorithm's own setting and belongs in [agent.td3]" },
+    Cfg { toml: "[agent]\nalgo = \"ddpg\"\nnoise = \"ou\"\n", expect: "belongs in [agent.ddpg] or [agent.td3]" },
+    Cfg { toml: "[agent]\ninit_alpha = 0.5\n", expect: "belongs in [agent.sac]" },
+    Cfg { toml: "[agent.sac]\npolicy_delay = 2\n", expect: "unknown field `policy_delay`" },
     Cfg { toml: "[train]\nepisodes = 0\n", expect: "train.episodes" },
     Cfg { toml: "[train]\neval_trials = 0\n", expect: "train.eval_trials" },
 ];
@@ -478,4 +484,23 @@ fn bad_checkpoints_are_refused_and_nothing_on_disk_changes() {
     failures.extend(expect_err("checkpoint case `directory`", "cases", || load_agent(&cfg, &env, &cases)));
     assert_eq!(snapshot(&runs), runs_before, "the runs' files changed");
     report(failures, CHECKPOINTS.len() + 1);
+}
+
+#[test]
+fn train_refuses_a_section_of_another_algorithm() {
+    // A SAC run whose config sets TD3's section: parsing allows it (a `--algo td3` may follow),
+    // training refuses it, naming the section and the run's algorithm, before writing anything.
+    let dir = Scratch::new("other-section");
+    let path = dir.0.join("sac-with-td3.toml");
+    std::fs::write(&path, "[agent]\nalgo = \"sac\"\n[agent.td3]\npolicy_delay = 3\n").unwrap();
+    let cfg = Config::load(&path).unwrap();
+    let out = dir.0.join("run");
+    let e = train(&cfg, &out, |_| {}).unwrap_err().to_string();
+    assert!(e.contains("`agent.td3`") && e.contains("agent.algo = \"sac\""), "{e}");
+    assert!(!out.join("config.toml").exists(), "nothing written for a refused config");
+    // The same file picks TD3 once the run's algorithm is TD3.
+    let mut td3 = cfg.clone();
+    td3.agent.algo = Algo::Td3;
+    td3.validate().unwrap();
+    assert_eq!(td3.agent.td3().policy_delay, 3);
 }

@@ -1,9 +1,14 @@
-//! Agent hyper-parameters (the `[agent]` section).
+//! Agent hyper-parameters: the `[agent]` section holds what every algorithm shares, and
+//! `[agent.ddpg]`, `[agent.td3]`, `[agent.sac]` what is each algorithm's own. A run's config holds
+//! at most its own algorithm's section (absent: that algorithm's defaults); a sweep preset may
+//! hold one for each algorithm of its sweep, and each run keeps only its own
+//! ([`AgentConfig::for_algo`]).
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
+use crate::validate::{at_least_one, finite, non_negative, positive};
 use crate::{Error, Result};
 
 /// The learning algorithm.
@@ -55,17 +60,14 @@ pub enum NoiseKind {
     Ou,
 }
 
-/// Default exploration noise of DDPG and TD3 (action units).
-const NOISE_DEFAULT: f64 = 0.1;
-
 /// Largest replay capacity, transitions (the paper's 10000 episodes make at most 500000).
 pub const MAX_BUFFER_SIZE: usize = 100_000_000;
 
 /// Largest `batch_size x widest hidden layer`: 2^28 f32 values, 1 GiB per activation matrix.
 pub const MAX_BATCH_VALUES: usize = 1 << 28;
 
-/// Hyper-parameters of the agents; each algorithm reads the ones it uses.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// Hyper-parameters of the agents: the `[agent]` section.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AgentConfig {
     pub algo: Algo,
@@ -92,27 +94,78 @@ pub struct AgentConfig {
     pub updates_per_step: u32,
     /// Clip each network's gradient to this global L2 norm; 0 disables.
     pub max_grad_norm: f64,
-    /// DDPG/TD3 exploration noise kind.
+    /// `[agent.ddpg]`; unset: [`DdpgConfig::default`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ddpg: Option<DdpgConfig>,
+    /// `[agent.td3]`; unset: [`Td3Config::default`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub td3: Option<Td3Config>,
+    /// `[agent.sac]`; unset: [`SacConfig::default`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sac: Option<SacConfig>,
+}
+
+/// `[agent.ddpg]`: DDPG's exploration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DdpgConfig {
+    /// Exploration noise kind.
     pub noise: NoiseKind,
-    /// DDPG/TD3 exploration noise scale (action units, actions in [-1, 1]); unset: the
-    /// algorithm's default ([`AgentConfig::noise_sigma`]).
-    pub noise_sigma: Option<f64>,
+    /// Exploration noise scale sigma (action units, actions in [-1, 1]).
+    pub noise_sigma: f64,
     /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
     pub ou_theta: f64,
-    /// TD3: actor and target updates every this many critic updates.
+}
+
+impl Default for DdpgConfig {
+    fn default() -> Self {
+        DdpgConfig { noise: NoiseKind::Gaussian, noise_sigma: 0.1, ou_theta: 0.15 }
+    }
+}
+
+/// `[agent.td3]`: TD3's exploration, policy delay and target policy smoothing.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Td3Config {
+    /// Exploration noise kind.
+    pub noise: NoiseKind,
+    /// Exploration noise scale sigma (action units, actions in [-1, 1]).
+    pub noise_sigma: f64,
+    /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
+    pub ou_theta: f64,
+    /// Actor and target updates every this many critic updates.
     pub policy_delay: u32,
-    /// TD3: target policy smoothing noise sigma.
+    /// Target policy smoothing noise sigma (action units).
     pub target_noise: f64,
-    /// TD3: clip of the smoothing noise.
+    /// Clip of the smoothing noise (action units).
     pub target_noise_clip: f64,
-    /// SAC: learning rate of log(alpha).
+}
+
+impl Default for Td3Config {
+    fn default() -> Self {
+        let DdpgConfig { noise, noise_sigma, ou_theta } = DdpgConfig::default();
+        Td3Config { noise, noise_sigma, ou_theta, policy_delay: 2, target_noise: 0.2, target_noise_clip: 0.5 }
+    }
+}
+
+/// `[agent.sac]`: SAC's entropy coefficient.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SacConfig {
+    /// Learning rate of log(alpha).
     pub alpha_lr: f64,
-    /// SAC: initial entropy coefficient alpha.
+    /// Initial entropy coefficient alpha.
     pub init_alpha: f64,
-    /// SAC: target entropy per action dimension (the usual choice: -1, i.e. -act_dim in total).
+    /// Target entropy per action dimension (the usual choice: -1, i.e. -act_dim in total).
     pub target_entropy_per_dim: f64,
-    /// SAC: fix alpha at `init_alpha` instead of tuning it.
+    /// Fix alpha at `init_alpha` instead of tuning it.
     pub fixed_alpha: bool,
+}
+
+impl Default for SacConfig {
+    fn default() -> Self {
+        SacConfig { alpha_lr: 3e-4, init_alpha: 1.0, target_entropy_per_dim: -1.0, fixed_alpha: false }
+    }
 }
 
 impl Default for AgentConfig {
@@ -129,21 +182,50 @@ impl Default for AgentConfig {
             learning_starts: 1000,
             updates_per_step: 1,
             max_grad_norm: 0.0,
-            noise: NoiseKind::Gaussian,
-            noise_sigma: None,
-            ou_theta: 0.15,
-            policy_delay: 2,
-            target_noise: 0.2,
-            target_noise_clip: 0.5,
-            alpha_lr: 3e-4,
-            init_alpha: 1.0,
-            target_entropy_per_dim: -1.0,
-            fixed_alpha: false,
+            ddpg: None,
+            td3: None,
+            sac: None,
         }
     }
 }
 
+impl PartialEq for AgentConfig {
+    /// Equal when they describe the same agents: an absent section equals its defaults. (Every
+    /// field is compared; a new field must be added here.)
+    fn eq(&self, other: &Self) -> bool {
+        let shared = |c: &Self| {
+            (
+                c.algo,
+                c.hidden.clone(),
+                (c.actor_lr, c.critic_lr, c.gamma, c.tau),
+                (c.batch_size, c.buffer_size, c.learning_starts, c.updates_per_step, c.max_grad_norm),
+            )
+        };
+        shared(self) == shared(other)
+            && (self.ddpg(), self.td3(), self.sac()) == (other.ddpg(), other.td3(), other.sac())
+    }
+}
+
+/// Keys that moved from `[agent]` into an algorithm's section, and where they belong.
+const MOVED_KEYS: [(&str, &str); 10] = [
+    ("noise", "[agent.ddpg] or [agent.td3]"),
+    ("noise_sigma", "[agent.ddpg] or [agent.td3]"),
+    ("ou_theta", "[agent.ddpg] or [agent.td3]"),
+    ("policy_delay", "[agent.td3]"),
+    ("target_noise", "[agent.td3]"),
+    ("target_noise_clip", "[agent.td3]"),
+    ("alpha_lr", "[agent.sac]"),
+    ("init_alpha", "[agent.sac]"),
+    ("target_entropy_per_dim", "[agent.sac]"),
+    ("fixed_alpha", "[agent.sac]"),
+];
+
 impl AgentConfig {
+    /// The default config of `algo`.
+    pub fn new(algo: Algo) -> AgentConfig {
+        AgentConfig { algo, ..AgentConfig::default() }
+    }
+
     /// The actor's learning rate: as set, else 1e-3 for SAC and 3e-4 for DDPG and TD3 (measured
     /// on the reaching task: SAC at 3e-4 learns about twice as slowly; DDPG at 1e-3 diverges).
     pub fn actor_lr(&self) -> f64 {
@@ -161,27 +243,80 @@ impl AgentConfig {
         })
     }
 
-    /// DDPG/TD3 exploration noise: as set, else NOISE_DEFAULT.
-    pub fn noise_sigma(&self) -> f64 {
-        self.noise_sigma.unwrap_or(NOISE_DEFAULT)
+    /// DDPG's settings: `[agent.ddpg]`, else its defaults.
+    pub fn ddpg(&self) -> DdpgConfig {
+        self.ddpg.unwrap_or_default()
     }
 
-    /// Check every value; the error names the field, the value and what is allowed.
+    /// TD3's settings: `[agent.td3]`, else its defaults.
+    pub fn td3(&self) -> Td3Config {
+        self.td3.unwrap_or_default()
+    }
+
+    /// SAC's settings: `[agent.sac]`, else its defaults.
+    pub fn sac(&self) -> SacConfig {
+        self.sac.unwrap_or_default()
+    }
+
+    /// The config of one run of `algo` from a preset's: only that algorithm's section is kept.
+    pub fn for_algo(&self, algo: Algo) -> AgentConfig {
+        let mut c = AgentConfig { algo, ddpg: None, td3: None, sac: None, ..self.clone() };
+        match algo {
+            Algo::Ddpg => c.ddpg = self.ddpg,
+            Algo::Td3 => c.td3 = self.td3,
+            Algo::Sac => c.sac = self.sac,
+        }
+        c
+    }
+
+    /// The config written out (a run's `config.toml`, `stagerl config`): the run's algorithm's
+    /// section with every value, no other.
+    pub fn resolved(&self) -> AgentConfig {
+        let mut c = self.for_algo(self.algo);
+        match self.algo {
+            Algo::Ddpg => c.ddpg = Some(self.ddpg()),
+            Algo::Td3 => c.td3 = Some(self.td3()),
+            Algo::Sac => c.sac = Some(self.sac()),
+        }
+        c
+    }
+
+    /// The algorithms whose sections are set.
+    pub fn sections(&self) -> Vec<Algo> {
+        let set = [self.ddpg.is_some(), self.td3.is_some(), self.sac.is_some()];
+        Algo::ALL.into_iter().zip(set).filter(|(_, s)| *s).map(|(a, _)| a).collect()
+    }
+
+    /// For a parse error of a config file: when its `[agent]` table (`agent`) holds a key that
+    /// belongs in an algorithm's section, an error saying where it belongs.
+    pub fn misplaced_key(agent: &toml::Table) -> Option<String> {
+        let (key, home) = MOVED_KEYS.iter().find(|(k, _)| agent.contains_key(*k))?;
+        Some(format!(
+            "unknown field `{key}` in [agent] (= {}): it is an algorithm's own setting and belongs in {home}",
+            agent[*key]
+        ))
+    }
+
+    /// Check every value and that no section of another algorithm than `algo` is set; the error
+    /// names the field, the value and what is allowed.
     pub fn validate(&self) -> Result<()> {
-        let pos = |field: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::config(field, v, "a finite number > 0"))
-            }
-        };
-        let nonneg = |field: &str, v: f64| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(Error::config(field, v, "a finite number >= 0"))
-            }
-        };
+        self.validate_values()?;
+        match self.sections().into_iter().find(|&a| a != self.algo) {
+            Some(other) => Err(Error::config(
+                format!("agent.{other}"),
+                format!("a [agent.{other}] section"),
+                format!(
+                    "only [agent.{algo}], the section of this run's algorithm (agent.algo = \"{algo}\"): \
+                     remove [agent.{other}] or run {other}",
+                    algo = self.algo
+                ),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Check every value, of the shared settings and of each section set (of any algorithm).
+    pub fn validate_values(&self) -> Result<()> {
         if self.hidden.is_empty() || self.hidden.iter().any(|&h| h == 0 || h > 16384) {
             return Err(Error::config(
                 "agent.hidden",
@@ -189,8 +324,8 @@ impl AgentConfig {
                 "one or more layer widths, each in 1..=16384",
             ));
         }
-        pos("agent.actor_lr", self.actor_lr())?;
-        pos("agent.critic_lr", self.critic_lr())?;
+        positive("agent.actor_lr", self.actor_lr())?;
+        positive("agent.critic_lr", self.critic_lr())?;
         if !(self.gamma.is_finite() && (0.0..=1.0).contains(&self.gamma)) {
             return Err(Error::config("agent.gamma", self.gamma, "a number in [0, 1]"));
         }
@@ -217,26 +352,74 @@ impl AgentConfig {
                 format!("an integer in 1..={MAX_BUFFER_SIZE} (transitions; the buffer is preallocated)"),
             ));
         }
-        if self.updates_per_step == 0 {
-            return Err(Error::config("agent.updates_per_step", 0, "an integer >= 1"));
+        at_least_one("agent.updates_per_step", self.updates_per_step.into())?;
+        non_negative("agent.max_grad_norm", self.max_grad_norm)?;
+        if let Some(d) = &self.ddpg {
+            validate_noise("agent.ddpg", d.noise_sigma, d.ou_theta)?;
         }
-        nonneg("agent.max_grad_norm", self.max_grad_norm)?;
-        nonneg("agent.noise_sigma", self.noise_sigma())?;
-        nonneg("agent.ou_theta", self.ou_theta)?;
-        if self.policy_delay == 0 {
-            return Err(Error::config("agent.policy_delay", 0, "an integer >= 1"));
+        if let Some(t) = &self.td3 {
+            validate_noise("agent.td3", t.noise_sigma, t.ou_theta)?;
+            at_least_one("agent.td3.policy_delay", t.policy_delay.into())?;
+            non_negative("agent.td3.target_noise", t.target_noise)?;
+            non_negative("agent.td3.target_noise_clip", t.target_noise_clip)?;
         }
-        nonneg("agent.target_noise", self.target_noise)?;
-        nonneg("agent.target_noise_clip", self.target_noise_clip)?;
-        pos("agent.alpha_lr", self.alpha_lr)?;
-        pos("agent.init_alpha", self.init_alpha)?;
-        if !self.target_entropy_per_dim.is_finite() {
-            return Err(Error::config(
-                "agent.target_entropy_per_dim",
-                self.target_entropy_per_dim,
-                "a finite number",
-            ));
+        if let Some(s) = &self.sac {
+            positive("agent.sac.alpha_lr", s.alpha_lr)?;
+            positive("agent.sac.init_alpha", s.init_alpha)?;
+            finite("agent.sac.target_entropy_per_dim", s.target_entropy_per_dim)?;
         }
         Ok(())
+    }
+}
+
+/// The exploration noise of `[agent.ddpg]` or `[agent.td3]` (`section`).
+fn validate_noise(section: &str, sigma: f64, theta: f64) -> Result<()> {
+    non_negative(&format!("{section}.noise_sigma"), sigma)?;
+    non_negative(&format!("{section}.ou_theta"), theta)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_absent_section_equals_its_defaults_and_only_the_runs_own_is_allowed() {
+        let td3 = AgentConfig::new(Algo::Td3);
+        let explicit = AgentConfig { td3: Some(Td3Config::default()), ..td3.clone() };
+        assert_eq!(td3, explicit);
+        let delayed =
+            AgentConfig { td3: Some(Td3Config { policy_delay: 3, ..Td3Config::default() }), ..td3.clone() };
+        assert_ne!(td3, delayed);
+        assert_ne!(td3, AgentConfig { gamma: 0.9, ..td3.clone() });
+        assert_ne!(td3, AgentConfig::new(Algo::Ddpg));
+        delayed.validate().unwrap();
+        // A SAC config with TD3's section is refused, naming both.
+        let sac = AgentConfig { algo: Algo::Sac, ..delayed.clone() };
+        let e = sac.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("`agent.td3`") && e.contains("[agent.sac]") && e.contains("agent.algo = \"sac\""),
+            "{e}"
+        );
+        sac.validate_values().unwrap();
+        // A run of a preset keeps its own section and drops the others.
+        let preset =
+            AgentConfig { sac: Some(SacConfig { fixed_alpha: true, ..SacConfig::default() }), ..sac };
+        let run = preset.for_algo(Algo::Td3);
+        assert_eq!((run.algo, run.sections()), (Algo::Td3, vec![Algo::Td3]));
+        assert_eq!(run.td3().policy_delay, 3);
+        let run = preset.for_algo(Algo::Ddpg);
+        assert_eq!(run.sections(), vec![]);
+        assert_eq!(run.resolved().sections(), vec![Algo::Ddpg]);
+    }
+
+    #[test]
+    fn a_moved_key_says_where_it_belongs() {
+        for (key, home) in MOVED_KEYS {
+            let table: toml::Table = toml::from_str(&format!("{key} = 1\n")).unwrap();
+            let m = AgentConfig::misplaced_key(&table).unwrap();
+            assert!(m.contains(&format!("`{key}` in [agent]")) && m.contains(home), "{m}");
+        }
+        let shared: toml::Table = toml::from_str("gamma = 0.9\nhidden = [8]\n").unwrap();
+        assert_eq!(AgentConfig::misplaced_key(&shared), None);
     }
 }

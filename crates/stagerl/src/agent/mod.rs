@@ -1,20 +1,25 @@
-//! The off-policy agents. Each algorithm reads top to bottom in its own file ([`ddpg`], [`td3`],
-//! [`sac`]); what they share (the [`Agent`] verbs, checkpoint helpers, exploration noise) lives
-//! here once. The replay buffer and the training loop are in [`crate::replay`] and
-//! [`crate::train`].
+//! The off-policy agents. Each algorithm reads top to bottom in its own file: [`td3`] (with
+//! DDPG, [`ddpg`], as its one-critic case, as in Stable-Baselines3) and [`sac`]. What they share
+//! (the [`Agent`] verbs, the one list of learned parts that drives saving, loading and the
+//! non-finite guard, exploration noise) lives here once. The replay buffer and the training loop
+//! are in [`crate::replay`] and [`crate::train`].
 
 mod config;
 pub mod ddpg;
 pub mod noise;
+mod parts;
 pub mod sac;
 pub mod td3;
 
-pub use config::{AgentConfig, Algo, NoiseKind, MAX_BATCH_VALUES, MAX_BUFFER_SIZE};
+pub use config::{
+    AgentConfig, Algo, DdpgConfig, NoiseKind, SacConfig, Td3Config, MAX_BATCH_VALUES, MAX_BUFFER_SIZE,
+};
+pub use parts::Learned;
 
 use crate::checkpoint::Checkpoint;
-use crate::nn::{first_non_finite, Adam, Mlp};
+use crate::nn::{Adam, Mlp};
 use crate::replay::Batch;
-use crate::{Error, Result};
+use crate::Result;
 
 /// What one gradient update measured.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -29,8 +34,9 @@ pub struct UpdateStats {
     pub entropy: Option<f64>,
 }
 
-/// The verbs every agent offers.
-pub trait Agent: Send {
+/// The verbs every agent offers. Saving, loading and the non-finite check are derived from the
+/// agent's one list of learned parts ([`Learned`]).
+pub trait Agent: Send + Learned {
     /// Which algorithm.
     fn algo(&self) -> Algo;
     /// Observation length.
@@ -45,19 +51,40 @@ pub trait Agent: Send {
     fn begin_episode(&mut self) {}
     /// One gradient update on a sampled batch.
     fn update(&mut self, batch: &Batch) -> UpdateStats;
+
     /// Write every network, target network, optimiser state and random state to `ck`.
-    fn save(&self, ck: &mut Checkpoint);
+    fn save(&self, ck: &mut Checkpoint) {
+        self.parts(&mut |name, part| part.save(ck, name));
+    }
+
     /// Restore what [`Agent::save`] wrote; shapes must match this agent's.
-    fn load(&mut self, ck: &Checkpoint) -> Result<()>;
+    fn load(&mut self, ck: &Checkpoint) -> Result<()> {
+        let mut result = Ok(());
+        self.parts_mut(&mut |name, part| {
+            if result.is_ok() {
+                result = part.load(ck, name);
+            }
+        });
+        result
+    }
+
     /// The first non-finite parameter or gradient, described (network, tensor, index).
-    fn first_non_finite(&self) -> Option<String>;
+    fn first_non_finite(&self) -> Option<String> {
+        let mut found = None;
+        self.parts(&mut |name, part| {
+            if found.is_none() {
+                found = part.first_non_finite(name);
+            }
+        });
+        found
+    }
 }
 
 /// Build the agent the config asks for. `seed` fixes its initial weights and its noise.
 pub fn build(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Result<Box<dyn Agent>> {
     cfg.validate()?;
     Ok(match cfg.algo {
-        Algo::Ddpg => Box::new(ddpg::Ddpg::new(cfg, obs_dim, act_dim, seed)),
+        Algo::Ddpg => Box::new(ddpg::new(cfg, obs_dim, act_dim, seed)),
         Algo::Td3 => Box::new(td3::Td3::new(cfg, obs_dim, act_dim, seed)),
         Algo::Sac => Box::new(sac::Sac::new(cfg, obs_dim, act_dim, seed)),
     })
@@ -70,68 +97,6 @@ pub(crate) fn sizes(input: usize, hidden: &[usize], output: usize) -> Vec<usize>
     s.extend_from_slice(hidden);
     s.push(output);
     s
-}
-
-/// Save a network's tensors as `{prefix}.layer{i}.weight|bias`.
-pub(crate) fn save_mlp(ck: &mut Checkpoint, prefix: &str, net: &Mlp<f32>) {
-    for t in net.tensors() {
-        ck.put_tensor(&format!("{prefix}.{}", t.name), &t.shape, &net.params()[t.range()]);
-    }
-}
-
-/// Load a network saved by [`save_mlp`]; every tensor's shape must match and every value be
-/// finite (a damaged network would only show later, as a NaN action).
-pub(crate) fn load_mlp(ck: &Checkpoint, prefix: &str, net: &mut Mlp<f32>) -> Result<()> {
-    for t in net.tensors() {
-        let name = format!("{prefix}.{}", t.name);
-        let (shape, data) = ck.tensor(&name)?;
-        if shape != t.shape.as_slice() {
-            return Err(Error::InvalidInput(format!(
-                "{}: tensor `{name}` has shape {shape:?}, this agent's has {:?} \
-                 (a different network size or observation?)",
-                ck.name(),
-                t.shape
-            )));
-        }
-        if let Some(i) = first_non_finite(data) {
-            return Err(Error::InvalidInput(format!(
-                "{}: tensor `{name}`[{i}] = {} is not finite: the network is damaged",
-                ck.name(),
-                data[i]
-            )));
-        }
-        net.params_mut()[t.range()].copy_from_slice(data);
-    }
-    Ok(())
-}
-
-/// Save an optimiser's moments (`{prefix}.m`, `{prefix}.v`) and step count.
-pub(crate) fn save_adam(ck: &mut Checkpoint, prefix: &str, opt: &Adam<f32>) {
-    ck.put_tensor(&format!("{prefix}.m"), &[opt.m.len()], &opt.m);
-    ck.put_tensor(&format!("{prefix}.v"), &[opt.v.len()], &opt.v);
-    ck.put_json(&format!("{prefix}.step"), &opt.step);
-}
-
-/// Load what [`save_adam`] wrote.
-pub(crate) fn load_adam(ck: &Checkpoint, prefix: &str, opt: &mut Adam<f32>) -> Result<()> {
-    ck.read_tensor_into(&format!("{prefix}.m"), &mut opt.m)?;
-    ck.read_tensor_into(&format!("{prefix}.v"), &mut opt.v)?;
-    opt.step = ck.json(&format!("{prefix}.step"))?;
-    Ok(())
-}
-
-/// Describe the first non-finite parameter or gradient among named networks.
-pub(crate) fn find_non_finite(nets: &[(&str, &Mlp<f32>)]) -> Option<String> {
-    for (name, net) in nets {
-        for (what, values) in [("parameter", net.params()), ("gradient", net.grads())] {
-            if let Some(i) = first_non_finite(values) {
-                let tensor = net.tensors().into_iter().find(|t| t.range().contains(&i));
-                let tname = tensor.map(|t| t.name).unwrap_or_default();
-                return Some(format!("{name} {what} {tname}[{i}] = {}", values[i]));
-            }
-        }
-    }
-    None
 }
 
 /// Clip a gradient to a global L2 norm when `max_norm > 0`.

@@ -13,15 +13,11 @@
 //!    (times `target_entropy_per_dim`);
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
 
-use super::{
-    find_non_finite, fit_critic, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig,
-    Algo, UpdateStats,
-};
-use crate::checkpoint::Checkpoint;
+use super::parts::learned_parts;
+use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, UpdateStats};
 use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
 use crate::replay::Batch;
 use crate::rng::Rng;
-use crate::Result;
 
 /// The log-std range of the actor (CleanRL's).
 const LOG_STD: LogStdBound = LogStdBound::Tanh { min: -5.0, max: 2.0 };
@@ -70,14 +66,14 @@ impl Sac {
         let q1 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
         let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
         let (q1_target, q2_target) = (q1.clone(), q2.clone());
-        let b = cfg.batch_size;
+        let (b, own) = (cfg.batch_size, cfg.sac());
         Sac {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
             q1_opt: Adam::new(q1.num_params(), cfg.critic_lr()),
             q2_opt: Adam::new(q2.num_params(), cfg.critic_lr()),
-            log_alpha: [cfg.init_alpha.ln() as f32],
-            alpha_opt: Adam::new(1, cfg.alpha_lr),
-            target_entropy: (cfg.target_entropy_per_dim * act_dim as f64) as f32,
+            log_alpha: [own.init_alpha.ln() as f32],
+            alpha_opt: Adam::new(1, own.alpha_lr),
+            target_entropy: (own.target_entropy_per_dim * act_dim as f64) as f32,
             head: SquashedGaussian::new(act_dim, LOG_STD),
             rng: Rng::derived(seed, 0x5AC1),
             eps: vec![0.0; b * act_dim],
@@ -196,7 +192,7 @@ impl Agent for Sac {
 
         // 3. Entropy coefficient.
         let mean_logp = self.next_logp[..b].iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64;
-        if !self.cfg.fixed_alpha {
+        if !self.cfg.sac().fixed_alpha {
             let grad = [-(mean_logp as f32 + self.target_entropy)];
             self.alpha_opt.step(&mut self.log_alpha, &grad);
         }
@@ -213,46 +209,18 @@ impl Agent for Sac {
             entropy: Some(-mean_logp),
         }
     }
-
-    fn save(&self, ck: &mut Checkpoint) {
-        save_mlp(ck, "actor", &self.actor);
-        save_mlp(ck, "q1", &self.q1);
-        save_mlp(ck, "q2", &self.q2);
-        save_mlp(ck, "q1_target", &self.q1_target);
-        save_mlp(ck, "q2_target", &self.q2_target);
-        save_adam(ck, "actor_opt", &self.actor_opt);
-        save_adam(ck, "q1_opt", &self.q1_opt);
-        save_adam(ck, "q2_opt", &self.q2_opt);
-        save_adam(ck, "alpha_opt", &self.alpha_opt);
-        ck.put_tensor("log_alpha", &[1], &self.log_alpha);
-        ck.put_json("agent_rng", &self.rng);
-    }
-
-    fn load(&mut self, ck: &Checkpoint) -> Result<()> {
-        load_mlp(ck, "actor", &mut self.actor)?;
-        load_mlp(ck, "q1", &mut self.q1)?;
-        load_mlp(ck, "q2", &mut self.q2)?;
-        load_mlp(ck, "q1_target", &mut self.q1_target)?;
-        load_mlp(ck, "q2_target", &mut self.q2_target)?;
-        load_adam(ck, "actor_opt", &mut self.actor_opt)?;
-        load_adam(ck, "q1_opt", &mut self.q1_opt)?;
-        load_adam(ck, "q2_opt", &mut self.q2_opt)?;
-        load_adam(ck, "alpha_opt", &mut self.alpha_opt)?;
-        ck.read_tensor_into("log_alpha", &mut self.log_alpha)?;
-        self.rng = ck.json("agent_rng")?;
-        Ok(())
-    }
-
-    fn first_non_finite(&self) -> Option<String> {
-        if !self.log_alpha[0].is_finite() {
-            return Some(format!("log_alpha = {}", self.log_alpha[0]));
-        }
-        find_non_finite(&[
-            ("actor", &self.actor),
-            ("q1", &self.q1),
-            ("q2", &self.q2),
-            ("q1_target", &self.q1_target),
-            ("q2_target", &self.q2_target),
-        ])
-    }
 }
+
+learned_parts!(Sac, |s, f| {
+    f("actor", P::Net(r!(s.actor)));
+    f("q1", P::Net(r!(s.q1)));
+    f("q2", P::Net(r!(s.q2)));
+    f("q1_target", P::Net(r!(s.q1_target)));
+    f("q2_target", P::Net(r!(s.q2_target)));
+    f("log_alpha", P::Tensor(r!(s.log_alpha)));
+    f("actor_opt", P::Adam(r!(s.actor_opt)));
+    f("q1_opt", P::Adam(r!(s.q1_opt)));
+    f("q2_opt", P::Adam(r!(s.q2_opt)));
+    f("alpha_opt", P::Adam(r!(s.alpha_opt)));
+    f("agent_rng", P::State(r!(s.rng)));
+});

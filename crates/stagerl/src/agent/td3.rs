@@ -1,38 +1,72 @@
-//! Twin Delayed DDPG (Fujimoto et al. 2018), as in CleanRL.
+//! Twin Delayed DDPG (Fujimoto et al. 2018), as in CleanRL, and the family it heads: as in
+//! Stable-Baselines3, DDPG ([`super::ddpg`]) is this algorithm with one critic, no policy delay
+//! and no target policy smoothing.
 //!
-//! DDPG with three changes: twin critics and the smaller of their targets (clipped double
-//! Q-learning); target policy smoothing, `a' = clip(mu'(s') + clip(N(0, sigma~), -c, c), -1, 1)`;
-//! and delayed policy updates (the actor and all targets every `policy_delay` critic updates).
+//! Networks: a deterministic actor `mu: obs -> act` (tanh output), `n` critics
+//! `Q_i: [obs | act] -> 1` (TD3: 2, DDPG: 1) and Polyak-averaged targets of all of them.
 //!
 //! One update on a batch `(s, a, r, s', d)`:
-//! 1. `y = r + gamma (1 - d) min(Q1', Q2')(s', a')`; each critic minimises `mean (Q_i(s, a) - y)^2`;
-//! 2. every `policy_delay` updates: the actor maximises `mean Q1(s, mu(s))`, then every target
-//!    network is Polyak-averaged.
+//! 1. target action `a' = mu'(s')`, smoothed (TD3 only):
+//!    `a' = clip(mu'(s') + clip(N(0, sigma~), -c, c), -1, 1)`;
+//! 2. critic target `y = r + gamma (1 - d) min_i Q_i'(s', a')` (clipped double Q-learning; with
+//!    one critic, DDPG's `Q'(s', a')`); each critic minimises `mean (Q_i(s, a) - y)^2`;
+//! 3. every `policy_delay` updates (DDPG: every update): the actor maximises `mean Q_1(s, mu(s))`,
+//!    its gradient dQ_1/da back-propagated through mu; then every target network is
+//!    Polyak-averaged, `theta' <- (1 - tau) theta' + tau theta`.
+//!
+//! Exploration: Gaussian or Ornstein-Uhlenbeck noise added to `mu(s)`, clipped to [-1, 1].
 
 use super::noise::ActionNoise;
-use super::{
-    find_non_finite, fit_critic, load_adam, load_mlp, save_adam, save_mlp, sizes, step, Agent, AgentConfig,
-    Algo, UpdateStats,
-};
-use crate::checkpoint::Checkpoint;
+use super::parts::learned_parts;
+use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, NoiseKind, UpdateStats};
 use crate::nn::{concat_cols, Activation, Adam, Mlp};
 use crate::replay::Batch;
 use crate::rng::Rng;
-use crate::Result;
+
+/// What sets a member of the TD3 family apart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Family {
+    pub algo: Algo,
+    /// Checkpoint names of each critic: `[critic, its target, its optimiser]`. Their number is
+    /// the number of critics.
+    pub critics: &'static [[&'static str; 3]],
+    /// Actor and target updates every this many critic updates (>= 1).
+    pub policy_delay: u32,
+    /// Target policy smoothing `(sigma~, c)`, action units; `None`: `a' = mu'(s')`, and no
+    /// random numbers are drawn for it.
+    pub target_smoothing: Option<(f64, f64)>,
+    /// Exploration noise: kind, sigma (action units), OU theta (per step).
+    pub noise: (NoiseKind, f64, f64),
+    /// Salts of the random streams of the initial weights and of the agent (noise, smoothing).
+    pub salts: (u64, u64),
+}
+
+impl Family {
+    /// TD3 with the config's settings.
+    pub fn td3(cfg: &AgentConfig) -> Family {
+        let t = cfg.td3();
+        Family {
+            algo: Algo::Td3,
+            critics: &[["q1", "q1_target", "q1_opt"], ["q2", "q2_target", "q2_opt"]],
+            policy_delay: t.policy_delay,
+            target_smoothing: Some((t.target_noise, t.target_noise_clip)),
+            noise: (t.noise, t.noise_sigma, t.ou_theta),
+            salts: (0x7D3, 0x7D31),
+        }
+    }
+}
 
 pub struct Td3 {
+    family: Family,
     cfg: AgentConfig,
     obs_dim: usize,
     act_dim: usize,
     actor: Mlp<f32>,
-    q1: Mlp<f32>,
-    q2: Mlp<f32>,
+    critics: Vec<Mlp<f32>>,
     actor_target: Mlp<f32>,
-    q1_target: Mlp<f32>,
-    q2_target: Mlp<f32>,
+    critic_targets: Vec<Mlp<f32>>,
     actor_opt: Adam<f32>,
-    q1_opt: Adam<f32>,
-    q2_opt: Adam<f32>,
+    critic_opts: Vec<Adam<f32>>,
     noise: ActionNoise,
     rng: Rng,
     updates: u64,
@@ -43,41 +77,52 @@ pub struct Td3 {
 }
 
 impl Td3 {
+    /// TD3 as the config describes it.
     pub fn new(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Td3 {
-        let mut init = Rng::derived(seed, 0x7D3);
+        Td3::with_family(Family::td3(cfg), cfg, obs_dim, act_dim, seed)
+    }
+
+    /// A member of the family: networks drawn in the order actor, critic 1, ..., critic n.
+    pub fn with_family(family: Family, cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Td3 {
+        let mut init = Rng::derived(seed, family.salts.0);
         let actor =
             Mlp::new(&sizes(obs_dim, &cfg.hidden, act_dim), Activation::Relu, Activation::Tanh, &mut init);
         let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
-        let q1 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
-        let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
+        let critics: Vec<Mlp<f32>> = (0..family.critics.len())
+            .map(|_| Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init))
+            .collect();
+        let (kind, sigma, theta) = family.noise;
         let b = cfg.batch_size;
         Td3 {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
-            q1_opt: Adam::new(q1.num_params(), cfg.critic_lr()),
-            q2_opt: Adam::new(q2.num_params(), cfg.critic_lr()),
+            critic_opts: critics.iter().map(|q| Adam::new(q.num_params(), cfg.critic_lr())).collect(),
             actor_target: actor.clone(),
-            q1_target: q1.clone(),
-            q2_target: q2.clone(),
-            noise: ActionNoise::new(cfg.noise, cfg.noise_sigma(), cfg.ou_theta, act_dim),
-            rng: Rng::derived(seed, 0x7D31),
+            critic_targets: critics.clone(),
+            noise: ActionNoise::new(kind, sigma, theta, act_dim),
+            rng: Rng::derived(seed, family.salts.1),
             updates: 0,
             critic_in: vec![0.0; b * (obs_dim + act_dim)],
             a_next: vec![0.0; b * act_dim],
             y: vec![0.0; b],
             dq: vec![0.0; b],
+            family,
             cfg: cfg.clone(),
             obs_dim,
             act_dim,
             actor,
-            q1,
-            q2,
+            critics,
         }
+    }
+
+    /// The number of critics.
+    pub fn num_critics(&self) -> usize {
+        self.critics.len()
     }
 }
 
 impl Agent for Td3 {
     fn algo(&self) -> Algo {
-        Algo::Td3
+        self.family.algo
     }
     fn obs_dim(&self) -> usize {
         self.obs_dim
@@ -104,86 +149,81 @@ impl Agent for Td3 {
         let gamma = self.cfg.gamma as f32;
         self.updates += 1;
 
-        // 1. Critics, with target policy smoothing and the smaller target.
+        // 1. Target action, smoothed for TD3.
         let mu_next = self.actor_target.predict(&batch.next_obs, b);
-        let (sigma, c) = (self.cfg.target_noise, self.cfg.target_noise_clip);
-        for (out, &m) in self.a_next[..b * ad].iter_mut().zip(mu_next) {
-            let n = (sigma * self.rng.normal()).clamp(-c, c);
-            *out = (f64::from(m) + n).clamp(-1.0, 1.0) as f32;
+        let a_next = match self.family.target_smoothing {
+            Some((sigma, c)) => {
+                for (out, &m) in self.a_next[..b * ad].iter_mut().zip(mu_next) {
+                    let n = (sigma * self.rng.normal()).clamp(-c, c);
+                    *out = (f64::from(m) + n).clamp(-1.0, 1.0) as f32;
+                }
+                &self.a_next[..b * ad]
+            }
+            None => mu_next,
+        };
+        concat_cols(&batch.next_obs, od, a_next, ad, b, &mut self.critic_in);
+
+        // 2. Critics, towards the smallest target critic.
+        for (i, target) in self.critic_targets.iter_mut().enumerate() {
+            let q_next = target.predict(&self.critic_in, b);
+            if i == 0 {
+                self.y[..b].copy_from_slice(q_next);
+            } else {
+                for (y, &q) in self.y[..b].iter_mut().zip(q_next) {
+                    *y = y.min(q);
+                }
+            }
         }
-        concat_cols(&batch.next_obs, od, &self.a_next[..b * ad], ad, b, &mut self.critic_in);
-        let q1n = self.q1_target.predict(&self.critic_in, b);
-        self.y[..b].copy_from_slice(q1n);
-        let q2n = self.q2_target.predict(&self.critic_in, b);
         for i in 0..b {
-            self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * self.y[i].min(q2n[i]);
+            self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * self.y[i];
         }
         concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
         let n = self.cfg.max_grad_norm;
-        let critic_loss =
-            fit_critic(&mut self.q1, &mut self.q1_opt, &self.critic_in, &self.y[..b], &mut self.dq, n)
-                + fit_critic(&mut self.q2, &mut self.q2_opt, &self.critic_in, &self.y[..b], &mut self.dq, n);
+        let mut critic_loss = 0.0;
+        for (q, opt) in self.critics.iter_mut().zip(&mut self.critic_opts) {
+            critic_loss += fit_critic(q, opt, &self.critic_in, &self.y[..b], &mut self.dq, n);
+        }
 
-        // 2. Delayed actor and targets.
+        // 3. Delayed actor and targets.
         let mut actor_loss = None;
-        if self.updates % u64::from(self.cfg.policy_delay) == 0 {
+        if self.updates % u64::from(self.family.policy_delay) == 0 {
+            let q1 = &mut self.critics[0];
             let mu = self.actor.forward(&batch.obs, b);
             concat_cols(&batch.obs, od, mu, ad, b, &mut self.critic_in);
-            let q = self.q1.forward(&self.critic_in, b);
+            let q = q1.forward(&self.critic_in, b);
             actor_loss = Some(-q.iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64);
             self.dq[..b].fill(-1.0 / b as f32);
-            let da = self.q1.input_grad_cols(&self.dq[..b], od..od + ad);
+            let da = q1.input_grad_cols(&self.dq[..b], od..od + ad);
             self.actor.zero_grad();
             self.actor.backward(da);
             step(&mut self.actor, &mut self.actor_opt, self.cfg.max_grad_norm);
             let tau = self.cfg.tau as f32;
             self.actor_target.polyak_from(&self.actor, tau);
-            self.q1_target.polyak_from(&self.q1, tau);
-            self.q2_target.polyak_from(&self.q2, tau);
+            for (target, q) in self.critic_targets.iter_mut().zip(&self.critics) {
+                target.polyak_from(q, tau);
+            }
         }
 
-        UpdateStats { critic_loss: critic_loss / 2.0, actor_loss, alpha: None, entropy: None }
-    }
-
-    fn save(&self, ck: &mut Checkpoint) {
-        save_mlp(ck, "actor", &self.actor);
-        save_mlp(ck, "q1", &self.q1);
-        save_mlp(ck, "q2", &self.q2);
-        save_mlp(ck, "actor_target", &self.actor_target);
-        save_mlp(ck, "q1_target", &self.q1_target);
-        save_mlp(ck, "q2_target", &self.q2_target);
-        save_adam(ck, "actor_opt", &self.actor_opt);
-        save_adam(ck, "q1_opt", &self.q1_opt);
-        save_adam(ck, "q2_opt", &self.q2_opt);
-        ck.put_json("agent_rng", &self.rng);
-        ck.put_json("agent_noise", &self.noise);
-        ck.put_json("agent_updates", &self.updates);
-    }
-
-    fn load(&mut self, ck: &Checkpoint) -> Result<()> {
-        load_mlp(ck, "actor", &mut self.actor)?;
-        load_mlp(ck, "q1", &mut self.q1)?;
-        load_mlp(ck, "q2", &mut self.q2)?;
-        load_mlp(ck, "actor_target", &mut self.actor_target)?;
-        load_mlp(ck, "q1_target", &mut self.q1_target)?;
-        load_mlp(ck, "q2_target", &mut self.q2_target)?;
-        load_adam(ck, "actor_opt", &mut self.actor_opt)?;
-        load_adam(ck, "q1_opt", &mut self.q1_opt)?;
-        load_adam(ck, "q2_opt", &mut self.q2_opt)?;
-        self.rng = ck.json("agent_rng")?;
-        self.noise = ck.json("agent_noise")?;
-        self.updates = ck.json("agent_updates")?;
-        Ok(())
-    }
-
-    fn first_non_finite(&self) -> Option<String> {
-        find_non_finite(&[
-            ("actor", &self.actor),
-            ("q1", &self.q1),
-            ("q2", &self.q2),
-            ("actor_target", &self.actor_target),
-            ("q1_target", &self.q1_target),
-            ("q2_target", &self.q2_target),
-        ])
+        let critic_loss = critic_loss / self.critics.len() as f64;
+        UpdateStats { critic_loss, actor_loss, alpha: None, entropy: None }
     }
 }
+
+learned_parts!(Td3, |s, f| {
+    let names = s.family.critics;
+    f("actor", P::Net(r!(s.actor)));
+    for (name, q) in names.iter().zip(each!(s.critics)) {
+        f(name[0], P::Net(q));
+    }
+    f("actor_target", P::Net(r!(s.actor_target)));
+    for (name, q) in names.iter().zip(each!(s.critic_targets)) {
+        f(name[1], P::Net(q));
+    }
+    f("actor_opt", P::Adam(r!(s.actor_opt)));
+    for (name, opt) in names.iter().zip(each!(s.critic_opts)) {
+        f(name[2], P::Adam(opt));
+    }
+    f("agent_rng", P::State(r!(s.rng)));
+    f("agent_noise", P::State(r!(s.noise)));
+    f("agent_updates", P::State(r!(s.updates)));
+});

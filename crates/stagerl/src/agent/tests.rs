@@ -1,5 +1,6 @@
 //! Agent-level tests: every algorithm runs, is deterministic, saves and loads exactly.
 
+use super::parts::{Part, PartMut};
 use super::*;
 use crate::rng::Rng;
 
@@ -97,5 +98,111 @@ fn save_load_round_trip_continues_identically() {
         let mut c = build(&other, 16, 6, 1).unwrap();
         let e = c.load(&ck).unwrap_err().to_string();
         assert!(e.contains("shape"), "{algo}: {e}");
+    }
+}
+
+#[test]
+fn ddpg_is_td3_with_one_critic_no_delay_and_no_smoothing() {
+    let (od, ad) = (16, 6);
+    let mut rng = Rng::new(2);
+    let batch = random_batch(&mut rng, 16, od, ad);
+    let mut ddpg = ddpg::new(&small_cfg(Algo::Ddpg), od, ad, 3);
+    let mut td3 = td3::Td3::new(&small_cfg(Algo::Td3), od, ad, 3);
+    assert_eq!((ddpg.algo(), ddpg.num_critics()), (Algo::Ddpg, 1));
+    assert_eq!((td3.algo(), td3.num_critics()), (Algo::Td3, 2));
+    for i in 1..=6 {
+        assert!(ddpg.update(&batch).actor_loss.is_some(), "DDPG updates its actor at update {i}");
+        assert_eq!(td3.update(&batch).actor_loss.is_some(), i % 2 == 0, "TD3's policy delay 2, update {i}");
+    }
+    // No target smoothing: DDPG's updates draw no random numbers, so its exploration stream
+    // after 6 updates is the one of a fresh agent.
+    let obs = [0.3f32; 16];
+    let mut fresh = ddpg::new(&small_cfg(Algo::Ddpg), od, ad, 3);
+    let (mut a, mut b, mut pa, mut pb) = ([0.0f32; 6], [0.0f32; 6], [0.0f32; 6], [0.0f32; 6]);
+    ddpg.predict(&obs, &mut pa);
+    fresh.predict(&obs, &mut pb);
+    ddpg.act(&obs, &mut a);
+    fresh.act(&obs, &mut b);
+    let noise = |x: &[f32; 6], p: &[f32; 6]| -> Vec<f32> { x.iter().zip(p).map(|(x, p)| x - p).collect() };
+    assert_ne!(pa, pb, "the trained actor moved");
+    for (na, nb) in noise(&a, &pa).iter().zip(noise(&b, &pb)) {
+        // Equal noise draws, up to clipping at the action bounds.
+        assert!((na - nb).abs() < 1e-6 || a.iter().chain(&b).any(|v| v.abs() == 1.0), "{a:?} {b:?}");
+    }
+}
+
+/// The names of an agent's learned parts, by kind, in list order.
+fn part_names(agent: &dyn Agent) -> (Vec<String>, Vec<String>) {
+    let (mut nets, mut others) = (Vec::new(), Vec::new());
+    agent.parts(&mut |name, part| match part {
+        Part::Net(_) => nets.push(name.to_string()),
+        _ => others.push(name.to_string()),
+    });
+    (nets, others)
+}
+
+#[test]
+fn one_list_of_parts_drives_save_load_and_the_guard() {
+    // DDPG keeps its checkpoint names (`critic`, ...), TD3 and SAC theirs (`q1`, `q2`, ...).
+    let expected: [(Algo, &[&str], &[&str]); 3] = [
+        (
+            Algo::Ddpg,
+            &["actor", "critic", "actor_target", "critic_target"],
+            &["actor_opt", "critic_opt", "agent_rng", "agent_noise", "agent_updates"],
+        ),
+        (
+            Algo::Td3,
+            &["actor", "q1", "q2", "actor_target", "q1_target", "q2_target"],
+            &["actor_opt", "q1_opt", "q2_opt", "agent_rng", "agent_noise", "agent_updates"],
+        ),
+        (
+            Algo::Sac,
+            &["actor", "q1", "q2", "q1_target", "q2_target"],
+            &["log_alpha", "actor_opt", "q1_opt", "q2_opt", "alpha_opt", "agent_rng"],
+        ),
+    ];
+    for (algo, nets, rest) in expected {
+        let mut agent = build(&small_cfg(algo), 16, 6, 5).unwrap();
+        let (names, others) = part_names(agent.as_ref());
+        assert_eq!(names, nets, "{algo}");
+        assert_eq!(others, rest, "{algo}");
+        // Saving writes every part of the list, and nothing else.
+        let mut ck = Checkpoint::new();
+        agent.save(&mut ck);
+        let mut written: Vec<String> = ck
+            .tensor_names()
+            .map(|t| t.split('.').next().unwrap().to_string())
+            .chain(ck.metadata().keys().map(|k| k.split('.').next().unwrap().to_string()))
+            .collect();
+        written.sort();
+        written.dedup();
+        let mut listed: Vec<String> = names.iter().chain(&others).cloned().collect();
+        listed.sort();
+        assert_eq!(written, listed, "{algo}");
+        // Loading reads every part: a checkpoint without one of them is refused, naming it.
+        for missing in &listed {
+            let mut partial = Checkpoint::new();
+            for t in ck.tensor_names().filter(|t| t.split('.').next() != Some(missing)) {
+                let (shape, data) = ck.tensor(t).unwrap();
+                partial.put_tensor(t, shape, data);
+            }
+            for (k, v) in ck.metadata().iter().filter(|(k, _)| k.split('.').next() != Some(missing)) {
+                partial.put_meta(k, v.clone());
+            }
+            let e = agent.load(&partial).expect_err(missing).to_string();
+            assert!(e.contains(missing.as_str()), "{algo}: {e}");
+        }
+        // The guard checks every network of the list, naming it.
+        for net in nets {
+            agent.load(&ck).unwrap();
+            assert_eq!(agent.first_non_finite(), None, "{algo}");
+            agent.parts_mut(&mut |name, part| {
+                if let (true, PartMut::Net(m)) = (name == *net, part) {
+                    m.params_mut()[3] = f32::NAN;
+                }
+            });
+            let fault = agent.first_non_finite().unwrap_or_else(|| panic!("{algo}: NaN in {net} unseen"));
+            assert!(fault.starts_with(&format!("{net} parameter layer0.weight[3]")), "{algo}: {fault}");
+        }
     }
 }

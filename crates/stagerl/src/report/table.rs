@@ -51,9 +51,12 @@ fn flat_config(cfg: &Config) -> BTreeMap<String, String> {
 
 /// The configuration's identity apart from algorithm, reward function, seed and evaluation
 /// settings: the settings that differ from the defaults, `key=value` sorted by key, or
-/// `"defaults"`. Equal labels mean equal configurations (given the same defaults).
+/// `"defaults"` (of its algorithm). Equal labels mean equal configurations (given the same
+/// defaults).
 pub fn variant_label(cfg: &Config) -> String {
-    let base = flat_config(&Config::default());
+    let mut defaults = Config::default();
+    defaults.agent.algo = cfg.agent.algo;
+    let base = flat_config(&defaults);
     let this = flat_config(cfg);
     let keys: std::collections::BTreeSet<&String> = base.keys().chain(this.keys()).collect();
     let diffs: Vec<String> = keys

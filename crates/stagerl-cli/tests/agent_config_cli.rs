@@ -1,0 +1,71 @@
+//! The agent's config sections through the binary: `stagerl config` prints a config that `train
+//! --config` accepts and writes back unchanged; an algorithm's setting in the wrong place, or a
+//! section of another algorithm than the run's, is refused with where it belongs.
+
+mod common;
+
+use common::{bin, scratch};
+use stagerl::config::Config;
+use std::path::Path;
+
+fn train(config: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["train", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(&["--episodes", "1", "--eval-trials", "2", "--force"]);
+    args.extend_from_slice(extra);
+    bin().args(&args).output().unwrap()
+}
+
+#[test]
+fn the_printed_config_trains_and_is_written_back_unchanged() {
+    let dir = scratch("agent-config-print");
+    let printed = bin().arg("config").output().unwrap();
+    assert!(printed.status.success());
+    let text = String::from_utf8(printed.stdout).unwrap();
+    assert!(text.contains("[agent.sac]") && !text.contains("[agent.td3]"), "{text}");
+    let path = dir.join("printed.toml");
+    std::fs::write(&path, &text).unwrap();
+    let out = dir.join("run");
+    let o = train(&path, &out, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let printed = Config::from_toml_str(&text, &path).unwrap();
+    let written = Config::load(&out.join("config.toml")).unwrap();
+    // `--episodes` is the only setting the command line changed.
+    assert_eq!(written.train.episodes, 1);
+    assert_eq!(Config { train: printed.train.clone(), ..written }, printed);
+}
+
+#[test]
+fn misplaced_settings_and_other_algorithms_sections_are_refused() {
+    let dir = scratch("agent-config-refused");
+    let cases: [(&str, &[&str], &[&str]); 4] = [
+        (
+            "[agent]\nalgo = \"sac\"\n[agent.td3]\npolicy_delay = 3\n",
+            &[],
+            &["agent.td3", "agent.algo = \"sac\""],
+        ),
+        ("[agent.td3]\npolicy_delay = 3\n", &["--algo", "ddpg"], &["agent.td3", "agent.algo = \"ddpg\""]),
+        (
+            "[agent]\npolicy_delay = 3\n",
+            &["--algo", "td3"],
+            &["`policy_delay` in [agent]", "belongs in [agent.td3]"],
+        ),
+        ("[agent]\nfixed_alpha = true\n", &[], &["`fixed_alpha` in [agent]", "belongs in [agent.sac]"]),
+    ];
+    for (i, (toml, extra, expect)) in cases.iter().enumerate() {
+        let path = dir.join(format!("case{i}.toml"));
+        std::fs::write(&path, toml).unwrap();
+        let out = dir.join(format!("run{i}"));
+        let o = train(&path, &out, extra);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{toml:?}: {stderr}");
+        assert!(expect.iter().all(|e| stderr.contains(e)), "{toml:?}: {stderr} should name {expect:?}");
+        assert!(!out.join("config.toml").exists(), "{toml:?}: a refused config writes no run");
+    }
+    // The section of the run's algorithm is taken.
+    let path = dir.join("td3.toml");
+    std::fs::write(&path, "[agent.td3]\npolicy_delay = 3\n").unwrap();
+    let out = dir.join("td3");
+    let o = train(&path, &out, &["--algo", "td3"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(Config::load(&out.join("config.toml")).unwrap().agent.td3().policy_delay, 3);
+}
