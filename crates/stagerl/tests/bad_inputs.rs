@@ -332,6 +332,38 @@ fn safetensors(header: &str, data: &[u8]) -> Vec<u8> {
     b
 }
 
+/// The SAC checkpoint with one byte of its data section (tensor values) flipped.
+fn flip_tensor_byte(f: &Fixture) -> Option<Vec<u8>> {
+    let mut b = f.sac.clone();
+    let n = b.len();
+    b[n - 7] ^= 0x01;
+    Some(b)
+}
+
+/// The SAC checkpoint's header as JSON, the header's length and the data section's offset.
+fn header(f: &Fixture) -> (serde_json::Value, usize) {
+    let len = u64::from_le_bytes(f.sac[..8].try_into().unwrap()) as usize;
+    (serde_json::from_slice(&f.sac[8..8 + len]).unwrap(), 8 + len)
+}
+
+/// The SAC checkpoint with its metadata entry `key` changed by `edit` (None removes it).
+fn edit_meta(f: &Fixture, key: &str, edit: impl FnOnce(&str) -> Option<String>) -> Option<Vec<u8>> {
+    let (mut h, data) = header(f);
+    let meta = h["__metadata__"].as_object_mut().unwrap();
+    match edit(meta[key].as_str().unwrap()) {
+        Some(v) => meta.insert(key.to_string(), v.into()),
+        None => meta.remove(key),
+    };
+    Some(safetensors(&h.to_string(), &f.sac[data..]))
+}
+
+/// `s` with one character changed in place (an ASCII byte with its lowest bit flipped).
+fn flip_char(s: &str, at: usize) -> String {
+    let mut b = s.as_bytes().to_vec();
+    b[at] ^= 0x01;
+    String::from_utf8(b).unwrap()
+}
+
 /// The SAC checkpoint with one edit applied.
 fn edited(f: &Fixture, edit: impl FnOnce(&mut Checkpoint) -> Checkpoint) -> Option<Vec<u8>> {
     let mut ck = Checkpoint::from_bytes(&f.sac, Path::new("sac")).unwrap();
@@ -391,6 +423,13 @@ const CHECKPOINTS: &[Ck] = &[
     Ck { name: "offsets-past-end", bytes: |_| Some(safetensors(r#"{"t":{"dtype":"F32","shape":[4],"data_offsets":[0,16]}}"#, &[0; 8])), expect: "not a valid checkpoint" },
     Ck { name: "shape-overflow", bytes: |_| Some(safetensors(r#"{"t":{"dtype":"F32","shape":[4294967296,4294967296,4294967296],"data_offsets":[0,0]}}"#, &[])), expect: "not a valid checkpoint" },
     Ck { name: "f64-tensor", bytes: |_| Some(safetensors(r#"{"actor.layer0.weight":{"dtype":"F64","shape":[1],"data_offsets":[0,8]}}"#, &[0; 8])), expect: "tensor `actor.layer0.weight` is F64, expected F32" },
+    // Silent corruption: one flipped bit in a tensor or in the metadata, no or a bad checksum.
+    Ck { name: "flipped-tensor-byte", bytes: flip_tensor_byte, expect: "checksum mismatch" },
+    Ck { name: "flipped-meta-rng", bytes: |f| edit_meta(f, "agent_rng", |v| Some(flip_char(v, v.len() / 2))), expect: "checksum mismatch" },
+    Ck { name: "flipped-meta-algorithm", bytes: |f| edit_meta(f, "algorithm", |v| Some(flip_char(v, 1))), expect: "checksum mismatch" },
+    Ck { name: "flipped-checksum", bytes: |f| edit_meta(f, "sha256", |v| Some(flip_char(v, 10))), expect: "checksum mismatch" },
+    Ck { name: "huge-checksum", bytes: |f| edit_meta(f, "sha256", |_| Some("0".repeat(100_000))), expect: "0000000000... (100000 bytes)" },
+    Ck { name: "no-checksum", bytes: |f| edit_meta(f, "sha256", |_| None), expect: "no `sha256` checksum" },
     // Another algorithm, another network shape.
     Ck { name: "td3-for-sac", bytes: |f| Some(f.td3.clone()), expect: "checkpoint of algorithm `td3`, the config says `sac`" },
     Ck { name: "hidden-16-for-8", bytes: |f| Some(f.wide.clone()), expect: "has shape [16, 16], this agent's has [8, 16]" },

@@ -615,6 +615,12 @@ pub fn resume(
         return train_with(&cfg, out, opts, on_episode).map(Resumed::Finished);
     }
     let ck = Checkpoint::load(&latest)?;
+    // The run's other checkpoints are checked too: a corrupted one is refused, not kept.
+    for p in [dir.best(), dir.final_checkpoint()] {
+        if p.exists() {
+            Checkpoint::load(&p)?;
+        }
+    }
     let mut t = Trainer::restore(&cfg, dir, &ck)?;
     if t.state.finished {
         return Ok(Resumed::AlreadyFinished(t.summary()));
