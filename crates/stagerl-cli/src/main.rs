@@ -1,5 +1,7 @@
 //! `stagerl`: a thin command-line layer over the `stagerl` library.
 
+#[macro_use]
+mod out;
 mod cmd;
 mod jsonl;
 
@@ -55,15 +57,13 @@ fn main() -> ExitCode {
         Command::Reward(a) => cmd::reward::run(a),
         Command::Report(a) => cmd::report::run(a),
         Command::Bench(b) => cmd::bench::run(b),
-        Command::Config => {
-            print!("{}", stagerl::config::Config::default().to_toml_string());
-            Ok(())
-        }
+        Command::Config => out::text(&stagerl::config::Config::default().to_toml_string()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("stagerl: error: {e:#}");
+            // With standard error closed too, the exit code alone tells.
+            let _ = errln!("stagerl: error: {e:#}");
             ExitCode::FAILURE
         }
     }

@@ -89,7 +89,7 @@ fn env(a: EnvArgs) -> Result<()> {
     let (episodes, checksum) = run(&mut env, a.steps)?;
     let secs = start.elapsed().as_secs_f64();
     let sps = a.steps as f64 / secs;
-    println!(
+    outln!(
         "env: {} steps ({} episodes) in {:.3} s, {:.0} steps/s, {:.1} ns/step (single thread, UR5, reward {}, checksum {:.3})",
         a.steps,
         episodes,
@@ -98,8 +98,8 @@ fn env(a: EnvArgs) -> Result<()> {
         1e9 / sps,
         a.reward,
         checksum
-    );
-    println!("{}", serde_json::json!({ "steps_per_sec": sps }));
+    )?;
+    outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
     Ok(())
 }
 
@@ -134,11 +134,11 @@ fn update(a: UpdateArgs) -> Result<()> {
         .collect();
     times.sort_by(f64::total_cmp);
     let median = times[times.len() / 2];
-    println!(
+    outln!(
         "update: {} hidden {}x{} batch {}: median {:.3} ms, min {:.3} ms over {} updates (obs {od}, act {ad}, one thread)",
         a.algo, a.hidden, a.hidden, a.batch, median, times[0], times.len()
-    );
-    println!("{}", serde_json::json!({ "ms_per_update": median }));
+    )?;
+    outln!("{}", serde_json::json!({ "ms_per_update": median }))?;
     Ok(())
 }
 
@@ -156,10 +156,10 @@ fn train(a: TrainArgs) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     std::fs::remove_dir_all(&dir).ok();
     let sps = summary.env_steps as f64 / secs;
-    println!(
+    outln!(
         "train: {} hidden {}x{}: {} env steps, {} updates in {:.2} s, {:.0} env steps/s end to end (one update per step, one thread)",
         a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps
-    );
-    println!("{}", serde_json::json!({ "steps_per_sec": sps }));
+    )?;
+    outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
     Ok(())
 }

@@ -26,25 +26,25 @@ pub fn run(args: Args) -> Result<()> {
     let dt = env.task().dt_s;
     let mut ctl = JacobianController::new(&chain);
     let mut action = vec![0.0f32; env.act_dim()];
-    println!(
+    outln!(
         "scripted Jacobian controller on `{}` ({} joints, tip `{}`), reward {}, seed {}",
         cfg.robot.urdf,
         chain.dof(),
         chain.tip_link(),
         cfg.reward.function,
         args.seed
-    );
+    )?;
     for ep in 1..=args.show {
         env.reset();
         let t = env.target();
-        println!(
+        outln!(
             "\nepisode {ep}: target ({:.4}, {:.4}, {:.4}) m, start distance {:.4} m",
             t.x,
             t.y,
             t.z,
             env.distance()
-        );
-        println!(
+        )?;
+        outln!(
             "{:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>6} {:>6} {:>9} {:>5} {:>9}",
             "step",
             "D_PT(m)",
@@ -58,14 +58,14 @@ pub fn run(args: Args) -> Result<()> {
             "reward",
             "bonus",
             "total"
-        );
+        )?;
         let mut episode_reward = 0.0;
         loop {
             ctl.act(&chain, env.joint_positions(), &env.target(), dt, &mut action);
             let s = env.step(&action)?;
             let r = s.terms;
             episode_reward += s.total();
-            println!(
+            outln!(
                 "{:>4} {:>9.5} {:>9.5} {:>9.5} {:>9.5} {:>9.5} {:>9.5} {:>6.3} {:>6.3} {:>9.5} {:>5} {:>9.5}",
                 env.steps(),
                 r.distance,
@@ -79,14 +79,14 @@ pub fn run(args: Args) -> Result<()> {
                 r.reward,
                 r.bonus,
                 r.total
-            );
+            )?;
             if s.done() {
-                println!(
+                outln!(
                     "{} after {} steps, episode reward (eq. 16) {:.4}",
                     if s.terminated { "reached" } else { "truncated" },
                     env.steps(),
                     episode_reward
-                );
+                )?;
                 break;
             }
         }
@@ -112,13 +112,13 @@ pub fn run(args: Args) -> Result<()> {
         }
         let n = f64::from(args.trials);
         let mean_steps = if successes > 0 { success_steps as f64 / f64::from(successes) } else { f64::NAN };
-        println!(
+        outln!(
             "\nevaluation over {} random targets: success {:.1} %, mean episode reward {:.3}, mean steps (successful) {:.2}",
             args.trials,
             100.0 * f64::from(successes) / n,
             total_reward / n,
             mean_steps
-        );
+        )?;
     }
     Ok(())
 }

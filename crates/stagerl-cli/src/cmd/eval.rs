@@ -41,38 +41,36 @@ pub fn run(args: Args) -> Result<()> {
     let csv = args.run.join(format!("eval-seed{}.csv", args.seed));
     train::eval::write_trials_csv(&csv, &trials)?;
     if !args.json {
-        println!(
+        outln!(
             "{} on {} trials (seed {}), per-trial CSV {}",
             checkpoint.display(),
             args.trials,
             args.seed,
             csv.display()
-        );
+        )?;
     }
-    print_summary(&s, args.json);
-    Ok(())
+    outln!("{}", summary_line(&s, args.json))
 }
 
-pub fn print_summary(s: &EvalSummary, json: bool) {
+/// The evaluation summary as one line: JSON or text.
+pub fn summary_line(s: &EvalSummary, json: bool) -> String {
     if json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "success_rate": s.success_rate,
-                "mean_reward": s.mean_reward,
-                "mean_steps": s.mean_steps,
-                "trials": s.trials,
-                "median_final_distance_m": s.median_final_distance_m,
-            })
-        );
+        serde_json::json!({
+            "success_rate": s.success_rate,
+            "mean_reward": s.mean_reward,
+            "mean_steps": s.mean_steps,
+            "trials": s.trials,
+            "median_final_distance_m": s.median_final_distance_m,
+        })
+        .to_string()
     } else {
-        println!(
+        format!(
             "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m",
             100.0 * s.success_rate,
             s.trials,
             s.mean_reward,
             s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into()),
             s.median_final_distance_m
-        );
+        )
     }
 }

@@ -28,7 +28,7 @@ pub fn run(args: Args) -> Result<()> {
     let chain = Chain::load(&args.robot, args.tip.as_deref())
         .with_context(|| format!("loading robot `{}`", args.robot))?;
     let stdin = std::io::stdin().lock();
-    let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+    let stdout = crate::out::stdout()?;
     crate::jsonl::process(stdin, stdout, |input: Input| {
         let pose = chain.try_fk(&input.joints)?;
         Ok(Output { position: pose.position.into(), quaternion: pose.quaternion_xyzw() })

@@ -83,7 +83,7 @@ pub fn run(args: Args) -> Result<()> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     stagerl::io::write_atomic(&args.out.join("preset.toml"), text.as_bytes())?;
     let total = runs.len();
-    println!(
+    outln!(
         "reproduce `{}`: {} runs in this shard ({} of {}), {} at once -> {}",
         args.preset,
         total,
@@ -91,8 +91,10 @@ pub fn run(args: Args) -> Result<()> {
         count,
         args.jobs,
         args.out.display()
-    );
+    )?;
     let stop = super::train::stop_flag()?;
+    // A failing standard output stops the sweep as SIGINT does: runs save themselves.
+    let output = crate::out::RunOutput::new(Arc::clone(&stop));
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
@@ -117,21 +119,24 @@ pub fn run(args: Args) -> Result<()> {
                             Ok(RunStatus::Partial { episode }) => format!("resumed after episode {episode}, done"),
                             _ => "done".to_string(),
                         };
-                        println!(
+                        output.line(format_args!(
                             "[{n}/{total}] {}: {what} in {:.0} s: success {:.1} %, mean reward {:.3}, mean steps {}",
                             spec.name,
                             t0.elapsed().as_secs_f64(),
                             100.0 * s.success_rate,
                             s.mean_reward,
                             s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into())
-                        );
+                        ));
                     }
                     Err(stagerl::Error::Interrupted { episode, .. }) => {
                         interrupted.store(true, Ordering::SeqCst);
-                        println!("[{n}/{total}] {}: interrupted after episode {episode}, saved", spec.name);
+                        output.line(format_args!(
+                            "[{n}/{total}] {}: interrupted after episode {episode}, saved",
+                            spec.name
+                        ));
                     }
                     Err(e) => {
-                        println!("[{n}/{total}] {}: FAILED: {e}", spec.name);
+                        output.line(format_args!("[{n}/{total}] {}: FAILED: {e}", spec.name));
                         failures.lock().expect("no poisoning").push(format!("{}: {e}", spec.name));
                     }
                 }
@@ -139,8 +144,12 @@ pub fn run(args: Args) -> Result<()> {
         }
     });
     let failures = failures.into_inner().expect("no poisoning");
+    if let Some(e) = output.failed() {
+        bail!("{e}: the sweep stopped; finished runs are kept and interrupted ones saved. Run the same command again to continue.");
+    }
     if interrupted.load(Ordering::SeqCst) || stop.load(Ordering::SeqCst) {
-        eprintln!(
+        // Standard error may be closed too; the exit code still tells.
+        let _ = errln!(
             "stagerl: interrupted after {:.0} s; finished runs are kept. Run the same command again to continue.",
             start.elapsed().as_secs_f64()
         );
@@ -149,12 +158,11 @@ pub fn run(args: Args) -> Result<()> {
     if !failures.is_empty() {
         bail!("{} of {total} runs failed:\n  {}", failures.len(), failures.join("\n  "));
     }
-    println!(
+    outln!(
         "all {total} runs done in {:.0} s. Tables and figures: stagerl report {}",
         start.elapsed().as_secs_f64(),
         args.out.display()
-    );
-    Ok(())
+    )
 }
 
 fn one(

@@ -55,7 +55,7 @@ pub fn run(args: Args) -> Result<()> {
     cfg.reward.function = args.function;
     let dt = cfg.task.dt_s;
     let stdin = std::io::stdin().lock();
-    let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+    let stdout = crate::out::stdout()?;
     crate::jsonl::process(stdin, stdout, |i: Input| {
         let input = RewardInput {
             ee_pos: Vec3::from(fixed::<3>("ee_pos", &i.ee_pos)?),
