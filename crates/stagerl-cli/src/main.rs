@@ -34,8 +34,9 @@ enum Command {
     /// Forward kinematics: JSON lines {"joints":[...]} on stdin (radians), one
     /// {"position":[x,y,z],"quaternion":[x,y,z,w]} line out per input (metres, base frame).
     Fk(cmd::fk::Args),
-    /// Reward terms: JSON lines {"ee_pos","ee_quat","target","joint_vel"} on stdin, one line of
-    /// every term out per input.
+    /// Reward terms: JSON lines {"ee_pos","ee_quat","target","joint_vel"} on stdin (`joint_vel`:
+    /// one value per joint of --robot, 6 for the default UR5), one line of every term out per
+    /// input.
     Reward(cmd::reward::Args),
     /// Table 1, the paper's claims, Figures 7 and 8 and trajectories from finished run directories.
     Report(cmd::report::Args),

@@ -86,25 +86,37 @@ const FK_LINES: &[Case] = &[
     Case { args: &["fk"], stdin: "{\"joints\":[0,0,0,0,0,1e999]}\n", expect: &["line 1"] },
     Case { args: &["fk"], stdin: "\n\n{\"joints\":[0,0,0,0,0,0]\n", expect: &["line 3", "malformed"] },
     Case { args: &["fk", "--robot", "$DIR/two.urdf"], stdin: "{\"joints\":[0,0,0,0,0,0]}\n", expect: &["line 1", "q has 6 values", "2 joints"] },
+    // Finite input whose pose overflows f64; a URDF origin too large to compute with.
+    Case { args: &["fk", "--robot", "$DIR/slider.urdf"], stdin: "{\"joints\":[1e308,1e308]}\n", expect: &["line 1", "forward kinematics overflows", "`s1` [-1, 1]"] },
+    Case { args: &["fk", "--robot", "$DIR/far.urdf"], stdin: "{\"joints\":[0,0]}\n", expect: &["far.urdf", "joint `j2` has origin xyz = [1e308, 0.0, 0.2]", "within +-1e6 m"] },
+    Case { args: &["fk", "--robot", "$DIR/long_slider.urdf"], stdin: "{\"joints\":[0,0]}\n", expect: &["long_slider.urdf", "prismatic joint `s1` has limits [-1e300, 1.0]"] },
 ];
 
 #[rustfmt::skip]
 const REWARD_LINES: &[Case] = &[
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"joint_vel\":[0]}\n", expect: &["line 1", "missing field `target`"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`ee_pos` has 2 values, expected 3"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,1],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`ee_quat` has 3 values, expected 4"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`target` has 4 values, expected 3"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 2"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,0],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 0"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1.00001],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 1.00001"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[]}\n", expect: &["line 1", "joint_vel is empty"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "missing field `target`"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`ee_pos` has 2 values, expected 3"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`ee_quat` has 3 values, expected 4"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`target` has 4 values, expected 3"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "ee_quat has norm 2"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,0],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "ee_quat has norm 0"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1.00001],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "ee_quat has norm 1.00001"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[]}\n", expect: &["line 1", "`joint_vel` has 0 values, expected 6"] },
     Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":\"fast\"}\n", expect: &["line 1", "malformed"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,\"a\",0],\"joint_vel\":[0]}\n", expect: &["line 1", "malformed"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0],\"velocity\":1}\n", expect: &["line 1", "unknown field `velocity`"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0],\"prev_ee_pos\":[0,0]}\n", expect: &["line 1", "`prev_ee_pos` has 2 values, expected 3"] },
-    Case { args: &["reward", "--function", "stride", "--config", "$DIR/displacement.toml"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "prev_ee_pos"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,\"a\",0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "malformed"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0],\"velocity\":1}\n", expect: &["line 1", "unknown field `velocity`"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0],\"prev_ee_pos\":[0,0]}\n", expect: &["line 1", "`prev_ee_pos` has 2 values, expected 3"] },
+    Case { args: &["reward", "--function", "stride", "--config", "$DIR/displacement.toml"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "prev_ee_pos"] },
     Case { args: &["reward", "--function", "sar"], stdin: "$GOOD\n\n$GOOD\n{\"ee_pos\":[0,0,0]}\n", expect: &["line 4", "missing field"] },
     Case { args: &["reward", "--function", "sar"], stdin: "null\n", expect: &["line 1", "malformed"] },
+    // joint_vel has one value per joint of --robot (the UR5 by default).
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0]}\n", expect: &["line 1", "`joint_vel` has 3 values, expected 6", "ur5"] },
+    Case { args: &["reward", "--function", "sar", "--robot", "$DIR/two.urdf"], stdin: "$GOOD\n", expect: &["line 1", "`joint_vel` has 6 values, expected 2", "two.urdf"] },
+    Case { args: &["reward", "--function", "sar", "--robot", "$DIR/missing.urdf"], stdin: "$GOOD\n", expect: &["missing.urdf"] },
+    // Finite input whose terms overflow f64.
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[1e200,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`distance` = inf is not finite"] },
+    Case { args: &["reward", "--function", "stride"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[1e200,0,0,0,0,0]}\n", expect: &["line 1", "`move` = inf is not finite"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[-1.7e308,0,0],\"ee_quat\":[0,0,0,1],\"target\":[1.7e308,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "is not finite"] },
 ];
 
 /// Every file and directory under `dir` except `dir/out` (where `train` may create runs), with
@@ -187,6 +199,16 @@ fn fixture(dir: &Path) {
             "<joint name=\"j3\" type=\"fixed\"><parent link=\"base\"/><child link=\"side\"/></joint></robot>",
         );
     std::fs::write(dir.join("branchy.urdf"), branchy).unwrap();
+    std::fs::write(dir.join("far.urdf"), TWO_JOINT_URDF.replace("0.5 0 0.2", "1e308 0 0.2")).unwrap();
+    let slider = TWO_JOINT_URDF
+        .replace("name=\"j1\" type=\"revolute\"", "name=\"s1\" type=\"prismatic\"")
+        .replace("name=\"j2\" type=\"revolute\"", "name=\"s2\" type=\"prismatic\"")
+        .replace("axis xyz=\"0 0 1\"", "axis xyz=\"1 0 0\"")
+        .replace("axis xyz=\"0 1 0\"", "axis xyz=\"1 0 0\"")
+        .replace("lower=\"-3\" upper=\"3\"", "lower=\"-1\" upper=\"1\"");
+    std::fs::write(dir.join("slider.urdf"), &slider).unwrap();
+    std::fs::write(dir.join("long_slider.urdf"), slider.replacen("lower=\"-1\"", "lower=\"-1e300\"", 1))
+        .unwrap();
 }
 
 fn run(args: &[String], stdin: &str) -> Output {
@@ -255,6 +277,12 @@ fn bad_input_to_the_cli_is_an_error_naming_the_problem() {
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
     std::fs::remove_file(dir.join("runs/sac/eval-seed0.csv")).unwrap();
     let ok = run(&["reward".into(), "--function".into(), "sar".into()], &format!("{GOOD_REWARD}\n"));
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let two = format!("{d}/two.urdf");
+    let ok = run(
+        &["reward".into(), "--function".into(), "sar".into(), "--robot".into(), two],
+        &GOOD_REWARD.replace("[0,0,0,0,0,0]", "[0.5,-0.5]"),
+    );
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
 
     let mut failures = check(ARGS, &dir);

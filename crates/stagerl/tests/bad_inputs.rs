@@ -244,6 +244,13 @@ const URDFS: &[Urdf] = &[
     Urdf { links: "base a b", joints: "j0 fixed base a | <origin xyz=\"nan 0 0\"/>; j1 revolute a b", raw: None, tip: None, expect: "joint `j0` has a non-finite origin" },
     Urdf { links: "base a", joints: "j1 revolute base a | <axis xyz=\"0 nan 1\"/>", raw: None, tip: None, expect: "joint `j1` has a non-finite axis" },
     Urdf { links: "base a", joints: "j1 prismatic base a | <axis xyz=\"0 0 0\"/>", raw: None, tip: None, expect: "joint `j1` has a zero axis" },
+    // Finite geometry too large to compute with: an origin of 1e308 m overflows forward kinematics.
+    Urdf { links: "base a", joints: "j1 revolute base a | <origin xyz=\"1e308 0 0\"/>", raw: None, tip: None, expect: "joint `j1` has origin xyz = [1e308, 0.0, 0.0] m" },
+    Urdf { links: "base a b", joints: "j0 fixed base a | <origin xyz=\"0 0 -2e6\"/>; j1 revolute a b", raw: None, tip: None, expect: "joint `j0` has origin xyz = [0.0, 0.0, -2000000.0] m" },
+    Urdf { links: "base a", joints: "j1 prismatic base a | <limit lower=\"-1e300\" upper=\"1\" effort=\"1\" velocity=\"1\"/>", raw: None, tip: None, expect: "prismatic joint `j1` has limits [-1e300, 1.0] m" },
+    // A cycle beside the chain (not on the base-tip path), and a chain hanging below a cycle.
+    Urdf { links: "base a b c", joints: "j0 revolute base a; j1 revolute b c; j2 revolute c b", raw: None, tip: Some("a"), expect: "joints `j2`, `j1` form a cycle through links `b`, `c`" },
+    Urdf { links: "base a b c d", joints: "j0 revolute base a; j1 revolute b c; j2 revolute c b; j3 fixed c d", raw: None, tip: Some("a"), expect: "form a cycle" },
 ];
 
 fn urdf_document(u: &Urdf) -> String {

@@ -16,6 +16,10 @@ pub(crate) struct Compiled {
     pub kin: Kinematics,
 }
 
+/// The largest length (metres) a URDF may hold in a joint origin or a prismatic joint's limits:
+/// beyond it forward kinematics can overflow f64 (an origin of 1e308 m does).
+pub const MAX_LENGTH_M: f64 = 1e6;
+
 fn urdf_err(msg: impl Into<String>) -> Error {
     Error::Urdf(msg.into())
 }
@@ -23,6 +27,37 @@ fn urdf_err(msg: impl Into<String>) -> Error {
 /// `a`, `b`, `c` as "`a`, `b`, `c`".
 fn quoted_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
     names.into_iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
+}
+
+/// An error naming the joints and links of a cycle, if any link has no path up to `root` (with
+/// one root and one parent joint per link, such a link is on a cycle or below one), whether or
+/// not the cycle touches the chain that will be compiled.
+fn check_no_cycle(
+    robot: &urdf_rs::Robot,
+    parent_joint: &HashMap<&str, &urdf_rs::Joint>,
+    root: &str,
+) -> Result<()> {
+    let mut reaches_root: HashSet<&str> = HashSet::from([root]);
+    for l in &robot.links {
+        let mut trail: Vec<&str> = Vec::new();
+        let mut link = l.name.as_str();
+        while !reaches_root.contains(link) {
+            if let Some(at) = trail.iter().position(|t| *t == link) {
+                let links = &trail[at..];
+                let joints = links.iter().map(|l| parent_joint[l].name.as_str());
+                return Err(urdf_err(format!(
+                    "joints {} form a cycle through links {}; a URDF must be a tree",
+                    quoted_list(joints),
+                    quoted_list(links.iter().copied())
+                )));
+            }
+            trail.push(link);
+            // Every link but the root has a parent joint (`root` is the only link without one).
+            link = parent_joint[link].parent.link.as_str();
+        }
+        reaches_root.extend(trail);
+    }
+    Ok(())
 }
 
 /// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf).
@@ -141,6 +176,8 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
         link = j.parent.link.as_str();
     }
     path.reverse();
+    // A cycle elsewhere in the document (beside the chain) is refused too.
+    check_no_cycle(robot, &parent_joint, root)?;
 
     // Compile: fold fixed joints and the axis-alignment rotations into the constants.
     let mut joints = Vec::new();
@@ -153,6 +190,13 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
         if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite()) {
             return Err(urdf_err(format!(
                 "joint `{}` has a non-finite origin: xyz = {xyz:?}, rpy = {rpy:?}",
+                j.name
+            )));
+        }
+        if xyz.iter().any(|v| v.abs() > MAX_LENGTH_M) {
+            return Err(urdf_err(format!(
+                "joint `{}` has origin xyz = {xyz:?} m; each coordinate must be within \
+                 +-{MAX_LENGTH_M:e} m",
                 j.name
             )));
         }
@@ -209,6 +253,12 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
                     "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
                      velocity = {}; finite lower < upper and velocity > 0 are required",
                     j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
+                )));
+            }
+            if kind == JointKind::Prismatic && lim.lower.abs().max(lim.upper.abs()) > MAX_LENGTH_M {
+                return Err(urdf_err(format!(
+                    "prismatic joint `{}` has limits [{:?}, {:?}] m; they must be within +-{MAX_LENGTH_M:e} m",
+                    j.name, lim.lower, lim.upper
                 )));
             }
             (lim.lower, lim.upper, lim.velocity)
