@@ -22,8 +22,9 @@ pub struct Args {
     /// E_start: smallest band half-width, reward units.
     #[arg(long, default_value_t = ConvergenceCriterion::default().band_floor)]
     band_floor: f64,
-    /// Evaluation trajectories to draw for the best and the worst reward function (0: none).
-    #[arg(long, default_value_t = 5)]
+    /// Evaluation trajectories to draw for the best and the worst reward function (0: none; at
+    /// most 1000).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=i64::from(report::MAX_TRAJECTORIES)))]
     trajectories: u32,
     /// Also use runs with fewer episodes than configured (still training, or stopped early).
     #[arg(long)]
