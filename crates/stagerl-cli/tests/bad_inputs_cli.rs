@@ -383,3 +383,55 @@ fn huge_evaluations_are_refused_not_aborted() {
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn huge_inputs_are_quoted_as_bounded_excerpts() {
+    // Each input holds a 2 MB token that the error used to echo whole: now an excerpt that ends
+    // with the token's size, "... (2000000 bytes)".
+    let dir = std::env::temp_dir().join(format!("stagerl-bad-cli-huge-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    let big = "x".repeat(2_000_000);
+    let d = dir.to_string_lossy().into_owned();
+    std::fs::write(dir.join("long_line.toml"), format!("[task]\nmax_steps = {big}\n")).unwrap();
+    std::fs::write(dir.join("long_value.toml"), format!("[reward]\nfunction = \"{big}\"\n")).unwrap();
+    std::fs::write(
+        dir.join("long_name.urdf"),
+        TWO_JOINT_URDF.replace("<parent link=\"l1\"/>", &format!("<parent link=\"{big}\"/>")),
+    )
+    .unwrap();
+    let cases: Vec<(Vec<String>, String, &str)> = vec![
+        (vec!["fk".into()], format!("{{\"joints\":[0,0,0,0,0,0],\"{big}\":1}}\n"), "unknown field"),
+        (vec!["fk".into()], format!("{{\"joints\":\"{big}\"}}\n"), "invalid type"),
+        (
+            vec!["reward".into(), "--function".into(), "sar".into()],
+            format!("{{\"ee_pos\":\"{big}\"}}\n"),
+            "line 1",
+        ),
+        (
+            vec!["train".into(), "--config".into(), format!("{d}/long_line.toml")],
+            String::new(),
+            "long_line.toml",
+        ),
+        (
+            vec!["demo".into(), "--config".into(), format!("{d}/long_value.toml")],
+            String::new(),
+            "long_value.toml",
+        ),
+        (vec!["fk".into(), "--robot".into(), format!("{d}/long_name.urdf")], String::new(), "does not exist"),
+    ];
+    let mut failures = Vec::new();
+    for (args, stdin, needle) in cases {
+        let out = run(&args, &stdin);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let case = format!("`stagerl {}`", args.join(" "));
+        if out.status.code() != Some(1) {
+            failures.push(format!("{case}: exit {:?}", out.status));
+        }
+        if err.len() > 2000 || !err.contains(needle) || !err.contains("bytes)") {
+            failures.push(format!("{case}: stderr of {} bytes: {}", err.len(), &err[..err.len().min(3000)]));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+    std::fs::remove_dir_all(&dir).ok();
+}

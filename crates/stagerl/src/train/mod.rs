@@ -184,8 +184,9 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
     let algo = ck.meta("algorithm")?;
     if algo != cfg.agent.algo.name() {
         return Err(Error::InvalidInput(format!(
-            "{}: checkpoint of algorithm `{algo}`, the config says `{}`",
+            "{}: checkpoint of algorithm `{}`, the config says `{}`",
             path.display(),
+            crate::text::excerpt(algo),
             cfg.agent.algo
         )));
     }
