@@ -71,6 +71,21 @@ const ARGS: &[Case] = &[
     Case { args: &["bench", "update", "--hidden", "0"], stdin: "", expect: &["agent.hidden"] },
     Case { args: &["bench", "update", "--batch", "0"], stdin: "", expect: &["agent.batch_size"] },
     Case { args: &["bench", "update", "--algo", "ppo"], stdin: "", expect: &["ppo"] },
+    // Unbounded resources: refused before allocating, with the estimate.
+    Case { args: &["train", "--config", "$DIR/huge_hidden.toml", "--out", "$DIR/out/hh"], stdin: "", expect: &["agent.hidden", "would need about 60.8 GiB"] },
+    Case { args: &["train", "--config", "$DIR/huge_replay.toml", "--out", "$DIR/out/hr"], stdin: "", expect: &["agent.buffer_size", "replay buffer 14.9"] },
+    Case { args: &["bench", "update", "--hidden", "16384"], stdin: "", expect: &["agent.hidden", "GiB"] },
+    Case { args: &["bench", "train", "--hidden", "16384"], stdin: "", expect: &["agent.hidden", "GiB"] },
+    Case { args: &["bench", "update", "--updates", "4294967295"], stdin: "", expect: &["--updates", "4294967295"] },
+    Case { args: &["bench", "env", "--steps", "18446744073709551615"], stdin: "", expect: &["--steps"] },
+    Case { args: &["bench", "train", "--steps", "18446744073709551615"], stdin: "", expect: &["--steps"] },
+    Case { args: &["demo", "--show", "4294967295"], stdin: "", expect: &["--show", "4294967295"] },
+    Case { args: &["demo", "--trials", "4294967295"], stdin: "", expect: &["--trials", "4294967295"] },
+    Case { args: &["demo", "--trials", "0"], stdin: "", expect: &["--trials"] },
+    Case { args: &["report", "$DIR/runs", "--trajectories", "4294967295", "--out", "$DIR/out/report"], stdin: "", expect: &["--trajectories", "4294967295"] },
+    Case { args: &["report", "$DIR/empty-dir", "--out", "$DIR/out/report"], stdin: "", expect: &["empty-dir", "no runs to report on"] },
+    Case { args: &["fk", "--robot", "$DIR/deep.urdf"], stdin: "", expect: &["deep.urdf", "nested more than 64 deep"] },
+    Case { args: &["reward", "--function", "sar", "--robot", "$DIR/deep.urdf"], stdin: "", expect: &["deep.urdf", "nested more than 64 deep"] },
 ];
 
 #[rustfmt::skip]
@@ -199,6 +214,15 @@ fn fixture(dir: &Path) {
             "<joint name=\"j3\" type=\"fixed\"><parent link=\"base\"/><child link=\"side\"/></joint></robot>",
         );
     std::fs::write(dir.join("branchy.urdf"), branchy).unwrap();
+    std::fs::write(
+        dir.join("deep.urdf"),
+        format!("<robot name=\"r\">{}{}</robot>", "<a>".repeat(40_000), "</a>".repeat(40_000)),
+    )
+    .unwrap();
+    std::fs::create_dir_all(dir.join("empty-dir")).unwrap();
+    std::fs::write(dir.join("huge_hidden.toml"), "[agent]\nhidden = [16384, 16384, 16384, 16384]\n").unwrap();
+    std::fs::write(dir.join("huge_replay.toml"), "[agent]\nhidden = [4096, 4096]\nbuffer_size = 100000000\n")
+        .unwrap();
     std::fs::write(dir.join("far.urdf"), TWO_JOINT_URDF.replace("0.5 0 0.2", "1e308 0 0.2")).unwrap();
     let slider = TWO_JOINT_URDF
         .replace("name=\"j1\" type=\"revolute\"", "name=\"s1\" type=\"prismatic\"")
@@ -419,6 +443,11 @@ fn huge_inputs_are_quoted_as_bounded_excerpts() {
             "long_value.toml",
         ),
         (vec!["fk".into(), "--robot".into(), format!("{d}/long_name.urdf")], String::new(), "does not exist"),
+        (
+            vec!["fk".into()],
+            format!("{{\"joints\":[{}]}}\n", " ".repeat(17 << 20)),
+            "longer than 16777216 bytes",
+        ),
     ];
     let mut failures = Vec::new();
     for (args, stdin, needle) in cases {
@@ -428,7 +457,7 @@ fn huge_inputs_are_quoted_as_bounded_excerpts() {
         if out.status.code() != Some(1) {
             failures.push(format!("{case}: exit {:?}", out.status));
         }
-        if err.len() > 2000 || !err.contains(needle) || !err.contains("bytes)") {
+        if err.len() > 2000 || !err.contains(needle) || !err.contains("bytes") {
             failures.push(format!("{case}: stderr of {} bytes: {}", err.len(), &err[..err.len().min(3000)]));
         }
     }

@@ -132,6 +132,9 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[agent]\nbatch_size = 0\n", expect: "agent.batch_size" },
     Cfg { toml: "[agent]\nbatch_size = 100000000000\n", expect: "agent.batch_size" },
     Cfg { toml: "[agent]\nbuffer_size = 100000000000000\n", expect: "agent.buffer_size" },
+    // Within each field's range, but too much memory together (estimated before allocating).
+    Cfg { toml: "[agent]\nhidden = [16384, 16384, 16384, 16384]\n", expect: "`agent.hidden` = [16384, 16384, 16384, 16384] is invalid: the run would need about 60.8 GiB (networks 60.0" },
+    Cfg { toml: "[agent]\nhidden = [4096, 4096]\nbuffer_size = 100000000\n", expect: "`agent.buffer_size` = 100000000 is invalid: the run would need about 16." },
     Cfg { toml: "[agent]\nupdates_per_step = 0\n", expect: "agent.updates_per_step" },
     Cfg { toml: "[agent]\npolicy_delay = 0\n", expect: "agent.policy_delay" },
     Cfg { toml: "[agent]\nnoise_sigma = -0.1\n", expect: "agent.noise_sigma" },
@@ -252,6 +255,22 @@ const URDFS: &[Urdf] = &[
     Urdf { links: "base a b c", joints: "j0 revolute base a; j1 revolute b c; j2 revolute c b", raw: None, tip: Some("a"), expect: "joints `j2`, `j1` form a cycle through links `b`, `c`" },
     Urdf { links: "base a b c d", joints: "j0 revolute base a; j1 revolute b c; j2 revolute c b; j3 fixed c d", raw: None, tip: Some("a"), expect: "form a cycle" },
 ];
+
+#[test]
+fn deeply_nested_urdfs_are_refused_without_overflowing_the_stack() {
+    // 40 000 nested elements used to overflow the recursive parser's stack (SIGSEGV).
+    let deep = format!("<robot name=\"r\">{}{}</robot>", "<a>".repeat(40_000), "</a>".repeat(40_000));
+    let e = Chain::from_urdf_str(&deep, None).unwrap_err().to_string();
+    assert!(e.contains("nested more than 64 deep"), "{e}");
+    // Tags inside comments, CDATA and attribute values do not count; self-closing ones do not nest.
+    let fine = format!(
+        "<?xml version=\"1.0\"?><!-- {} --><robot name=\"r>\"><link name=\"base\"/><link name=\"a\"/>\
+         <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"a\"/><axis xyz=\"0 0 1\"/>\
+         <limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint></robot>",
+        "<a>".repeat(1000)
+    );
+    Chain::from_urdf_str(&fine, None).unwrap();
+}
 
 fn urdf_document(u: &Urdf) -> String {
     if let Some(raw) = u.raw {

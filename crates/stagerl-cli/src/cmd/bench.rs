@@ -24,9 +24,9 @@ pub struct UpdateArgs {
     hidden: usize,
     #[arg(long, default_value_t = 256)]
     batch: usize,
-    /// Timed updates (after 20 warm-up updates).
-    #[arg(long, default_value_t = 200)]
-    updates: usize,
+    /// Timed updates (after 20 warm-up updates), 1 to 1 000 000.
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    updates: u32,
 }
 
 #[derive(clap::Args)]
@@ -35,15 +35,16 @@ pub struct TrainArgs {
     algo: stagerl::agent::Algo,
     #[arg(long, default_value_t = 64)]
     hidden: usize,
-    /// Environment steps to time (after `learning_starts` = 1000 random steps, which are timed too).
-    #[arg(long, default_value_t = 20_000)]
+    /// Environment steps to time (after `learning_starts` = 1000 random steps, which are timed
+    /// too), 1 to 100 000 000.
+    #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     steps: u64,
 }
 
 #[derive(clap::Args)]
 pub struct EnvArgs {
     /// Steps to time.
-    #[arg(long, default_value_t = 5_000_000)]
+    #[arg(long, default_value_t = 5_000_000, value_parser = clap::value_parser!(u64).range(1..=10_000_000_000))]
     steps: u64,
     /// Reward function.
     #[arg(long, default_value = "sar")]
@@ -113,6 +114,8 @@ fn update(a: UpdateArgs) -> Result<()> {
         batch_size: a.batch,
         ..AgentConfig::default()
     };
+    // The whole config's validation: its memory estimate refuses networks too large to allocate.
+    Config { agent: cfg.clone(), ..Config::default() }.validate()?;
     let mut agent = build(&cfg, od, ad, 0)?;
     let mut rng = Rng::new(1);
     let mut batch = Batch::new(a.batch, od, ad);
@@ -125,7 +128,7 @@ fn update(a: UpdateArgs) -> Result<()> {
     for _ in 0..20 {
         agent.update(&batch);
     }
-    let mut times: Vec<f64> = (0..a.updates.max(1))
+    let mut times: Vec<f64> = (0..a.updates)
         .map(|_| {
             let t = Instant::now();
             agent.update(&batch);

@@ -11,11 +11,11 @@ pub struct Args {
     /// Seed of the target stream.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Episodes printed step by step.
-    #[arg(long, default_value_t = 1)]
+    /// Episodes printed step by step (0 to 1000).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=1000))]
     show: u32,
-    /// Random targets in the closing evaluation.
-    #[arg(long, default_value_t = 500)]
+    /// Random targets in the closing evaluation (1 to 10 000 000).
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
     trials: u32,
 }
 

@@ -118,6 +118,8 @@ impl ReachEnv {
     pub fn from_config(cfg: &Config, seed: u64) -> Result<ReachEnv> {
         cfg.validate()?;
         let chain = Arc::new(cfg.robot.load()?);
+        // The memory estimate again, with the arm's own joint count.
+        cfg.check_memory(chain.dof())?;
         let task = cfg.task.resolve(&chain)?;
         ReachEnv::new(chain, task, cfg.reward.clone(), seed)
     }

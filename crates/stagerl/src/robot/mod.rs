@@ -18,7 +18,7 @@ mod kin;
 #[cfg(test)]
 mod tests;
 mod urdf;
-pub use urdf::MAX_LENGTH_M;
+pub use urdf::{MAX_LENGTH_M, MAX_URDF_BYTES, MAX_XML_DEPTH};
 
 /// The bundled UR5 URDF (see `assets/robots/ur5.urdf`).
 pub const UR5_URDF: &str = include_str!("../../../../assets/robots/ur5.urdf");
@@ -118,6 +118,14 @@ impl Chain {
     /// Read and parse a URDF file (see [`Chain::from_urdf_str`]); [`Error::Io`] if it cannot be
     /// read, URDF errors prefixed with the path.
     pub fn from_urdf_file(path: &Path, tip: Option<&str>) -> Result<Chain> {
+        let size = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+        if size > urdf::MAX_URDF_BYTES {
+            return Err(Error::Urdf(format!(
+                "{}: {size} bytes, more than the {} bytes a URDF may have",
+                path.display(),
+                urdf::MAX_URDF_BYTES
+            )));
+        }
         let xml = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         Chain::from_urdf_str(&xml, tip).map_err(|e| match e {
             Error::Urdf(m) => Error::Urdf(format!("{}: {m}", path.display())),

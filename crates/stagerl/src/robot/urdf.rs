@@ -60,8 +60,71 @@ fn check_no_cycle(
     Ok(())
 }
 
+/// The deepest element nesting a URDF may have (a URDF needs 4: robot, joint, limit; a deeper
+/// document could overflow the stack of the recursive XML parser).
+pub const MAX_XML_DEPTH: usize = 64;
+
+/// The largest URDF file read, bytes (64 MiB).
+pub const MAX_URDF_BYTES: u64 = 64 << 20;
+
+/// An error if `xml` nests elements deeper than [`MAX_XML_DEPTH`]: a scan of its tags (comments,
+/// CDATA, declarations and quoted attribute values skipped) without recursion. Malformed markup
+/// is left to the parser to report.
+fn check_xml_depth(xml: &str) -> Result<()> {
+    let b = xml.as_bytes();
+    let find = |from: usize, pat: &str| xml[from..].find(pat).map(|k| from + k);
+    let (mut depth, mut i) = (0usize, 0usize);
+    while let Some(open) = find(i, "<") {
+        let rest = &xml[open..];
+        let skip_to = |pat: &str| find(open, pat).map(|k| k + pat.len());
+        let next = if rest.starts_with("<!--") {
+            skip_to("-->")
+        } else if rest.starts_with("<![CDATA[") {
+            skip_to("]]>")
+        } else if rest.starts_with("<?") || rest.starts_with("<!") || rest.starts_with("</") {
+            if rest.starts_with("</") {
+                depth = depth.saturating_sub(1);
+            }
+            skip_to(">")
+        } else {
+            // A start tag: its end is the first `>` outside a quoted attribute value.
+            let mut quote = None;
+            let end = (open + 1..b.len()).find(|&k| match (quote, b[k]) {
+                (None, q @ (b'"' | b'\'')) => {
+                    quote = Some(q);
+                    false
+                }
+                (Some(q), c) if c == q => {
+                    quote = None;
+                    false
+                }
+                (None, b'>') => true,
+                _ => false,
+            });
+            if let Some(end) = end {
+                if b[end - 1] != b'/' {
+                    depth += 1;
+                    if depth > MAX_XML_DEPTH {
+                        return Err(urdf_err(format!(
+                            "elements are nested more than {MAX_XML_DEPTH} deep (at byte {open}); \
+                             a URDF needs a handful of levels"
+                        )));
+                    }
+                }
+            }
+            end.map(|e| e + 1)
+        };
+        match next {
+            Some(n) => i = n,
+            None => break,
+        }
+    }
+    Ok(())
+}
+
 /// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf).
 pub(crate) fn compile_str(xml: &str, tip: Option<&str>) -> Result<Compiled> {
+    check_xml_depth(xml)?;
     let robot = urdf_rs::read_from_string(xml)
         .map_err(|e| urdf_err(format!("cannot parse the URDF document: {e}")))?;
     compile(&robot, tip)
