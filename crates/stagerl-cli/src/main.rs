@@ -48,7 +48,10 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage(&e),
+    };
     let result = match cli.command {
         Command::Train(a) => cmd::train::run(a),
         Command::Eval(a) => cmd::eval::run(a),
@@ -65,6 +68,20 @@ fn main() -> ExitCode {
         Err(e) => {
             // With standard error closed too, the exit code alone tells.
             let _ = errln!("stagerl: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Print clap's help, version or usage error through [`out`] (so a failing output is an error,
+/// not ignored) and exit with clap's code (0 for help and version, 2 for a usage error).
+fn usage(e: &clap::Error) -> ExitCode {
+    let text = e.render().to_string();
+    let written = if e.use_stderr() { errln!("{}", text.trim_end()) } else { out::text(&text) };
+    match written {
+        Ok(()) => ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(2)),
+        Err(err) => {
+            let _ = errln!("stagerl: error: {err:#}");
             ExitCode::FAILURE
         }
     }

@@ -68,6 +68,9 @@ fn full_disk_and_closed_stdout_are_errors() {
     let many_fk = FK_LINE.repeat(2000);
     for (args, stdin) in [
         (&["config"][..], ""),
+        (&["--help"][..], ""),
+        (&["--version"][..], ""),
+        (&["fk", "--help"][..], ""),
         (&["demo", "--trials", "5"][..], ""),
         (&["fk"][..], many_fk.as_str()),
         (&["reward", "--function", "sar"][..], REWARD_LINE),
