@@ -7,10 +7,12 @@
 //! fixture directory, `$RUN` a small trained SAC run (hidden [8, 8]) and `$EMPTY` a run directory
 //! with a config but no checkpoint.
 
-use std::collections::BTreeMap;
+mod common;
+
+use common::{bin, snapshot, spawn_piped};
 use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::path::Path;
+use std::process::Output;
 
 use stagerl::agent::Algo;
 use stagerl::checkpoint::Checkpoint;
@@ -134,25 +136,6 @@ const REWARD_LINES: &[Case] = &[
     Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[-1.7e308,0,0],\"ee_quat\":[0,0,0,1],\"target\":[1.7e308,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "is not finite"] },
 ];
 
-/// Every file and directory under `dir` except `dir/out` (where `train` may create runs), with
-/// the files' bytes.
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                out.insert(p.clone(), None);
-                stack.push(p);
-            } else {
-                out.insert(p.clone(), Some(std::fs::read(&p).unwrap()));
-            }
-        }
-    }
-    out
-}
-
 fn small_run(dir: &Path, algo: Algo, hidden: usize) {
     let mut cfg = Config::default();
     cfg.agent.algo = algo;
@@ -236,14 +219,7 @@ fn fixture(dir: &Path) {
 }
 
 fn run(args: &[String], stdin: &str) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_stagerl"))
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn stagerl");
+    let mut child = spawn_piped(bin().args(args));
     // A command may exit before reading its input (a bad argument): ignore a broken pipe.
     let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
     child.wait_with_output().unwrap()

@@ -4,34 +4,11 @@
 
 mod common;
 
-use common::{bin, scratch};
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::{Output, Stdio};
+use common::{run, scratch, snapshot};
+use std::path::Path;
 
 const CONFIG: &str = "[agent]\nhidden = [8, 8]\nlearning_starts = 50\nbatch_size = 8\nbuffer_size = 1000\n\
 [train]\nepisodes = 4\neval_every_episodes = 2\neval_trials = 2\ncheckpoint_every_episodes = 1\n";
-
-fn run(args: &[&str]) -> Output {
-    bin().args(args).env("RUST_BACKTRACE", "0").stdin(Stdio::null()).output().unwrap()
-}
-
-/// Every file under `dir` with its bytes.
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.insert(p.clone(), std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
-}
 
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();

@@ -5,10 +5,10 @@
 
 mod common;
 
-use common::{bin, scratch};
+use common::{bin, scratch, spawn_piped};
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Output};
 
 const FK_LINE: &str = "{\"joints\":[0,0,0,0,0,0]}\n";
 const REWARD_LINE: &str =
@@ -18,31 +18,15 @@ const REWARD_LINE: &str =
 /// (`>/dev/full`, `>&-`, ...), `stdin` on standard input.
 fn shell(args: &[&str], redirect: &str, stdin: &str) -> Output {
     let script = format!("exec \"$0\" \"$@\" {redirect}");
-    let mut child = Command::new("sh")
-        .arg("-c")
-        .arg(script)
-        .arg(env!("CARGO_BIN_EXE_stagerl"))
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child =
+        spawn_piped(Command::new("sh").arg("-c").arg(script).arg(env!("CARGO_BIN_EXE_stagerl")).args(args));
     let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
     child.wait_with_output().unwrap()
 }
 
 /// Run `stagerl args`, read one line of its output, then close the pipe (as `| head -1` does).
 fn head_1(args: &[&str], stdin: &str) -> (String, Output) {
-    let mut child = bin()
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_piped(bin().args(args));
     let mut input = child.stdin.take().unwrap();
     let stdin = stdin.to_string();
     let feeder = std::thread::spawn(move || {

@@ -5,19 +5,15 @@
 
 mod common;
 
-use common::{bin, episodes_without_wall, scratch};
+use common::{assert_same_run, bin, run, scratch};
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const EPISODES: u64 = 160;
 const CONFIG: &str =
     "[agent]\nhidden = [16, 16]\nlearning_starts = 150\nbatch_size = 16\nbuffer_size = 20000\n\
 [train]\nepisodes = 160\neval_every_episodes = 40\neval_trials = 4\ncheckpoint_every_episodes = 1000\n";
-
-fn run(args: &[&str]) -> Output {
-    bin().args(args).stdin(Stdio::null()).output().unwrap()
-}
 
 #[test]
 fn sigterm_at_random_moments_then_resume_gives_the_uninterrupted_run() {
@@ -64,19 +60,6 @@ fn sigterm_at_random_moments_then_resume_gives_the_uninterrupted_run() {
     let out = run(&["train", "--resume", &s(&cut), "--eval-trials", "0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    assert_eq!(episodes_without_wall(&full).len() as u64, EPISODES + 1);
-    assert_eq!(
-        episodes_without_wall(&full),
-        episodes_without_wall(&cut),
-        "episodes.csv (but wall time) differs after SIGTERMs after episodes {stops:?}"
-    );
-    let eval = |d: &Path| std::fs::read_to_string(d.join("eval.csv")).unwrap();
-    assert_eq!(eval(&full).lines().count(), 5);
-    assert_eq!(eval(&full), eval(&cut));
-    let ck =
-        |d: &Path| stagerl::checkpoint::Checkpoint::load(&d.join("checkpoints/final.safetensors")).unwrap();
-    let (a, b) = (ck(&full), ck(&cut));
-    assert!(a.tensor_names().count() > 20);
-    assert!(a.same_contents(&b), "final networks or metadata differ");
+    assert_same_run(&full, &cut, EPISODES as usize, 4, &format!("after SIGTERMs after episodes {stops:?}"));
     std::fs::remove_dir_all(&root).ok();
 }
