@@ -195,8 +195,10 @@ impl Checkpoint {
         let bad = |what: String| {
             Error::InvalidInput(format!("{}: not a valid checkpoint: {what}", origin.display()))
         };
-        let st = SafeTensors::deserialize(bytes).map_err(|e| bad(e.to_string()))?;
-        let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
+        let st =
+            SafeTensors::deserialize(bytes).map_err(|e| bad(crate::text::bound_message(&e.to_string())))?;
+        let (_, header) =
+            SafeTensors::read_metadata(bytes).map_err(|e| bad(crate::text::bound_message(&e.to_string())))?;
         let mut ck = Checkpoint { origin: Some(origin.to_path_buf()), ..Checkpoint::default() };
         if let Some(m) = header.metadata() {
             ck.metadata = m.clone().into_iter().collect();

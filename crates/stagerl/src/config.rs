@@ -361,8 +361,10 @@ impl Config {
 
     /// Parse a TOML document; `origin` names it in error messages.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Config> {
-        let cfg: Config = toml::from_str(text)
-            .map_err(|e| Error::ConfigParse { path: origin.to_path_buf(), message: e.to_string() })?;
+        let cfg: Config = toml::from_str(text).map_err(|e| Error::ConfigParse {
+            path: origin.to_path_buf(),
+            message: crate::text::bound_message(&e.to_string()),
+        })?;
         cfg.validate()?;
         Ok(cfg)
     }

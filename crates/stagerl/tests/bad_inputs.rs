@@ -544,3 +544,17 @@ fn bad_checkpoints_are_refused_and_nothing_on_disk_changes() {
     assert_eq!(snapshot(&runs), runs_before, "the runs' files changed");
     report(failures, CHECKPOINTS.len() + 1);
 }
+
+#[test]
+fn library_errors_quote_long_input_as_excerpts() {
+    let big = "x".repeat(1_000_000);
+    let errors = [
+        Config::from_toml_str(&format!("[task]\nmax_steps = {big}\n"), Path::new("big.toml")).unwrap_err(),
+        Config::from_toml_str(&format!("[reward]\nfunction = \"{big}\"\n"), Path::new("big.toml")).unwrap_err(),
+        Chain::from_urdf_str(&format!("<robot name=\"r\"><link name=\"a\"/><joint name=\"j\" type=\"fixed\"><parent link=\"{big}\"/><child link=\"a\"/></joint></robot>"), None).unwrap_err(),
+    ];
+    for e in errors {
+        let m = e.to_string();
+        assert!(m.len() < 2000 && m.contains("bytes)"), "{} bytes: {}", m.len(), &m[..m.len().min(3000)]);
+    }
+}

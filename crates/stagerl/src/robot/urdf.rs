@@ -20,8 +20,9 @@ pub(crate) struct Compiled {
 /// beyond it forward kinematics can overflow f64 (an origin of 1e308 m does).
 pub const MAX_LENGTH_M: f64 = 1e6;
 
+/// A URDF error; names echoed from the document are cut to excerpts.
 fn urdf_err(msg: impl Into<String>) -> Error {
-    Error::Urdf(msg.into())
+    Error::Urdf(crate::text::bound_message(&msg.into()))
 }
 
 /// `a`, `b`, `c` as "`a`, `b`, `c`".
