@@ -245,35 +245,10 @@ pub fn pick_trajectory_runs<'a>(
 /// `table1.json`, `claims.md`, `figure7.{png,svg}`, `figure8.{png,svg}` and, when
 /// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}`.
 pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
-    // Checked before anything is written: a report is written whole or not at all.
-    for (what, p) in [("output directory", opts.out.as_path()), ("run directory", dir)] {
-        if p.to_str().is_none() {
-            return Err(Error::InvalidInput(format!(
-                "the report's {what} {} is not valid UTF-8 (the report records its paths as text); choose another",
-                p.display()
-            )));
-        }
-    }
-    if opts.trajectories > MAX_TRAJECTORIES {
-        return Err(Error::config(
-            "trajectories",
-            opts.trajectories,
-            format!("0 to {MAX_TRAJECTORIES} evaluation trajectories per figure"),
-        ));
-    }
+    check_options(dir, opts)?;
     let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
     if groups.is_empty() {
-        let skipped = match report.skipped.len() {
-            0 => String::new(),
-            n => format!(
-                " ({n} directories not read, e.g. `{}`: {})",
-                report.skipped[0].name, report.skipped[0].reason
-            ),
-        };
-        return Err(Error::InvalidInput(format!(
-            "{}: no runs to report on: a run directory holds config.toml and episodes.csv, at depth 1 or 2{skipped}",
-            dir.display()
-        )));
+        return Err(no_runs(dir, &report));
     }
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let out = |name: &str| opts.out.join(name);
@@ -344,4 +319,42 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
         .map_err(|e| Error::InvalidInput(format!("report JSON: {e}")))?;
     crate::io::write_atomic(&json_path, json.as_bytes())?;
     Ok(report)
+}
+
+/// The checks of [`generate`] made before anything is written, so that a report is written whole
+/// or not at all: UTF-8 paths, a bounded number of trajectories.
+fn check_options(dir: &Path, opts: &ReportOptions) -> Result<()> {
+    for (what, p) in [("output directory", opts.out.as_path()), ("run directory", dir)] {
+        if p.to_str().is_none() {
+            return Err(Error::InvalidInput(format!(
+                "the report's {what} {} is not valid UTF-8 (the report records its paths as text); choose another",
+                p.display()
+            )));
+        }
+    }
+    if opts.trajectories > MAX_TRAJECTORIES {
+        return Err(Error::config(
+            "trajectories",
+            opts.trajectories,
+            format!("0 to {MAX_TRAJECTORIES} evaluation trajectories per figure"),
+        ));
+    }
+    Ok(())
+}
+
+/// The error for a directory without any run.
+fn no_runs(dir: &Path, report: &Report) -> Error {
+    let skipped = match report.skipped.first() {
+        None => String::new(),
+        Some(first) => format!(
+            " ({} directories not read, e.g. `{}`: {})",
+            report.skipped.len(),
+            first.name,
+            first.reason
+        ),
+    };
+    Error::InvalidInput(format!(
+        "{}: no runs to report on: a run directory holds config.toml and episodes.csv, at depth 1 or 2{skipped}",
+        dir.display()
+    ))
 }

@@ -123,6 +123,62 @@ fn check_xml_depth(xml: &str) -> Result<()> {
     Ok(())
 }
 
+/// A joint's origin (xyz metres, rpy radians): finite, and within [`MAX_LENGTH_M`].
+fn checked_origin(j: &urdf_rs::Joint) -> Result<([f64; 3], [f64; 3])> {
+    let xyz = j.origin.xyz.0;
+    let rpy = j.origin.rpy.0;
+    if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite()) {
+        return Err(urdf_err(format!(
+            "joint `{}` has a non-finite origin: xyz = {xyz:?}, rpy = {rpy:?}",
+            j.name
+        )));
+    }
+    if xyz.iter().any(|v| v.abs() > MAX_LENGTH_M) {
+        return Err(urdf_err(format!(
+            "joint `{}` has origin xyz = {xyz:?} m; each coordinate must be within \
+             +-{MAX_LENGTH_M:e} m",
+            j.name
+        )));
+    }
+    Ok((xyz, rpy))
+}
+
+/// An actuated joint's (lower, upper, velocity) limits (rad or m, rad/s or m/s): usable, and a
+/// prismatic joint's within [`MAX_LENGTH_M`]. Continuous joints are unbounded.
+fn checked_limits(j: &urdf_rs::Joint, kind: JointKind) -> Result<(f64, f64, f64)> {
+    let lim = &j.limit;
+    if j.joint_type == JointType::Continuous {
+        if !(lim.velocity.is_finite() && lim.velocity > 0.0) {
+            return Err(urdf_err(format!(
+                "continuous joint `{}` has no usable velocity limit (velocity = {}); \
+                 a finite <limit velocity> > 0 is required",
+                j.name, lim.velocity
+            )));
+        }
+        Ok((f64::NEG_INFINITY, f64::INFINITY, lim.velocity))
+    } else {
+        let usable = lim.lower.is_finite()
+            && lim.upper.is_finite()
+            && lim.velocity.is_finite()
+            && lim.lower < lim.upper
+            && lim.velocity > 0.0;
+        if !usable {
+            return Err(urdf_err(format!(
+                "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
+                 velocity = {}; finite lower < upper and velocity > 0 are required",
+                j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
+            )));
+        }
+        if kind == JointKind::Prismatic && lim.lower.abs().max(lim.upper.abs()) > MAX_LENGTH_M {
+            return Err(urdf_err(format!(
+                "prismatic joint `{}` has limits [{:?}, {:?}] m; they must be within +-{MAX_LENGTH_M:e} m",
+                j.name, lim.lower, lim.upper
+            )));
+        }
+        Ok((lim.lower, lim.upper, lim.velocity))
+    }
+}
+
 /// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf).
 pub(crate) fn compile_str(xml: &str, tip: Option<&str>) -> Result<Compiled> {
     check_xml_depth(xml)?;
@@ -249,21 +305,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     let mut base: Option<Tf> = None;
     let mut pending: Tf = kin::IDENTITY;
     for j in &path {
-        let xyz = j.origin.xyz.0;
-        let rpy = j.origin.rpy.0;
-        if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite()) {
-            return Err(urdf_err(format!(
-                "joint `{}` has a non-finite origin: xyz = {xyz:?}, rpy = {rpy:?}",
-                j.name
-            )));
-        }
-        if xyz.iter().any(|v| v.abs() > MAX_LENGTH_M) {
-            return Err(urdf_err(format!(
-                "joint `{}` has origin xyz = {xyz:?} m; each coordinate must be within \
-                 +-{MAX_LENGTH_M:e} m",
-                j.name
-            )));
-        }
+        let (xyz, rpy) = checked_origin(j)?;
         pending = kin::mul(&pending, &kin::origin(xyz, rpy));
         let kind = match j.joint_type {
             JointType::Fixed => continue,
@@ -296,37 +338,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
             )));
         }
         let axis = [axis[0] / norm, axis[1] / norm, axis[2] / norm];
-        let lim = &j.limit;
-        let (lower, upper, velocity) = if j.joint_type == JointType::Continuous {
-            if !(lim.velocity.is_finite() && lim.velocity > 0.0) {
-                return Err(urdf_err(format!(
-                    "continuous joint `{}` has no usable velocity limit (velocity = {}); \
-                     a finite <limit velocity> > 0 is required",
-                    j.name, lim.velocity
-                )));
-            }
-            (f64::NEG_INFINITY, f64::INFINITY, lim.velocity)
-        } else {
-            let usable = lim.lower.is_finite()
-                && lim.upper.is_finite()
-                && lim.velocity.is_finite()
-                && lim.lower < lim.upper
-                && lim.velocity > 0.0;
-            if !usable {
-                return Err(urdf_err(format!(
-                    "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
-                     velocity = {}; finite lower < upper and velocity > 0 are required",
-                    j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
-                )));
-            }
-            if kind == JointKind::Prismatic && lim.lower.abs().max(lim.upper.abs()) > MAX_LENGTH_M {
-                return Err(urdf_err(format!(
-                    "prismatic joint `{}` has limits [{:?}, {:?}] m; they must be within +-{MAX_LENGTH_M:e} m",
-                    j.name, lim.lower, lim.upper
-                )));
-            }
-            (lim.lower, lim.upper, lim.velocity)
-        };
+        let (lower, upper, velocity) = checked_limits(j, kind)?;
         joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity });
 
         let a = kin::basis_for_axis(axis);
