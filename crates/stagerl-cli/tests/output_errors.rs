@@ -95,7 +95,7 @@ fn train_whose_output_closes_saves_the_run_and_says_how_to_resume() {
     std::fs::write(
         &cfg,
         "[agent]\nhidden = [8, 8]\nlearning_starts = 100\nbatch_size = 8\nbuffer_size = 5000\n\
-         [train]\nepisodes = 60\neval_every_episodes = 5\neval_trials = 2\ncheckpoint_every_episodes = 1000\n",
+         [train]\nepisodes = 300\neval_every_episodes = 5\neval_trials = 2\ncheckpoint_every_episodes = 1000\n",
     )
     .unwrap();
     let dir = root.join("run");
@@ -113,7 +113,7 @@ fn train_whose_output_closes_saves_the_run_and_says_how_to_resume() {
         .unwrap()
         .parse()
         .unwrap();
-    assert!(episode % 5 == 0 && episode < 60, "{err}");
+    assert!(episode % 5 == 0 && episode < 300, "{err}");
     assert!(dir.join("checkpoints/latest.safetensors").exists());
     assert!(!dir.join("checkpoints/final.safetensors").exists());
 
@@ -128,5 +128,31 @@ fn train_whose_output_closes_saves_the_run_and_says_how_to_resume() {
     let out = shell(&["train", "--config", &s(&cfg), "--out", &s(&full)], ">/dev/full", "");
     assert_clean_error("train >/dev/full", &out, "No space left on device");
     assert!(!full.join("episodes.csv").exists());
+    std::fs::remove_dir_all(&root).ok();
+}
+
+#[test]
+fn reproduce_whose_output_closes_stops_and_resumes() {
+    let root = scratch("output-reproduce");
+    let preset = root.join("p.toml");
+    std::fs::write(
+        &preset,
+        "[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\", \"basic\", \"posture\"]\nseeds = [1]\neval_trials = 2\n\
+         [agent]\nhidden = [8, 8]\nbatch_size = 8\nbuffer_size = 2000\nlearning_starts = 50\n\
+         [train]\nepisodes = 40\neval_every_episodes = 0\ncheckpoint_every_episodes = 10\n",
+    )
+    .unwrap();
+    let out_dir = root.join("sweep");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let args = ["reproduce", "--preset", &s(&preset), "--out", &s(&out_dir), "--jobs", "1"];
+    // The first line is the sweep's; the line of the first finished run fails and stops the sweep.
+    let (first, out) = head_1(&args, "");
+    assert!(first.starts_with("reproduce"), "{first}");
+    assert_clean_error("reproduce | head -1", &out, "Broken pipe");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("Run the same command again"));
+    // The same command finishes the sweep.
+    let out = bin().args(args).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("all 3 runs done"));
     std::fs::remove_dir_all(&root).ok();
 }
