@@ -20,7 +20,6 @@ macro_rules! errln {
 
 /// Write one line to standard output and flush it.
 pub fn line(args: fmt::Arguments<'_>) -> Result<()> {
-    ensure_stdout_open()?;
     let mut o = io::stdout().lock();
     o.write_fmt(args)
         .and_then(|()| o.write_all(b"\n"))
@@ -30,7 +29,6 @@ pub fn line(args: fmt::Arguments<'_>) -> Result<()> {
 
 /// Write `text` as it is to standard output and flush it.
 pub fn text(text: &str) -> Result<()> {
-    ensure_stdout_open()?;
     let mut o = io::stdout().lock();
     o.write_all(text.as_bytes()).and_then(|()| o.flush()).context("writing to standard output")
 }
@@ -48,7 +46,10 @@ pub fn err_line(args: fmt::Arguments<'_>) -> Result<()> {
         .context("writing to standard error")
 }
 
-/// Standard output for bulk writing (buffered; flush it and check the result).
+/// Standard output for a command whose product is its output (`fk`, `reward`): buffered (flush
+/// it and check the result), and an error if the process was started with standard output
+/// closed, where every write would vanish into the `/dev/null` the runtime put in its place.
+/// (Other commands write their results to files and accept it.)
 pub fn stdout() -> Result<io::BufWriter<io::StdoutLock<'static>>> {
     ensure_stdout_open()?;
     Ok(io::BufWriter::new(io::stdout().lock()))
@@ -65,8 +66,9 @@ fn ensure_stdout_open() -> Result<()> {
 
 /// Whether standard output was closed when the process started. The Rust runtime reopens a
 /// closed standard stream as `/dev/null` in read-write mode before `main`, and writes to it then
-/// succeed silently; a shell's or a parent's `> /dev/null` opens it write-only. Linux only
-/// (elsewhere: false).
+/// succeed silently; a shell's `> /dev/null` opens it write-only. (A parent that opens
+/// `/dev/null` read-write itself, as Python's `subprocess.DEVNULL` does, looks the same.) Linux
+/// only (elsewhere: false).
 fn stdout_was_closed() -> bool {
     if !cfg!(target_os = "linux") {
         return false;

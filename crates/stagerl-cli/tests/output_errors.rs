@@ -1,6 +1,6 @@
-//! Output errors are errors, never panics: a pipe closed early (`| head -1`), a full disk
-//! (`> /dev/full`) or a closed standard output give a non-zero exit (not 101, the code of a panic)
-//! and a message on standard error; `train` whose output goes away saves its run and says how to
+//! Output errors are errors, never panics: a pipe closed early (`| head -1`) or a full disk
+//! (`> /dev/full`) give a non-zero exit (not 101, the code of a panic) and a message on standard
+//! error, and so does a closed standard output for `fk` and `reward`; `train` whose output goes away saves its run and says how to
 //! resume it.
 
 mod common;
@@ -62,9 +62,14 @@ fn full_disk_and_closed_stdout_are_errors() {
     ] {
         let out = shell(args, ">/dev/full", stdin);
         assert_clean_error(&format!("{args:?} >/dev/full"), &out, "No space left on device");
+        // Standard error closed as well: still a failure, silently.
+        let out = shell(args, ">/dev/full 2>&-", stdin);
+        assert_eq!(out.status.code(), Some(1), "{args:?} >/dev/full 2>&-");
+    }
+    // fk and reward, whose product is their output, refuse a closed standard output.
+    for (args, stdin) in [(&["fk"][..], FK_LINE), (&["reward", "--function", "sar"][..], REWARD_LINE)] {
         let out = shell(args, ">&-", stdin);
         assert_clean_error(&format!("{args:?} >&-"), &out, "standard output is closed");
-        // Standard error closed as well: still a failure, silently.
         let out = shell(args, ">&- 2>&-", stdin);
         assert_eq!(out.status.code(), Some(1), "{args:?} >&- 2>&-");
     }
