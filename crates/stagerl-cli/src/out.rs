@@ -59,7 +59,7 @@ pub fn stdout() -> Result<io::BufWriter<io::StdoutLock<'static>>> {
 fn ensure_stdout_open() -> Result<()> {
     static CLOSED: OnceLock<bool> = OnceLock::new();
     if *CLOSED.get_or_init(stdout_was_closed) {
-        bail!("standard output is closed (to discard the output, redirect it to /dev/null)");
+        bail!("standard output is closed (to discard the output, redirect it with `> /dev/null`)");
     }
     Ok(())
 }
