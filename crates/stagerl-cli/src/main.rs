@@ -1,5 +1,7 @@
 //! `stagerl`: a thin command-line layer over the `stagerl` library.
 
+#[macro_use]
+mod out;
 mod cmd;
 mod jsonl;
 
@@ -32,8 +34,9 @@ enum Command {
     /// Forward kinematics: JSON lines {"joints":[...]} on stdin (radians), one
     /// {"position":[x,y,z],"quaternion":[x,y,z,w]} line out per input (metres, base frame).
     Fk(cmd::fk::Args),
-    /// Reward terms: JSON lines {"ee_pos","ee_quat","target","joint_vel"} on stdin, one line of
-    /// every term out per input.
+    /// Reward terms: JSON lines {"ee_pos","ee_quat","target","joint_vel"} on stdin (`joint_vel`:
+    /// one value per joint of --robot, 6 for the default UR5), one line of every term out per
+    /// input.
     Reward(cmd::reward::Args),
     /// Table 1, the paper's claims, Figures 7 and 8 and trajectories from finished run directories.
     Report(cmd::report::Args),
@@ -45,7 +48,10 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage(&e),
+    };
     let result = match cli.command {
         Command::Train(a) => cmd::train::run(a),
         Command::Eval(a) => cmd::eval::run(a),
@@ -55,15 +61,27 @@ fn main() -> ExitCode {
         Command::Reward(a) => cmd::reward::run(a),
         Command::Report(a) => cmd::report::run(a),
         Command::Bench(b) => cmd::bench::run(b),
-        Command::Config => {
-            print!("{}", stagerl::config::Config::default().to_toml_string());
-            Ok(())
-        }
+        Command::Config => out::text(&stagerl::config::Config::default().to_toml_string()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("stagerl: error: {e:#}");
+            // With standard error closed too, the exit code alone tells.
+            let _ = errln!("stagerl: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Print clap's help, version or usage error through [`out`] (so a failing output is an error,
+/// not ignored) and exit with clap's code (0 for help and version, 2 for a usage error).
+fn usage(e: &clap::Error) -> ExitCode {
+    let text = e.render().to_string();
+    let written = if e.use_stderr() { errln!("{}", text.trim_end()) } else { out::text(&text) };
+    match written {
+        Ok(()) => ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(2)),
+        Err(err) => {
+            let _ = errln!("stagerl: error: {err:#}");
             ExitCode::FAILURE
         }
     }

@@ -7,10 +7,12 @@
 //! fixture directory, `$RUN` a small trained SAC run (hidden [8, 8]) and `$EMPTY` a run directory
 //! with a config but no checkpoint.
 
-use std::collections::BTreeMap;
+mod common;
+
+use common::{bin, snapshot, spawn_piped};
 use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::path::Path;
+use std::process::Output;
 
 use stagerl::agent::Algo;
 use stagerl::checkpoint::Checkpoint;
@@ -71,6 +73,21 @@ const ARGS: &[Case] = &[
     Case { args: &["bench", "update", "--hidden", "0"], stdin: "", expect: &["agent.hidden"] },
     Case { args: &["bench", "update", "--batch", "0"], stdin: "", expect: &["agent.batch_size"] },
     Case { args: &["bench", "update", "--algo", "ppo"], stdin: "", expect: &["ppo"] },
+    // Unbounded resources: refused before allocating, with the estimate.
+    Case { args: &["train", "--config", "$DIR/huge_hidden.toml", "--out", "$DIR/out/hh"], stdin: "", expect: &["agent.hidden", "would need about 60.8 GiB"] },
+    Case { args: &["train", "--config", "$DIR/huge_replay.toml", "--out", "$DIR/out/hr"], stdin: "", expect: &["agent.buffer_size", "replay buffer 14.9"] },
+    Case { args: &["bench", "update", "--hidden", "16384"], stdin: "", expect: &["agent.hidden", "GiB"] },
+    Case { args: &["bench", "train", "--hidden", "16384"], stdin: "", expect: &["agent.hidden", "GiB"] },
+    Case { args: &["bench", "update", "--updates", "4294967295"], stdin: "", expect: &["--updates", "4294967295"] },
+    Case { args: &["bench", "env", "--steps", "18446744073709551615"], stdin: "", expect: &["--steps"] },
+    Case { args: &["bench", "train", "--steps", "18446744073709551615"], stdin: "", expect: &["--steps"] },
+    Case { args: &["demo", "--show", "4294967295"], stdin: "", expect: &["--show", "4294967295"] },
+    Case { args: &["demo", "--trials", "4294967295"], stdin: "", expect: &["--trials", "4294967295"] },
+    Case { args: &["demo", "--trials", "0"], stdin: "", expect: &["--trials"] },
+    Case { args: &["report", "$DIR/runs", "--trajectories", "4294967295", "--out", "$DIR/out/report"], stdin: "", expect: &["--trajectories", "4294967295"] },
+    Case { args: &["report", "$DIR/empty-dir", "--out", "$DIR/out/report"], stdin: "", expect: &["empty-dir", "no runs to report on"] },
+    Case { args: &["fk", "--robot", "$DIR/deep.urdf"], stdin: "", expect: &["deep.urdf", "nested more than 64 deep"] },
+    Case { args: &["reward", "--function", "sar", "--robot", "$DIR/deep.urdf"], stdin: "", expect: &["deep.urdf", "nested more than 64 deep"] },
 ];
 
 #[rustfmt::skip]
@@ -86,45 +103,38 @@ const FK_LINES: &[Case] = &[
     Case { args: &["fk"], stdin: "{\"joints\":[0,0,0,0,0,1e999]}\n", expect: &["line 1"] },
     Case { args: &["fk"], stdin: "\n\n{\"joints\":[0,0,0,0,0,0]\n", expect: &["line 3", "malformed"] },
     Case { args: &["fk", "--robot", "$DIR/two.urdf"], stdin: "{\"joints\":[0,0,0,0,0,0]}\n", expect: &["line 1", "q has 6 values", "2 joints"] },
+    // Finite input whose pose overflows f64; a URDF origin too large to compute with.
+    Case { args: &["fk", "--robot", "$DIR/slider.urdf"], stdin: "{\"joints\":[1e308,1e308]}\n", expect: &["line 1", "forward kinematics overflows", "`s1` [-1, 1]"] },
+    Case { args: &["fk", "--robot", "$DIR/far.urdf"], stdin: "{\"joints\":[0,0]}\n", expect: &["far.urdf", "joint `j2` has origin xyz = [1e308, 0.0, 0.2]", "within +-1e6 m"] },
+    Case { args: &["fk", "--robot", "$DIR/long_slider.urdf"], stdin: "{\"joints\":[0,0]}\n", expect: &["long_slider.urdf", "prismatic joint `s1` has limits [-1e300, 1.0]"] },
 ];
 
 #[rustfmt::skip]
 const REWARD_LINES: &[Case] = &[
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"joint_vel\":[0]}\n", expect: &["line 1", "missing field `target`"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`ee_pos` has 2 values, expected 3"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,1],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`ee_quat` has 3 values, expected 4"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "`target` has 4 values, expected 3"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 2"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,0],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 0"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1.00001],\"target\":[0,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "ee_quat has norm 1.00001"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[]}\n", expect: &["line 1", "joint_vel is empty"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "missing field `target`"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`ee_pos` has 2 values, expected 3"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`ee_quat` has 3 values, expected 4"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`target` has 4 values, expected 3"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "ee_quat has norm 2"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,0],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "ee_quat has norm 0"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1.00001],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "ee_quat has norm 1.00001"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[]}\n", expect: &["line 1", "`joint_vel` has 0 values, expected 6"] },
     Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":\"fast\"}\n", expect: &["line 1", "malformed"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,\"a\",0],\"joint_vel\":[0]}\n", expect: &["line 1", "malformed"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0],\"velocity\":1}\n", expect: &["line 1", "unknown field `velocity`"] },
-    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0],\"prev_ee_pos\":[0,0]}\n", expect: &["line 1", "`prev_ee_pos` has 2 values, expected 3"] },
-    Case { args: &["reward", "--function", "stride", "--config", "$DIR/displacement.toml"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0]}\n", expect: &["line 1", "prev_ee_pos"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,\"a\",0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "malformed"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0],\"velocity\":1}\n", expect: &["line 1", "unknown field `velocity`"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0],\"prev_ee_pos\":[0,0]}\n", expect: &["line 1", "`prev_ee_pos` has 2 values, expected 3"] },
+    Case { args: &["reward", "--function", "stride", "--config", "$DIR/displacement.toml"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "prev_ee_pos"] },
     Case { args: &["reward", "--function", "sar"], stdin: "$GOOD\n\n$GOOD\n{\"ee_pos\":[0,0,0]}\n", expect: &["line 4", "missing field"] },
     Case { args: &["reward", "--function", "sar"], stdin: "null\n", expect: &["line 1", "malformed"] },
+    // joint_vel has one value per joint of --robot (the UR5 by default).
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0]}\n", expect: &["line 1", "`joint_vel` has 3 values, expected 6", "ur5"] },
+    Case { args: &["reward", "--function", "sar", "--robot", "$DIR/two.urdf"], stdin: "$GOOD\n", expect: &["line 1", "`joint_vel` has 6 values, expected 2", "two.urdf"] },
+    Case { args: &["reward", "--function", "sar", "--robot", "$DIR/missing.urdf"], stdin: "$GOOD\n", expect: &["missing.urdf"] },
+    // Finite input whose terms overflow f64.
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[1e200,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`distance` = inf is not finite"] },
+    Case { args: &["reward", "--function", "stride"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[1e200,0,0,0,0,0]}\n", expect: &["line 1", "`move` = inf is not finite"] },
+    Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[-1.7e308,0,0],\"ee_quat\":[0,0,0,1],\"target\":[1.7e308,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "is not finite"] },
 ];
-
-/// Every file and directory under `dir` except `dir/out` (where `train` may create runs), with
-/// the files' bytes.
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                out.insert(p.clone(), None);
-                stack.push(p);
-            } else {
-                out.insert(p.clone(), Some(std::fs::read(&p).unwrap()));
-            }
-        }
-    }
-    out
-}
 
 fn small_run(dir: &Path, algo: Algo, hidden: usize) {
     let mut cfg = Config::default();
@@ -187,17 +197,29 @@ fn fixture(dir: &Path) {
             "<joint name=\"j3\" type=\"fixed\"><parent link=\"base\"/><child link=\"side\"/></joint></robot>",
         );
     std::fs::write(dir.join("branchy.urdf"), branchy).unwrap();
+    std::fs::write(
+        dir.join("deep.urdf"),
+        format!("<robot name=\"r\">{}{}</robot>", "<a>".repeat(40_000), "</a>".repeat(40_000)),
+    )
+    .unwrap();
+    std::fs::create_dir_all(dir.join("empty-dir")).unwrap();
+    std::fs::write(dir.join("huge_hidden.toml"), "[agent]\nhidden = [16384, 16384, 16384, 16384]\n").unwrap();
+    std::fs::write(dir.join("huge_replay.toml"), "[agent]\nhidden = [4096, 4096]\nbuffer_size = 100000000\n")
+        .unwrap();
+    std::fs::write(dir.join("far.urdf"), TWO_JOINT_URDF.replace("0.5 0 0.2", "1e308 0 0.2")).unwrap();
+    let slider = TWO_JOINT_URDF
+        .replace("name=\"j1\" type=\"revolute\"", "name=\"s1\" type=\"prismatic\"")
+        .replace("name=\"j2\" type=\"revolute\"", "name=\"s2\" type=\"prismatic\"")
+        .replace("axis xyz=\"0 0 1\"", "axis xyz=\"1 0 0\"")
+        .replace("axis xyz=\"0 1 0\"", "axis xyz=\"1 0 0\"")
+        .replace("lower=\"-3\" upper=\"3\"", "lower=\"-1\" upper=\"1\"");
+    std::fs::write(dir.join("slider.urdf"), &slider).unwrap();
+    std::fs::write(dir.join("long_slider.urdf"), slider.replacen("lower=\"-1\"", "lower=\"-1e300\"", 1))
+        .unwrap();
 }
 
 fn run(args: &[String], stdin: &str) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_stagerl"))
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn stagerl");
+    let mut child = spawn_piped(bin().args(args));
     // A command may exit before reading its input (a bad argument): ignore a broken pipe.
     let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
     child.wait_with_output().unwrap()
@@ -255,6 +277,12 @@ fn bad_input_to_the_cli_is_an_error_naming_the_problem() {
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
     std::fs::remove_file(dir.join("runs/sac/eval-seed0.csv")).unwrap();
     let ok = run(&["reward".into(), "--function".into(), "sar".into()], &format!("{GOOD_REWARD}\n"));
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let two = format!("{d}/two.urdf");
+    let ok = run(
+        &["reward".into(), "--function".into(), "sar".into(), "--robot".into(), two],
+        &GOOD_REWARD.replace("[0,0,0,0,0,0]", "[0.5,-0.5]"),
+    );
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
 
     let mut failures = check(ARGS, &dir);
@@ -352,6 +380,63 @@ fn huge_evaluations_are_refused_not_aborted() {
     )
     .unwrap();
     let failures = check(TRAIN_PENDING, &dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn huge_inputs_are_quoted_as_bounded_excerpts() {
+    // Each input holds a 2 MB token that the error used to echo whole: now an excerpt that ends
+    // with the token's size, "... (2000000 bytes)".
+    let dir = std::env::temp_dir().join(format!("stagerl-bad-cli-huge-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::create_dir_all(&dir).unwrap();
+    let big = "x".repeat(2_000_000);
+    let d = dir.to_string_lossy().into_owned();
+    std::fs::write(dir.join("long_line.toml"), format!("[task]\nmax_steps = {big}\n")).unwrap();
+    std::fs::write(dir.join("long_value.toml"), format!("[reward]\nfunction = \"{big}\"\n")).unwrap();
+    std::fs::write(
+        dir.join("long_name.urdf"),
+        TWO_JOINT_URDF.replace("<parent link=\"l1\"/>", &format!("<parent link=\"{big}\"/>")),
+    )
+    .unwrap();
+    let cases: Vec<(Vec<String>, String, &str)> = vec![
+        (vec!["fk".into()], format!("{{\"joints\":[0,0,0,0,0,0],\"{big}\":1}}\n"), "unknown field"),
+        (vec!["fk".into()], format!("{{\"joints\":\"{big}\"}}\n"), "invalid type"),
+        (
+            vec!["reward".into(), "--function".into(), "sar".into()],
+            format!("{{\"ee_pos\":\"{big}\"}}\n"),
+            "line 1",
+        ),
+        (
+            vec!["train".into(), "--config".into(), format!("{d}/long_line.toml")],
+            String::new(),
+            "long_line.toml",
+        ),
+        (
+            vec!["demo".into(), "--config".into(), format!("{d}/long_value.toml")],
+            String::new(),
+            "long_value.toml",
+        ),
+        (vec!["fk".into(), "--robot".into(), format!("{d}/long_name.urdf")], String::new(), "does not exist"),
+        (
+            vec!["fk".into()],
+            format!("{{\"joints\":[{}]}}\n", " ".repeat(17 << 20)),
+            "longer than 16777216 bytes",
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (args, stdin, needle) in cases {
+        let out = run(&args, &stdin);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let case = format!("`stagerl {}`", args.join(" "));
+        if out.status.code() != Some(1) {
+            failures.push(format!("{case}: exit {:?}", out.status));
+        }
+        if err.len() > 2000 || !err.contains(needle) || !err.contains("bytes") {
+            failures.push(format!("{case}: stderr of {} bytes: {}", err.len(), &err[..err.len().min(3000)]));
+        }
+    }
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -197,7 +197,7 @@ fn reward_malformed_lines_report_their_number() {
     let cases = [
         (format!("{good}{{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0]}}\n"), "line 2", "joint_vel"),
         (format!("{good}{good}{{\"ee_pos\":[0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0]}}\n"), "line 3", "malformed"),
-        ("{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0.3,0,0],\"joint_vel\":[0]}\n".to_string(), "line 1", "norm"),
+        ("{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,2],\"target\":[0.3,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n".to_string(), "line 1", "norm"),
         ("{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[]}\n".to_string(), "line 1", "joint_vel"),
         ("[1,2,3]\n".to_string(), "line 1", "malformed"),
     ];

@@ -102,5 +102,31 @@ fn report_on_trained_runs() {
     let missing = stagerl(&["report", root.join("nope").to_str().unwrap()]);
     assert!(!missing.status.success());
     assert!(String::from_utf8_lossy(&missing.stderr).contains("nope"));
+
+    // A non-UTF-8 output path is refused before any file is written.
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let bad_out = root.join(std::ffi::OsStr::from_bytes(b"out-\xff\xfe"));
+        let r = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+            .arg("report")
+            .arg(&runs)
+            .arg("--out")
+            .arg(&bad_out)
+            .output()
+            .unwrap();
+        assert_eq!(r.status.code(), Some(1));
+        assert!(String::from_utf8_lossy(&r.stderr).contains("is not valid UTF-8"), "{r:?}");
+        assert!(!bad_out.exists());
+    }
+    // So are too many trajectories, and a directory without runs.
+    let many = stagerl(&["report", runs.to_str().unwrap(), "--trajectories", "4294967295"]);
+    assert_eq!(many.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&many.stderr).contains("--trajectories"));
+    let empty = root.join("no-runs");
+    std::fs::create_dir_all(&empty).unwrap();
+    let r = stagerl(&["report", empty.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("no runs to report on"));
+    assert!(!empty.join("report").exists());
     std::fs::remove_dir_all(&root).ok();
 }

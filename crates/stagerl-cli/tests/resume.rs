@@ -3,17 +3,12 @@
 
 mod common;
 
-use common::{bin, episodes_without_wall, scratch};
-use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use common::{assert_same_run, bin, run, scratch};
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 const CONFIG: &str = "[agent]\nhidden = [16, 16]\nlearning_starts = 200\nbatch_size = 32\n\
 [train]\nepisodes = 300\neval_every_episodes = 100\neval_trials = 5\ncheckpoint_every_episodes = 20\n";
-
-fn run(args: &[&str]) -> Output {
-    bin().args(args).stdin(Stdio::null()).output().unwrap()
-}
 
 #[test]
 fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_run() {
@@ -62,19 +57,7 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_run() {
     let out = run(&["train", "--resume", cut.to_str().unwrap(), "--eval-trials", "0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    assert_eq!(episodes_without_wall(&full).len(), 301);
-    assert_eq!(
-        episodes_without_wall(&full),
-        episodes_without_wall(&cut),
-        "episodes.csv (but wall time) differs"
-    );
-    let eval = |d: &Path| std::fs::read_to_string(d.join("eval.csv")).unwrap();
-    assert_eq!(eval(&full), eval(&cut));
-    let ck =
-        |d: &Path| stagerl::checkpoint::Checkpoint::load(&d.join("checkpoints/final.safetensors")).unwrap();
-    let (a, b) = (ck(&full), ck(&cut));
-    assert!(a.tensor_names().count() > 20);
-    assert!(a.same_contents(&b), "final networks or metadata differ");
+    assert_same_run(&full, &cut, 300, 3, "after SIGKILLs");
 
     // Resuming a finished run does nothing and says so.
     let out = run(&["train", "--resume", cut.to_str().unwrap()]);

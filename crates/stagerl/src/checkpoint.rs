@@ -3,12 +3,61 @@
 //!
 //! Everything that is not a float array (counters, random-generator states, the config, the
 //! algorithm's name) goes in the metadata as text, usually JSON.
+//!
+//! Every file carries a SHA-256 checksum of its contents in the metadata entry `sha256` (lowercase
+//! hex), checked on every load: a file without it or with a wrong one is refused, naming the file.
+//! It is the SHA-256 of a sequence of parts, each written as its length in bytes (8 bytes, little
+//! endian) followed by its bytes: for each tensor in name order, its name, its shape as decimal
+//! numbers joined by `,` (empty for a scalar) and its values as little-endian f32 bytes (as stored);
+//! then for each other metadata entry in key order, its key and its value (UTF-8). In Python:
+//!
+//! ```python
+//! import hashlib
+//! from safetensors import safe_open
+//! def part(h, b): h.update(len(b).to_bytes(8, "little")); h.update(b)
+//! h = hashlib.sha256()
+//! with safe_open(path, "numpy") as f:
+//!     meta = f.metadata()
+//!     for name in sorted(f.keys()):
+//!         t = f.get_tensor(name)
+//!         part(h, name.encode()); part(h, ",".join(map(str, t.shape)).encode())
+//!         part(h, t.astype("<f4").tobytes())
+//!     for k in sorted(meta):
+//!         if k != "sha256": part(h, k.encode()); part(h, meta[k].encode())
+//! assert h.hexdigest() == meta["sha256"]
+//! ```
 
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
+use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 use crate::{Error, Result};
+
+/// The metadata key of the checksum.
+pub const CHECKSUM_KEY: &str = "sha256";
+
+/// The checksum described in the module docs, over tensors given as (name, shape, f32 LE bytes).
+fn checksum<'a>(
+    tensors: impl Iterator<Item = (&'a str, &'a [usize], &'a [u8])>,
+    metadata: &BTreeMap<String, String>,
+) -> String {
+    let mut h = Sha256::new();
+    let mut part = |b: &[u8]| {
+        h.update((b.len() as u64).to_le_bytes());
+        h.update(b);
+    };
+    for (name, shape, bytes) in tensors {
+        part(name.as_bytes());
+        part(shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(",").as_bytes());
+        part(bytes);
+    }
+    for (k, v) in metadata.iter().filter(|(k, _)| *k != CHECKSUM_KEY) {
+        part(k.as_bytes());
+        part(v.as_bytes());
+    }
+    format!("{:x}", h.finalize())
+}
 
 /// A checkpoint being assembled or one that was read back.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -37,6 +86,7 @@ impl Checkpoint {
 
     /// Add a metadata entry.
     pub fn put_meta(&mut self, key: &str, value: impl Into<String>) {
+        assert_ne!(key, CHECKSUM_KEY, "`{CHECKSUM_KEY}` is written by `to_bytes`");
         self.metadata.insert(key.to_string(), value.into());
     }
 
@@ -125,7 +175,12 @@ impl Checkpoint {
             })
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| Error::InvalidInput(format!("checkpoint: {e}")))?;
-        let meta: HashMap<String, String> = self.metadata.clone().into_iter().collect();
+        let sum = checksum(
+            bytes.iter().map(|(name, b, shape)| (name.as_str(), shape.as_slice(), b.as_slice())),
+            &self.metadata,
+        );
+        let mut meta: HashMap<String, String> = self.metadata.clone().into_iter().collect();
+        meta.insert(CHECKSUM_KEY.to_string(), sum);
         safetensors::tensor::serialize(views, Some(meta))
             .map_err(|e| Error::InvalidInput(format!("checkpoint: {e}")))
     }
@@ -135,22 +190,42 @@ impl Checkpoint {
         crate::io::write_atomic(path, &self.to_bytes()?)
     }
 
-    /// Parse a checkpoint; `origin` names it in errors.
+    /// Parse a checkpoint and check its checksum; `origin` names it in errors.
     pub fn from_bytes(bytes: &[u8], origin: &Path) -> Result<Checkpoint> {
         let bad = |what: String| {
             Error::InvalidInput(format!("{}: not a valid checkpoint: {what}", origin.display()))
         };
-        let st = SafeTensors::deserialize(bytes).map_err(|e| bad(e.to_string()))?;
-        let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| bad(e.to_string()))?;
+        let st =
+            SafeTensors::deserialize(bytes).map_err(|e| bad(crate::text::bound_message(&e.to_string())))?;
+        let (_, header) =
+            SafeTensors::read_metadata(bytes).map_err(|e| bad(crate::text::bound_message(&e.to_string())))?;
         let mut ck = Checkpoint { origin: Some(origin.to_path_buf()), ..Checkpoint::default() };
         if let Some(m) = header.metadata() {
             ck.metadata = m.clone().into_iter().collect();
         }
-        for name in st.names() {
+        let mut names = st.names();
+        names.sort();
+        let mut views = Vec::with_capacity(names.len());
+        for name in names {
             let view = st.tensor(name).map_err(|e| bad(e.to_string()))?;
             if view.dtype() != Dtype::F32 {
                 return Err(bad(format!("tensor `{name}` is {:?}, expected F32", view.dtype())));
             }
+            views.push((name, view));
+        }
+        let Some(stored) = ck.metadata.remove(CHECKSUM_KEY) else {
+            return Err(bad(format!(
+                "no `{CHECKSUM_KEY}` checksum in its metadata (every stagerl checkpoint has one); refused"
+            )));
+        };
+        let computed = checksum(views.iter().map(|(name, v)| (*name, v.shape(), v.data())), &ck.metadata);
+        if computed != stored {
+            return Err(bad(format!(
+                "checksum mismatch (stored sha256 {}, contents hash to {computed}): the file is corrupted; refused",
+                crate::text::excerpt(&stored)
+            )));
+        }
+        for (name, view) in views {
             let data: Vec<f32> =
                 view.data().chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect();
             ck.tensors.insert(name.to_string(), (view.shape().to_vec(), data));

@@ -34,6 +34,92 @@ pub struct Config {
     pub train: TrainConfig,
 }
 
+/// The most memory a run may be estimated to need ([`Config::estimated_memory`]): 16 GiB.
+pub const MAX_RUN_MEMORY_BYTES: f64 = 16.0 * (1u64 << 30) as f64;
+
+/// Joints assumed by [`Config::validate`]'s memory estimate (the URDF is not loaded there): the
+/// UR5's. The networks' hidden layers dominate the estimate wherever it comes near the limit.
+const ESTIMATE_DOF: usize = 6;
+
+/// A training run's estimated memory, bytes, by what holds it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MemoryEstimate {
+    /// Network parameters: actor, two critics and their targets (5 networks) x 4 copies (values,
+    /// gradients, two Adam moments), f32.
+    pub networks: f64,
+    /// Activations and their gradients: batch x every layer's width x 5 networks x 2, f32.
+    pub activations: f64,
+    /// The preallocated replay buffer: buffer_size x (2 observations + action + reward +
+    /// terminal), f32.
+    pub replay: f64,
+    /// One record per evaluation trial (64 bytes each).
+    pub evaluation: f64,
+}
+
+impl MemoryEstimate {
+    /// Everything, bytes.
+    pub fn total(&self) -> f64 {
+        self.networks + self.activations + self.replay + self.evaluation
+    }
+}
+
+impl Config {
+    /// The memory a run of this config needs for an arm of `dof` joints, estimated before anything
+    /// is allocated (in f64: absurd sizes do not overflow).
+    pub fn estimated_memory(&self, dof: usize) -> MemoryEstimate {
+        let obs = crate::env::observation_dim(self.task.observation, dof) as f64;
+        let act = dof as f64;
+        let f32_bytes = 4.0;
+        let widths: Vec<f64> = self.agent.hidden.iter().map(|&h| h as f64).collect();
+        // Layer sizes of one network, input obs + act (the critics'; the actor's is smaller).
+        let mut params = 0.0;
+        let mut fan_in = obs + act;
+        for &w in widths.iter().chain([2.0 * act].iter()) {
+            params += fan_in * w + w;
+            fan_in = w;
+        }
+        let nets = 5.0;
+        let layer_values = widths.iter().sum::<f64>() + obs + 2.0 * act;
+        MemoryEstimate {
+            networks: params * nets * 4.0 * f32_bytes,
+            activations: self.agent.batch_size as f64 * layer_values * nets * 2.0 * f32_bytes,
+            replay: self.agent.buffer_size as f64 * (2.0 * obs + act + 2.0) * f32_bytes,
+            evaluation: f64::from(self.train.eval_trials) * 64.0,
+        }
+    }
+
+    /// An error if [`Config::estimated_memory`] for `dof` joints exceeds
+    /// [`MAX_RUN_MEMORY_BYTES`], naming the field that contributes most.
+    pub fn check_memory(&self, dof: usize) -> Result<()> {
+        let m = self.estimated_memory(dof);
+        if m.total() <= MAX_RUN_MEMORY_BYTES {
+            return Ok(());
+        }
+        let gib = |b: f64| b / (1u64 << 30) as f64;
+        let parts = [
+            (m.networks, "agent.hidden", format!("{:?}", self.agent.hidden)),
+            (m.activations, "agent.batch_size", self.agent.batch_size.to_string()),
+            (m.replay, "agent.buffer_size", self.agent.buffer_size.to_string()),
+            (m.evaluation, "train.eval_trials", self.train.eval_trials.to_string()),
+        ];
+        let (_, field, value) = parts.iter().max_by(|a, b| a.0.total_cmp(&b.0)).expect("four parts");
+        Err(Error::config(
+            *field,
+            value,
+            format!(
+                "the run would need about {:.1} GiB (networks {:.1}, activations {:.1}, replay buffer \
+                 {:.1}, evaluation {:.1} GiB), more than the {:.0} GiB allowed; use smaller values",
+                gib(m.total()),
+                gib(m.networks),
+                gib(m.activations),
+                gib(m.replay),
+                gib(m.evaluation),
+                gib(MAX_RUN_MEMORY_BYTES)
+            ),
+        ))
+    }
+}
+
 impl Config {
     /// Parse a TOML document; `origin` names it in error messages. Every value is checked; a
     /// section of another algorithm than `agent.algo` is allowed here (a command-line `--algo`
@@ -44,7 +130,7 @@ impl Config {
             let raw: Option<toml::Table> = toml::from_str(text).ok();
             let agent = raw.as_ref().and_then(|t| t.get("agent")).and_then(toml::Value::as_table);
             let message = agent.and_then(AgentConfig::misplaced_key).unwrap_or_else(|| e.to_string());
-            Error::ConfigParse { path: origin.to_path_buf(), message }
+            Error::ConfigParse { path: origin.to_path_buf(), message: crate::text::bound_message(&message) }
         })?;
         cfg.validate_values()?;
         Ok(cfg)
@@ -79,7 +165,7 @@ impl Config {
         self.reward.validate()?;
         self.agent.validate_values()?;
         self.train.validate()?;
-        Ok(())
+        self.check_memory(ESTIMATE_DOF)
     }
 }
 
@@ -88,6 +174,8 @@ impl ReachEnv {
     pub fn from_config(cfg: &Config, seed: u64) -> Result<ReachEnv> {
         cfg.validate()?;
         let chain = Arc::new(cfg.robot.load()?);
+        // The memory estimate again, with the arm's own joint count.
+        cfg.check_memory(chain.dof())?;
         let task = cfg.task.resolve(&chain)?;
         ReachEnv::new(chain, task, cfg.reward.clone(), seed)
     }

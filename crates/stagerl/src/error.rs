@@ -33,7 +33,12 @@ pub enum Error {
 impl Error {
     /// Shorthand for [`Error::Config`].
     pub fn config(field: impl Into<String>, value: impl ToString, allowed: impl Into<String>) -> Self {
-        Error::Config { field: field.into(), value: value.to_string(), allowed: allowed.into() }
+        // The value is echoed input: an excerpt of it.
+        Error::Config {
+            field: field.into(),
+            value: crate::text::excerpt(&value.to_string()),
+            allowed: allowed.into(),
+        }
     }
 
     /// Shorthand for [`Error::Io`].

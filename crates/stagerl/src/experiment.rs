@@ -114,7 +114,8 @@ impl Preset {
     /// Parse a preset; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Preset> {
         let bad = |m: String| Error::ConfigParse { path: origin.to_path_buf(), message: m };
-        let mut table: toml::Table = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
+        let mut table: toml::Table =
+            toml::from_str(text).map_err(|e| bad(crate::text::bound_message(&e.to_string())))?;
         let sweep = table.remove("sweep").ok_or_else(|| bad("no [sweep] section".into()))?;
         let sweep: SweepSpec = sweep.try_into().map_err(|e: toml::de::Error| bad(format!("[sweep]: {e}")))?;
         let rest = toml::to_string(&table).map_err(|e| bad(e.to_string()))?;

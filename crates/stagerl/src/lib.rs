@@ -42,6 +42,7 @@ pub mod rng;
 pub mod robot;
 pub mod rundir;
 pub mod schedule;
+pub mod text;
 pub mod train;
 pub mod validate;
 

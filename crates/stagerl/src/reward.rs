@@ -382,6 +382,38 @@ impl RewardTerms {
             total: reward + bonus,
         }
     }
+
+    /// [`RewardTerms::compute`] for input from outside: the input is validated, and a term that
+    /// overflows to a non-finite value for finite input (an `ee_pos` of 1e200 m squares past
+    /// f64's range) is an error naming the term, not a silent infinity or NaN.
+    pub fn try_compute(cfg: &RewardConfig, dt_s: f64, input: &RewardInput<'_>) -> Result<RewardTerms> {
+        input.validate()?;
+        let t = RewardTerms::compute(cfg, dt_s, input);
+        let terms = [
+            ("distance", t.distance),
+            ("position", t.position),
+            ("phi", t.phi),
+            ("direction", t.direction),
+            ("posture", t.posture),
+            ("move", t.movement),
+            ("stride", t.stride),
+            ("har", t.har),
+            ("alpha1", t.alpha1),
+            ("alpha2", t.alpha2),
+            ("sar", t.sar),
+            ("reward", t.reward),
+            ("total", t.total),
+        ];
+        match terms.iter().find(|(_, v)| !v.is_finite()) {
+            Some((name, v)) => Err(Error::InvalidInput(format!(
+                "the reward term `{name}` = {v} is not finite: the finite input overflows f64 \
+                 (distance to the target {:e} m, squared joint speed {:e}); use physical scales",
+                (input.target - input.ee_pos).norm(),
+                input.joint_vel.iter().map(|v| v * v).sum::<f64>()
+            ))),
+            None => Ok(t),
+        }
+    }
 }
 
 #[cfg(test)]

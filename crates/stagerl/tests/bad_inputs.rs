@@ -132,6 +132,9 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[agent]\nbatch_size = 0\n", expect: "agent.batch_size" },
     Cfg { toml: "[agent]\nbatch_size = 100000000000\n", expect: "agent.batch_size" },
     Cfg { toml: "[agent]\nbuffer_size = 100000000000000\n", expect: "agent.buffer_size" },
+    // Within each field's range, but too much memory together (estimated before allocating).
+    Cfg { toml: "[agent]\nhidden = [16384, 16384, 16384, 16384]\n", expect: "`agent.hidden` = [16384, 16384, 16384, 16384] is invalid: the run would need about 60.8 GiB (networks 60.0" },
+    Cfg { toml: "[agent]\nhidden = [4096, 4096]\nbuffer_size = 100000000\n", expect: "`agent.buffer_size` = 100000000 is invalid: the run would need about 16." },
     Cfg { toml: "[agent]\nupdates_per_step = 0\n", expect: "agent.updates_per_step" },
     Cfg { toml: "[agent]\nalgo = \"td3\"\n[agent.td3]\npolicy_delay = 0\n", expect: "agent.td3.policy_delay" },
     Cfg { toml: "[agent]\nalgo = \"ddpg\"\n[agent.ddpg]\nnoise_sigma = -0.1\n", expect: "agent.ddpg.noise_sigma" },
@@ -250,7 +253,30 @@ const URDFS: &[Urdf] = &[
     Urdf { links: "base a b", joints: "j0 fixed base a | <origin xyz=\"nan 0 0\"/>; j1 revolute a b", raw: None, tip: None, expect: "joint `j0` has a non-finite origin" },
     Urdf { links: "base a", joints: "j1 revolute base a | <axis xyz=\"0 nan 1\"/>", raw: None, tip: None, expect: "joint `j1` has a non-finite axis" },
     Urdf { links: "base a", joints: "j1 prismatic base a | <axis xyz=\"0 0 0\"/>", raw: None, tip: None, expect: "joint `j1` has a zero axis" },
+    // Finite geometry too large to compute with: an origin of 1e308 m overflows forward kinematics.
+    Urdf { links: "base a", joints: "j1 revolute base a | <origin xyz=\"1e308 0 0\"/>", raw: None, tip: None, expect: "joint `j1` has origin xyz = [1e308, 0.0, 0.0] m" },
+    Urdf { links: "base a b", joints: "j0 fixed base a | <origin xyz=\"0 0 -2e6\"/>; j1 revolute a b", raw: None, tip: None, expect: "joint `j0` has origin xyz = [0.0, 0.0, -2000000.0] m" },
+    Urdf { links: "base a", joints: "j1 prismatic base a | <limit lower=\"-1e300\" upper=\"1\" effort=\"1\" velocity=\"1\"/>", raw: None, tip: None, expect: "prismatic joint `j1` has limits [-1e300, 1.0] m" },
+    // A cycle beside the chain (not on the base-tip path), and a chain hanging below a cycle.
+    Urdf { links: "base a b c", joints: "j0 revolute base a; j1 revolute b c; j2 revolute c b", raw: None, tip: Some("a"), expect: "joints `j2`, `j1` form a cycle through links `b`, `c`" },
+    Urdf { links: "base a b c d", joints: "j0 revolute base a; j1 revolute b c; j2 revolute c b; j3 fixed c d", raw: None, tip: Some("a"), expect: "form a cycle" },
 ];
+
+#[test]
+fn deeply_nested_urdfs_are_refused_without_overflowing_the_stack() {
+    // 40 000 nested elements used to overflow the recursive parser's stack (SIGSEGV).
+    let deep = format!("<robot name=\"r\">{}{}</robot>", "<a>".repeat(40_000), "</a>".repeat(40_000));
+    let e = Chain::from_urdf_str(&deep, None).unwrap_err().to_string();
+    assert!(e.contains("nested more than 64 deep"), "{e}");
+    // Tags inside comments, CDATA and attribute values do not count; self-closing ones do not nest.
+    let fine = format!(
+        "<?xml version=\"1.0\"?><!-- {} --><robot name=\"r>\"><link name=\"base\"/><link name=\"a\"/>\
+         <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"a\"/><axis xyz=\"0 0 1\"/>\
+         <limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint></robot>",
+        "<a>".repeat(1000)
+    );
+    Chain::from_urdf_str(&fine, None).unwrap();
+}
 
 fn urdf_document(u: &Urdf) -> String {
     if let Some(raw) = u.raw {
@@ -338,6 +364,38 @@ fn safetensors(header: &str, data: &[u8]) -> Vec<u8> {
     b
 }
 
+/// The SAC checkpoint with one byte of its data section (tensor values) flipped.
+fn flip_tensor_byte(f: &Fixture) -> Option<Vec<u8>> {
+    let mut b = f.sac.clone();
+    let n = b.len();
+    b[n - 7] ^= 0x01;
+    Some(b)
+}
+
+/// The SAC checkpoint's header as JSON, the header's length and the data section's offset.
+fn header(f: &Fixture) -> (serde_json::Value, usize) {
+    let len = u64::from_le_bytes(f.sac[..8].try_into().unwrap()) as usize;
+    (serde_json::from_slice(&f.sac[8..8 + len]).unwrap(), 8 + len)
+}
+
+/// The SAC checkpoint with its metadata entry `key` changed by `edit` (None removes it).
+fn edit_meta(f: &Fixture, key: &str, edit: impl FnOnce(&str) -> Option<String>) -> Option<Vec<u8>> {
+    let (mut h, data) = header(f);
+    let meta = h["__metadata__"].as_object_mut().unwrap();
+    match edit(meta[key].as_str().unwrap()) {
+        Some(v) => meta.insert(key.to_string(), v.into()),
+        None => meta.remove(key),
+    };
+    Some(safetensors(&h.to_string(), &f.sac[data..]))
+}
+
+/// `s` with one character changed in place (an ASCII byte with its lowest bit flipped).
+fn flip_char(s: &str, at: usize) -> String {
+    let mut b = s.as_bytes().to_vec();
+    b[at] ^= 0x01;
+    String::from_utf8(b).unwrap()
+}
+
 /// The SAC checkpoint with one edit applied.
 fn edited(f: &Fixture, edit: impl FnOnce(&mut Checkpoint) -> Checkpoint) -> Option<Vec<u8>> {
     let mut ck = Checkpoint::from_bytes(&f.sac, Path::new("sac")).unwrap();
@@ -397,6 +455,13 @@ const CHECKPOINTS: &[Ck] = &[
     Ck { name: "offsets-past-end", bytes: |_| Some(safetensors(r#"{"t":{"dtype":"F32","shape":[4],"data_offsets":[0,16]}}"#, &[0; 8])), expect: "not a valid checkpoint" },
     Ck { name: "shape-overflow", bytes: |_| Some(safetensors(r#"{"t":{"dtype":"F32","shape":[4294967296,4294967296,4294967296],"data_offsets":[0,0]}}"#, &[])), expect: "not a valid checkpoint" },
     Ck { name: "f64-tensor", bytes: |_| Some(safetensors(r#"{"actor.layer0.weight":{"dtype":"F64","shape":[1],"data_offsets":[0,8]}}"#, &[0; 8])), expect: "tensor `actor.layer0.weight` is F64, expected F32" },
+    // Silent corruption: one flipped bit in a tensor or in the metadata, no or a bad checksum.
+    Ck { name: "flipped-tensor-byte", bytes: flip_tensor_byte, expect: "checksum mismatch" },
+    Ck { name: "flipped-meta-rng", bytes: |f| edit_meta(f, "agent_rng", |v| Some(flip_char(v, v.len() / 2))), expect: "checksum mismatch" },
+    Ck { name: "flipped-meta-algorithm", bytes: |f| edit_meta(f, "algorithm", |v| Some(flip_char(v, 1))), expect: "checksum mismatch" },
+    Ck { name: "flipped-checksum", bytes: |f| edit_meta(f, "sha256", |v| Some(flip_char(v, 10))), expect: "checksum mismatch" },
+    Ck { name: "huge-checksum", bytes: |f| edit_meta(f, "sha256", |_| Some("0".repeat(100_000))), expect: "0000000000... (100000 bytes)" },
+    Ck { name: "no-checksum", bytes: |f| edit_meta(f, "sha256", |_| None), expect: "no `sha256` checksum" },
     // Another algorithm, another network shape.
     Ck { name: "td3-for-sac", bytes: |f| Some(f.td3.clone()), expect: "checkpoint of algorithm `td3`, the config says `sac`" },
     Ck { name: "hidden-16-for-8", bytes: |f| Some(f.wide.clone()), expect: "has shape [16, 16], this agent's has [8, 16]" },
@@ -503,4 +568,18 @@ fn train_refuses_a_section_of_another_algorithm() {
     td3.agent.algo = Algo::Td3;
     td3.validate().unwrap();
     assert_eq!(td3.agent.td3().policy_delay, 3);
+}
+
+#[test]
+fn library_errors_quote_long_input_as_excerpts() {
+    let big = "x".repeat(1_000_000);
+    let errors = [
+        Config::from_toml_str(&format!("[task]\nmax_steps = {big}\n"), Path::new("big.toml")).unwrap_err(),
+        Config::from_toml_str(&format!("[reward]\nfunction = \"{big}\"\n"), Path::new("big.toml")).unwrap_err(),
+        Chain::from_urdf_str(&format!("<robot name=\"r\"><link name=\"a\"/><joint name=\"j\" type=\"fixed\"><parent link=\"{big}\"/><child link=\"a\"/></joint></robot>"), None).unwrap_err(),
+    ];
+    for e in errors {
+        let m = e.to_string();
+        assert!(m.len() < 2000 && m.contains("bytes)"), "{} bytes: {}", m.len(), &m[..m.len().min(3000)]);
+    }
 }

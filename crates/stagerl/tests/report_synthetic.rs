@@ -305,16 +305,20 @@ fn report_of_synthetic_runs() {
 }
 
 #[test]
-fn an_empty_directory_gives_an_empty_report_and_a_missing_one_an_error() {
+fn an_empty_directory_and_a_missing_one_are_errors_writing_nothing() {
     let root = temp_dir("empty");
-    let r = report::generate(&root, &ReportOptions::new(root.join("out"))).unwrap();
-    assert!(r.groups.is_empty());
-    let md = std::fs::read_to_string(root.join("out/table1.md")).unwrap();
-    assert!(md.contains("| SAC | SAR | ours | 0 |"), "{md}");
-    let (w, h) = png_size(&root.join("out/figure7.png"));
-    assert!(w > 0 && h > 0);
+    let e = report::generate(&root, &ReportOptions::new(root.join("out"))).unwrap_err().to_string();
+    assert!(e.contains("no runs to report on") && e.contains("empty"), "{e}");
+    assert!(!root.join("out").exists());
     let e =
         report::generate(&root.join("nope"), &ReportOptions::new(root.join("out2"))).unwrap_err().to_string();
     assert!(e.contains("nope"), "{e}");
+    // A directory of non-runs: an error that says what was not read.
+    std::fs::create_dir_all(root.join("junk")).unwrap();
+    std::fs::write(root.join("junk/config.toml"), "not toml [").unwrap();
+    std::fs::write(root.join("junk/episodes.csv"), "x").unwrap();
+    let e = report::generate(&root, &ReportOptions::new(root.join("out"))).unwrap_err().to_string();
+    assert!(e.contains("no runs to report on") && e.contains("junk"), "{e}");
+    assert!(!root.join("out").exists());
     std::fs::remove_dir_all(&root).ok();
 }

@@ -24,9 +24,9 @@ pub struct UpdateArgs {
     hidden: usize,
     #[arg(long, default_value_t = 256)]
     batch: usize,
-    /// Timed updates (after 20 warm-up updates).
-    #[arg(long, default_value_t = 200)]
-    updates: usize,
+    /// Timed updates (after 20 warm-up updates), 1 to 1 000 000.
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    updates: u32,
 }
 
 #[derive(clap::Args)]
@@ -35,15 +35,16 @@ pub struct TrainArgs {
     algo: stagerl::agent::Algo,
     #[arg(long, default_value_t = 64)]
     hidden: usize,
-    /// Environment steps to time (after `learning_starts` = 1000 random steps, which are timed too).
-    #[arg(long, default_value_t = 20_000)]
+    /// Environment steps to time (after `learning_starts` = 1000 random steps, which are timed
+    /// too), 1 to 100 000 000.
+    #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     steps: u64,
 }
 
 #[derive(clap::Args)]
 pub struct EnvArgs {
     /// Steps to time.
-    #[arg(long, default_value_t = 5_000_000)]
+    #[arg(long, default_value_t = 5_000_000, value_parser = clap::value_parser!(u64).range(1..=10_000_000_000))]
     steps: u64,
     /// Reward function.
     #[arg(long, default_value = "sar")]
@@ -89,7 +90,7 @@ fn env(a: EnvArgs) -> Result<()> {
     let (episodes, checksum) = run(&mut env, a.steps)?;
     let secs = start.elapsed().as_secs_f64();
     let sps = a.steps as f64 / secs;
-    println!(
+    outln!(
         "env: {} steps ({} episodes) in {:.3} s, {:.0} steps/s, {:.1} ns/step (single thread, UR5, reward {}, checksum {:.3})",
         a.steps,
         episodes,
@@ -98,8 +99,8 @@ fn env(a: EnvArgs) -> Result<()> {
         1e9 / sps,
         a.reward,
         checksum
-    );
-    println!("{}", serde_json::json!({ "steps_per_sec": sps }));
+    )?;
+    outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
     Ok(())
 }
 
@@ -113,6 +114,8 @@ fn update(a: UpdateArgs) -> Result<()> {
         batch_size: a.batch,
         ..AgentConfig::default()
     };
+    // The whole config's validation: its memory estimate refuses networks too large to allocate.
+    Config { agent: cfg.clone(), ..Config::default() }.validate()?;
     let mut agent = build(&cfg, od, ad, 0)?;
     let mut rng = Rng::new(1);
     let mut batch = Batch::new(a.batch, od, ad);
@@ -125,7 +128,7 @@ fn update(a: UpdateArgs) -> Result<()> {
     for _ in 0..20 {
         agent.update(&batch);
     }
-    let mut times: Vec<f64> = (0..a.updates.max(1))
+    let mut times: Vec<f64> = (0..a.updates)
         .map(|_| {
             let t = Instant::now();
             agent.update(&batch);
@@ -134,11 +137,11 @@ fn update(a: UpdateArgs) -> Result<()> {
         .collect();
     times.sort_by(f64::total_cmp);
     let median = times[times.len() / 2];
-    println!(
+    outln!(
         "update: {} hidden {}x{} batch {}: median {:.3} ms, min {:.3} ms over {} updates (obs {od}, act {ad}, one thread)",
         a.algo, a.hidden, a.hidden, a.batch, median, times[0], times.len()
-    );
-    println!("{}", serde_json::json!({ "ms_per_update": median }));
+    )?;
+    outln!("{}", serde_json::json!({ "ms_per_update": median }))?;
     Ok(())
 }
 
@@ -156,10 +159,10 @@ fn train(a: TrainArgs) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     std::fs::remove_dir_all(&dir).ok();
     let sps = summary.env_steps as f64 / secs;
-    println!(
+    outln!(
         "train: {} hidden {}x{}: {} env steps, {} updates in {:.2} s, {:.0} env steps/s end to end (one update per step, one thread)",
         a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps
-    );
-    println!("{}", serde_json::json!({ "steps_per_sec": sps }));
+    )?;
+    outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
     Ok(())
 }

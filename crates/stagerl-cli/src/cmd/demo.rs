@@ -12,11 +12,11 @@ pub struct Args {
     /// Seed of the target stream (also of the closing evaluation's targets).
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Episodes printed step by step.
-    #[arg(long, default_value_t = 1)]
+    /// Episodes printed step by step (0 to 1000).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=1000))]
     show: u32,
-    /// Random targets in the closing evaluation.
-    #[arg(long, default_value_t = 500)]
+    /// Random targets in the closing evaluation (1 to 10 000 000).
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
     trials: u32,
 }
 
@@ -25,50 +25,53 @@ pub fn run(args: Args) -> Result<()> {
     let mut env = ReachEnv::from_config(&cfg, args.seed).context("building the environment")?;
     let chain = env.chain().clone();
     let mut ctl = JacobianController::new(&chain);
-    println!(
+    outln!(
         "scripted Jacobian controller on `{}` ({} joints, tip `{}`), reward {}, seed {}",
         cfg.robot.urdf,
         chain.dof(),
         chain.tip_link(),
         cfg.reward.function,
         args.seed
-    );
+    )?;
     let mut scratch = Scratch::new(&env);
     for ep in 1..=args.show {
         env.reset();
         let t = env.target();
-        println!(
+        outln!(
             "\nepisode {ep}: target ({:.4}, {:.4}, {:.4}) m, start distance {:.4} m",
             t.x,
             t.y,
             t.z,
             env.distance()
-        );
+        )?;
         // The columns: the step, then every reported term but `reached` (D_PT in metres).
         let columns =
             |t: &stagerl::reward::RewardTerms| t.reported().into_iter().filter(|(n, _)| *n != "reached");
         let header: String = columns(&Default::default())
             .map(|(n, _)| format!(" {:>9}", if n == "distance" { "D_PT(m)" } else { n }))
             .collect();
-        println!("{:>4}{header}", "step");
+        outln!("{:>4}{header}", "step")?;
+        // The rows are gathered during the episode and printed after it (a write error is the
+        // CLI's to report, not the rollout's).
+        let mut rows = String::new();
         let print_step = |t: &Transition<'_>| {
             let row: String = columns(&t.step.terms).map(|(_, v)| format!(" {v:>9.5}")).collect();
-            println!("{:>4}{row}", t.env.steps());
+            rows.push_str(&format!("{:>4}{row}\n", t.env.steps()));
             Ok(Flow::Continue)
         };
         let outcome = rollout(&mut env, &mut scratch, &mut Observed(ctl.policy(), print_step))?;
+        crate::out::text(&rows)?;
         if let Outcome::Finished { reward, last } = outcome {
-            println!(
+            outln!(
                 "{} after {} steps, episode reward (eq. 16) {reward:.4}",
                 if last.terminated { "reached" } else { "truncated" },
                 env.steps()
-            );
+            )?;
         }
     }
     if args.trials > 0 {
         let (s, _) = evaluate_with(&mut env, args.trials, args.seed, &mut Policy(ctl.policy()))?;
-        println!();
-        super::eval::print_summary(&s, false);
+        outln!("\n{}", super::eval::summary_line(&s, false))?;
     }
     Ok(())
 }

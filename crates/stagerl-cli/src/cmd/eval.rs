@@ -26,38 +26,35 @@ pub fn run(args: Args) -> Result<()> {
     let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.display()))?;
     let e = train::evaluate_run(&dir, &cfg, args.checkpoint.as_deref(), args.trials, args.seed)?;
     if !args.json {
-        println!(
+        outln!(
             "{} on {} trials (seed {}), per-trial CSV {}",
             e.checkpoint.display(),
             args.trials,
             args.seed,
             e.csv.display()
-        );
+        )?;
     }
-    print_summary(&e.summary, args.json);
-    Ok(())
+    outln!("{}", summary_line(&e.summary, args.json))
 }
 
-pub fn print_summary(s: &EvalSummary, json: bool) {
+pub fn summary_line(s: &EvalSummary, json: bool) -> String {
     if json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "success_rate": s.success_rate,
-                "mean_reward": s.mean_reward,
-                "mean_steps": s.mean_steps,
-                "trials": s.trials,
-                "median_final_distance_m": s.median_final_distance_m,
-            })
-        );
+        serde_json::json!({
+            "success_rate": s.success_rate,
+            "mean_reward": s.mean_reward,
+            "mean_steps": s.mean_steps,
+            "trials": s.trials,
+            "median_final_distance_m": s.median_final_distance_m,
+        })
+        .to_string()
     } else {
-        println!(
+        format!(
             "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m",
             100.0 * s.success_rate,
             s.trials,
             s.mean_reward,
             s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into()),
             s.median_final_distance_m
-        );
+        )
     }
 }

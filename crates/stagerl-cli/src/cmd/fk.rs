@@ -28,9 +28,56 @@ pub fn run(args: Args) -> Result<()> {
     let chain = Chain::load(&args.robot, args.tip.as_deref())
         .with_context(|| format!("loading robot `{}`", args.robot))?;
     let stdin = std::io::stdin().lock();
-    let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+    let stdout = crate::out::stdout()?;
     crate::jsonl::process(stdin, stdout, |input: Input| {
         let pose = chain.try_fk(&input.joints)?;
         Ok(Output { position: pose.position.into(), quaternion: pose.quaternion_xyzw() })
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Random finite f64 bit patterns (subnormals and extremes included) written as JSON numbers
+    /// in several notations come back from `fk`'s line parser with the same bits.
+    #[test]
+    fn joints_parse_bit_exactly() {
+        let mut rng = stagerl::rng::Rng::new(4);
+        let mut values = vec![f64::MAX, f64::MIN, f64::MIN_POSITIVE, f64::from_bits(1), -0.0, 0.1];
+        while values.len() < 60_000 {
+            let bits = rng.next_u64();
+            if f64::from_bits(bits).is_finite() {
+                values.push(f64::from_bits(bits));
+            }
+            values.push(f64::from_bits(bits & 0x800F_FFFF_FFFF_FFFF)); // a subnormal
+        }
+        let mut input = String::new();
+        for chunk in values.chunks(6) {
+            // Shortest round-trip decimal, exponent notation, and 17 significant digits.
+            for fmt in [0, 1, 2] {
+                let nums: Vec<String> = chunk
+                    .iter()
+                    .map(|x| match fmt {
+                        0 => format!("{x:?}"),
+                        1 => format!("{x:e}"),
+                        _ => format!("{x:.16e}"),
+                    })
+                    .collect();
+                input.push_str(&format!("{{\"joints\":[{}]}}\n", nums.join(",")));
+            }
+        }
+        let mut parsed = Vec::new();
+        crate::jsonl::process(input.as_bytes(), std::io::sink(), |i: Input| {
+            parsed.push(i.joints);
+            Ok(0)
+        })
+        .unwrap();
+        let expected: Vec<&[f64]> = values.chunks(6).flat_map(|c| [c, c, c]).collect();
+        assert_eq!(parsed.len(), expected.len());
+        for (got, want) in parsed.iter().zip(expected) {
+            let same = got.iter().zip(want).all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same && got.len() == want.len(), "{want:?} parsed as {got:?}");
+        }
+    }
 }

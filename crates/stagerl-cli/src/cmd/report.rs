@@ -22,8 +22,9 @@ pub struct Args {
     /// E_start: smallest band half-width, reward units.
     #[arg(long, default_value_t = ConvergenceCriterion::default().band_floor)]
     band_floor: f64,
-    /// Evaluation trajectories to draw for the best and the worst reward function (0: none).
-    #[arg(long, default_value_t = 5)]
+    /// Evaluation trajectories to draw for the best and the worst reward function (0: none; at
+    /// most 1000).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=i64::from(report::MAX_TRAJECTORIES)))]
     trajectories: u32,
     /// Also use runs with fewer episodes than configured (still training, or stopped early).
     #[arg(long)]
@@ -47,39 +48,39 @@ pub fn run(args: Args) -> Result<()> {
         .with_context(|| format!("reporting on the runs in {}", args.dir.display()))?;
     let runs: usize = r.groups.iter().map(|g| g.seeds).sum();
     let excluded: usize = r.groups.iter().map(|g| g.excluded.len()).sum();
-    println!(
+    outln!(
         "{runs} run(s) in {} group(s) from {}{}{}",
         r.groups.len(),
         args.dir.display(),
         if excluded > 0 { format!(", {excluded} excluded (see the notes)") } else { String::new() },
         if r.skipped.is_empty() { String::new() } else { format!(", {} unreadable", r.skipped.len()) }
-    );
+    )?;
     for g in &r.groups {
-        println!(
+        outln!(
             "  {:<5} {:<8} {} seed(s), {} converged{}",
             g.algo.name(),
             g.reward.name(),
             g.seeds,
             g.converged,
             if g.primary { String::new() } else { format!("  [{}]", g.variant) }
-        );
+        )?;
     }
     let count = |v: Verdict| r.claims.iter().filter(|c| c.verdict == v).count();
-    println!(
+    outln!(
         "claims: {} hold, {} do not hold, {} not measurable",
         count(Verdict::Holds),
         count(Verdict::DoesNotHold),
         count(Verdict::NotMeasurable)
-    );
+    )?;
     for w in &r.warnings {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}")?;
     }
     for s in &r.skipped {
-        eprintln!("warning: {} not read: {}", s.name, s.reason);
+        errln!("warning: {} not read: {}", s.name, s.reason)?;
     }
-    println!("wrote {}:", out.display());
+    outln!("wrote {}:", out.display())?;
     for f in &r.files {
-        println!("  {}", f.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+        outln!("  {}", f.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default())?;
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 use anyhow::{bail, Result};
 use stagerl::experiment::{self, Preset, RunReport, RunStatus};
 use std::path::PathBuf;
+use std::sync::Arc;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -32,7 +33,7 @@ pub fn run(args: Args) -> Result<()> {
     let runs = experiment::shard(preset.runs(), index, count)?;
     experiment::write_preset(&args.out, &text)?;
     let total = runs.len();
-    println!(
+    outln!(
         "reproduce `{}`: {} runs in this shard ({} of {}), {} at once -> {}",
         args.preset,
         total,
@@ -40,11 +41,18 @@ pub fn run(args: Args) -> Result<()> {
         count,
         args.jobs,
         args.out.display()
-    );
+    )?;
     let stop = super::train::stop_flag()?;
-    let outcome = experiment::run_sweep(&runs, &args.out, &preset.sweep, args.jobs, &stop, &print_run);
-    if outcome.interrupted {
-        eprintln!(
+    // A failing standard output stops the sweep as SIGINT does: runs save themselves.
+    let output = crate::out::RunOutput::new(Arc::clone(&stop));
+    let outcome =
+        experiment::run_sweep(&runs, &args.out, &preset.sweep, args.jobs, &stop, &|r| print_run(&output, r));
+    if let Some(e) = output.failed() {
+        bail!("{e}: the sweep stopped; finished runs are kept and interrupted ones saved. Run the same command again to continue.");
+    }
+    if outcome.interrupted || stop.load(std::sync::atomic::Ordering::SeqCst) {
+        // Standard error may be closed too; the exit code still tells.
+        let _ = errln!(
             "stagerl: interrupted after {:.0} s; finished runs are kept. Run the same command again to continue.",
             outcome.wall_s
         );
@@ -53,15 +61,14 @@ pub fn run(args: Args) -> Result<()> {
     if !outcome.failures.is_empty() {
         bail!("{} of {total} runs failed:\n  {}", outcome.failures.len(), outcome.failures.join("\n  "));
     }
-    println!(
+    outln!(
         "all {total} runs done in {:.0} s. Tables and figures: stagerl report {}",
         outcome.wall_s,
         args.out.display()
-    );
-    Ok(())
+    )
 }
 
-fn print_run(r: &RunReport<'_>) {
+fn print_run(output: &crate::out::RunOutput, r: &RunReport<'_>) {
     let (n, total, name) = (r.n, r.total, &r.spec.name);
     match r.result {
         Ok(s) => {
@@ -70,17 +77,17 @@ fn print_run(r: &RunReport<'_>) {
                 Some(RunStatus::Partial { episode }) => format!("resumed after episode {episode}, done"),
                 _ => "done".to_string(),
             };
-            println!(
+            output.line(format_args!(
                 "[{n}/{total}] {name}: {what} in {:.0} s: success {:.1} %, mean reward {:.3}, mean steps {}",
                 r.wall_s,
                 100.0 * s.success_rate,
                 s.mean_reward,
                 s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into())
-            );
+            ));
         }
         Err(stagerl::Error::Interrupted { episode, .. }) => {
-            println!("[{n}/{total}] {name}: interrupted after episode {episode}, saved");
+            output.line(format_args!("[{n}/{total}] {name}: interrupted after episode {episode}, saved"));
         }
-        Err(e) => println!("[{n}/{total}] {name}: FAILED: {e}"),
+        Err(e) => output.line(format_args!("[{n}/{total}] {name}: FAILED: {e}")),
     }
 }

@@ -1,4 +1,4 @@
-use anyhow::Result;
+use anyhow::{Context, Result};
 use serde::Deserialize;
 use stagerl::nalgebra::Vector3 as Vec3;
 use stagerl::reward::{Reported, RewardFunction, RewardInput, RewardTerms};
@@ -12,6 +12,13 @@ pub struct Args {
     /// A TOML config for the constants (beta, dt, boundary, sigmas, bonus); defaults otherwise.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// The arm whose joints `joint_vel` lists, one value per joint (rad/s or m/s): `ur5` for the
+    /// bundled arm (6 joints), or a path to a URDF file.
+    #[arg(long, default_value = "ur5")]
+    robot: String,
+    /// Tip link of the URDF given by --robot (default: its only leaf link).
+    #[arg(long)]
+    tip: Option<String>,
 }
 
 /// The fixed-length fields are read as lists and checked here, so a wrong length is reported
@@ -37,8 +44,11 @@ pub fn run(args: Args) -> Result<()> {
     let mut cfg = super::load_config(args.config.as_deref())?;
     cfg.reward.function = args.function;
     let dt = cfg.task.dt_s;
+    let chain = stagerl::robot::Chain::load(&args.robot, args.tip.as_deref())
+        .with_context(|| format!("loading robot `{}`", args.robot))?;
+    let dof = chain.dof();
     let stdin = std::io::stdin().lock();
-    let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+    let stdout = crate::out::stdout()?;
     crate::jsonl::process(stdin, stdout, |i: Input| {
         let input = RewardInput {
             ee_pos: Vec3::from(fixed::<3>("ee_pos", &i.ee_pos)?),
@@ -52,12 +62,18 @@ pub fn run(args: Args) -> Result<()> {
                 .transpose()?
                 .map(Vec3::from),
         };
-        input.validate()?;
+        if i.joint_vel.len() != dof {
+            anyhow::bail!(
+                "malformed input: `joint_vel` has {} values, expected {dof} (one per joint of `{}`; see --robot)",
+                i.joint_vel.len(),
+                args.robot
+            );
+        }
         if cfg.reward.direction == stagerl::reward::DirectionSource::Displacement
             && input.prev_ee_pos.is_none()
         {
             anyhow::bail!("reward.direction = \"displacement\" needs the key `prev_ee_pos`");
         }
-        Ok(Reported(RewardTerms::compute(&cfg.reward, dt, &input)))
+        Ok(Reported(RewardTerms::try_compute(&cfg.reward, dt, &input)?))
     })
 }

@@ -10,6 +10,8 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use crate::out::RunOutput;
+
 #[derive(clap::Args)]
 pub struct Args {
     /// Algorithm (overrides agent.algo).
@@ -53,18 +55,35 @@ pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     Ok(flag)
 }
 
-/// Map an interruption to a message and the interrupted exit code.
-fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path) -> Result<T> {
+/// Map an interruption to a message and the interrupted exit code; a stop caused by standard
+/// output failing (closed pipe, full disk) is an error saying how to resume.
+fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path, output: &RunOutput) -> Result<T> {
     match r {
         Err(stagerl::Error::Interrupted { episode, checkpoint }) => {
-            eprintln!(
-                "stagerl: interrupted after episode {episode}; saved to {}. Continue with: stagerl train --resume {}",
-                checkpoint.display(),
-                dir.display()
+            let (saved, resume) = (checkpoint.display(), dir.display());
+            if let Some(e) = output.failed() {
+                bail!(
+                    "{e}: the run stopped after episode {episode} and was saved to {saved}. Continue with: stagerl train --resume {resume}"
+                );
+            }
+            // Standard error may be closed too; the exit code still tells.
+            let _ = errln!(
+                "stagerl: interrupted after episode {episode}; saved to {saved}. Continue with: stagerl train --resume {resume}"
             );
             std::process::exit(i32::from(INTERRUPTED_EXIT));
         }
         other => other.context("training"),
+    }
+}
+
+/// An error if some output of a run that finished could not be printed.
+fn output_ok(output: &RunOutput, dir: &std::path::Path) -> Result<()> {
+    match output.failed() {
+        Some(e) => bail!(
+            "{e}: the run in {} finished and its files are complete, but its output was not all printed",
+            dir.display()
+        ),
+        None => Ok(()),
     }
 }
 
@@ -100,7 +119,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     dir.ensure_writable().with_context(|| format!("the run directory {} is not writable", out.display()))?;
 
-    println!(
+    outln!(
         "training {} with reward {} on `{}`, seed {}, {} episodes -> {}",
         cfg.agent.algo,
         cfg.reward.function,
@@ -108,34 +127,37 @@ pub fn run(args: Args) -> Result<()> {
         cfg.train.seed,
         cfg.train.episodes,
         out.display()
-    );
+    )?;
     let stop = stop_flag()?;
+    let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };
-    let mut reporter = Reporter::new(cfg.train.episodes);
-    let summary = finish(train::train_with(&cfg, &out, &opts, &mut |p| reporter.episode(p)), &out)?;
+    let mut reporter = Reporter::new(cfg.train.episodes, &output);
+    let summary = finish(train::train_with(&cfg, &out, &opts, &mut |p| reporter.episode(p)), &out, &output)?;
     reporter.finish();
-    report_and_evaluate(&cfg, &out, &summary, args.eval_trials)
+    report_and_evaluate(&cfg, &out, &summary, args.eval_trials, &output)?;
+    output_ok(&output, &out)
 }
 
 fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
     let run = RunDir::new(dir);
     let cfg = run.load_config().with_context(|| format!("reading the run in {}", dir.display()))?;
     match train::checkpointed_episode(dir)? {
-        Some((episode, false)) => println!("resuming {} after episode {episode}", dir.display()),
+        Some((episode, false)) => outln!("resuming {} after episode {episode}", dir.display())?,
         Some((_, true)) => {}
-        None => println!("{} has no checkpoint yet: starting it over", dir.display()),
+        None => outln!("{} has no checkpoint yet: starting it over", dir.display())?,
     }
     let stop = stop_flag()?;
+    let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };
-    let mut reporter = Reporter::new(cfg.train.episodes);
-    match finish(train::resume(dir, &opts, &mut |p| reporter.episode(p)), dir)? {
+    let mut reporter = Reporter::new(cfg.train.episodes, &output);
+    match finish(train::resume(dir, &opts, &mut |p| reporter.episode(p)), dir, &output)? {
         Resumed::AlreadyFinished(s) => {
-            println!("{} already finished ({} episodes); nothing to do", dir.display(), s.episodes);
-            Ok(())
+            outln!("{} already finished ({} episodes); nothing to do", dir.display(), s.episodes)
         }
         Resumed::Finished(s) => {
             reporter.finish();
-            report_and_evaluate(&cfg, dir, &s, eval_trials)
+            report_and_evaluate(&cfg, dir, &s, eval_trials, &output)?;
+            output_ok(&output, dir)
         }
     }
 }
@@ -145,40 +167,42 @@ fn report_and_evaluate(
     out: &std::path::Path,
     summary: &train::TrainSummary,
     eval_trials: u32,
+    output: &RunOutput,
 ) -> Result<()> {
-    println!(
+    output.line(format_args!(
         "trained {} episodes, {} env steps, {} updates in {:.1} s ({:.0} env steps/s)",
         summary.episodes,
         summary.env_steps,
         summary.updates,
         summary.wall_s,
         summary.env_steps as f64 / summary.wall_s
-    );
+    ));
     if eval_trials > 0 {
         // The checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0: not
         // the `train.eval_seed` targets the best checkpoint was chosen on.
         let seed = train::eval::DEFAULT_EVAL_SEED;
         let e = train::evaluate_run(&RunDir::new(out), cfg, None, eval_trials, seed)?;
-        println!(
+        output.line(format_args!(
             "{} on {eval_trials} new targets (seed {seed}), per-trial CSV {}",
             e.checkpoint.display(),
             e.csv.display()
-        );
-        super::eval::print_summary(&e.summary, false);
+        ));
+        output.line(format_args!("{}", super::eval::summary_line(&e.summary, false)));
     }
     Ok(())
 }
 
 /// A progress bar on a terminal; plain log lines every 10 s otherwise.
-struct Reporter {
+struct Reporter<'a> {
+    output: &'a RunOutput,
     bar: Option<ProgressBar>,
     last_log: Instant,
     recent: VecDeque<(f64, bool)>,
     last_eval: Option<(u64, f64)>,
 }
 
-impl Reporter {
-    fn new(episodes: u64) -> Reporter {
+impl<'a> Reporter<'a> {
+    fn new(episodes: u64, output: &'a RunOutput) -> Reporter<'a> {
         let bar = std::io::stdout().is_terminal().then(|| {
             let b = ProgressBar::new(episodes);
             b.set_style(
@@ -189,7 +213,7 @@ impl Reporter {
             );
             b
         });
-        Reporter { bar, last_log: Instant::now(), recent: VecDeque::new(), last_eval: None }
+        Reporter { output, bar, last_log: Instant::now(), recent: VecDeque::new(), last_eval: None }
     }
 
     fn episode(&mut self, p: &Progress<'_>) {
@@ -224,10 +248,10 @@ impl Reporter {
                     || p.eval.is_some()
                     || r.episode == p.episodes
                 {
-                    println!(
+                    self.output.line(format_args!(
                         "episode {}/{} env steps {} {:.0} s {msg}",
                         r.episode, p.episodes, r.env_steps, r.wall_s
-                    );
+                    ));
                     self.last_log = Instant::now();
                 }
             }

@@ -1,8 +1,9 @@
 //! Helpers shared by the CLI integration tests.
 #![allow(dead_code)]
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command, Output, Stdio};
 
 /// The `stagerl` binary under test.
 pub fn bin() -> Command {
@@ -24,4 +25,57 @@ pub fn episodes_without_wall(dir: &Path) -> Vec<String> {
         .lines()
         .map(|l| l.rsplit_once(',').unwrap().0.to_string())
         .collect()
+}
+
+/// Run `stagerl args` to completion with no input.
+pub fn run(args: &[&str]) -> Output {
+    bin().args(args).env("RUST_BACKTRACE", "0").stdin(Stdio::null()).output().unwrap()
+}
+
+/// Start `cmd` with its three standard streams piped (and no backtraces).
+pub fn spawn_piped(cmd: &mut Command) -> Child {
+    cmd.env("RUST_BACKTRACE", "0")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn")
+}
+
+/// Every file and directory under `dir`, with the files' bytes.
+pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                out.insert(p.clone(), None);
+                stack.push(p);
+            } else {
+                out.insert(p.clone(), Some(std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out
+}
+
+/// Assert that run `cut` (stopped and resumed) ended as the uninterrupted run `full`: the same
+/// `episodes.csv` but wall time (`episodes` rows and a header), `eval.csv` (`evals` rows and a
+/// header) and final checkpoint. `what` describes the stops for the messages.
+pub fn assert_same_run(full: &Path, cut: &Path, episodes: usize, evals: usize, what: &str) {
+    assert_eq!(episodes_without_wall(full).len(), episodes + 1);
+    assert_eq!(
+        episodes_without_wall(full),
+        episodes_without_wall(cut),
+        "episodes.csv (but wall time) differs {what}"
+    );
+    let eval = |d: &Path| std::fs::read_to_string(d.join("eval.csv")).unwrap();
+    assert_eq!(eval(full).lines().count(), evals + 1);
+    assert_eq!(eval(full), eval(cut), "eval.csv differs {what}");
+    let ck =
+        |d: &Path| stagerl::checkpoint::Checkpoint::load(&d.join("checkpoints/final.safetensors")).unwrap();
+    let (a, b) = (ck(full), ck(cut));
+    assert!(a.tensor_names().count() > 20);
+    assert!(a.same_contents(&b), "final networks or metadata differ {what}");
 }

@@ -195,6 +195,9 @@ pub fn analyze(
     Ok((groups, report))
 }
 
+/// Most evaluation trajectories a report draws per figure ([`ReportOptions::trajectories`]).
+pub const MAX_TRAJECTORIES: u32 = 1000;
+
 /// The runs whose trajectories are drawn: for the algorithm with the most reward functions run,
 /// the lowest seed of its best and of its worst reward function (by evaluation success rate, then
 /// evaluation reward, then the tail's mean training reward), among runs with a checkpoint.
@@ -242,7 +245,11 @@ pub fn pick_trajectory_runs<'a>(
 /// `table1.json`, `claims.md`, `figure7.{png,svg}`, `figure8.{png,svg}` and, when
 /// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}`.
 pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
+    check_options(dir, opts)?;
     let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
+    if groups.is_empty() {
+        return Err(no_runs(dir, &report));
+    }
     std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
     let out = |name: &str| opts.out.join(name);
     let mut files = Vec::new();
@@ -312,4 +319,42 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
         .map_err(|e| Error::InvalidInput(format!("report JSON: {e}")))?;
     crate::io::write_atomic(&json_path, json.as_bytes())?;
     Ok(report)
+}
+
+/// The checks of [`generate`] made before anything is written, so that a report is written whole
+/// or not at all: UTF-8 paths, a bounded number of trajectories.
+fn check_options(dir: &Path, opts: &ReportOptions) -> Result<()> {
+    for (what, p) in [("output directory", opts.out.as_path()), ("run directory", dir)] {
+        if p.to_str().is_none() {
+            return Err(Error::InvalidInput(format!(
+                "the report's {what} {} is not valid UTF-8 (the report records its paths as text); choose another",
+                p.display()
+            )));
+        }
+    }
+    if opts.trajectories > MAX_TRAJECTORIES {
+        return Err(Error::config(
+            "trajectories",
+            opts.trajectories,
+            format!("0 to {MAX_TRAJECTORIES} evaluation trajectories per figure"),
+        ));
+    }
+    Ok(())
+}
+
+/// The error for a directory without any run.
+fn no_runs(dir: &Path, report: &Report) -> Error {
+    let skipped = match report.skipped.first() {
+        None => String::new(),
+        Some(first) => format!(
+            " ({} directories not read, e.g. `{}`: {})",
+            report.skipped.len(),
+            first.name,
+            first.reason
+        ),
+    };
+    Error::InvalidInput(format!(
+        "{}: no runs to report on: a run directory holds config.toml and episodes.csv, at depth 1 or 2{skipped}",
+        dir.display()
+    ))
 }

@@ -43,6 +43,7 @@ mod kin;
 #[cfg(test)]
 mod tests;
 mod urdf;
+pub use urdf::{MAX_LENGTH_M, MAX_URDF_BYTES, MAX_XML_DEPTH};
 
 /// The bundled UR5 URDF (see `assets/robots/ur5.urdf`).
 pub const UR5_URDF: &str = include_str!("../../../../assets/robots/ur5.urdf");
@@ -124,7 +125,8 @@ impl Chain {
     /// the root, a joint naming a missing link, a floating/planar/spherical or mimic joint on the
     /// chain, a revolute or prismatic joint without usable limits (finite `lower < upper`,
     /// `velocity > 0`), a continuous joint without a positive velocity limit, a non-finite origin
-    /// or axis, a zero axis, or a chain with no actuated joint.
+    /// or axis, an origin or prismatic limit beyond [`MAX_LENGTH_M`], a zero axis, a chain
+    /// with no actuated joint, or joints forming a cycle anywhere in the document.
     pub fn from_urdf_str(xml: &str, tip: Option<&str>) -> Result<Chain> {
         let c = urdf::compile_str(xml, tip)?;
         Ok(Chain {
@@ -141,6 +143,14 @@ impl Chain {
     /// Read and parse a URDF file (see [`Chain::from_urdf_str`]); [`Error::Io`] if it cannot be
     /// read, URDF errors prefixed with the path.
     pub fn from_urdf_file(path: &Path, tip: Option<&str>) -> Result<Chain> {
+        let size = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+        if size > urdf::MAX_URDF_BYTES {
+            return Err(Error::Urdf(format!(
+                "{}: {size} bytes, more than the {} bytes a URDF may have",
+                path.display(),
+                urdf::MAX_URDF_BYTES
+            )));
+        }
         let xml = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         Chain::from_urdf_str(&xml, tip).map_err(|e| match e {
             Error::Urdf(m) => Error::Urdf(format!("{}: {m}", path.display())),
@@ -187,11 +197,27 @@ impl Chain {
         kin::pose_of(&self.kin.fk_tf(q))
     }
 
-    /// Checked forward kinematics: errors ([`Error::InvalidInput`]) on a wrong length or a
-    /// non-finite joint value.
+    /// Checked forward kinematics: errors ([`Error::InvalidInput`]) on a wrong length, a
+    /// non-finite joint value, or finite joint values whose pose overflows to a non-finite one.
     pub fn try_fk(&self, q: &[f64]) -> Result<Pose> {
         self.check_q(q)?;
-        Ok(self.fk(q))
+        let pose = self.fk(q);
+        let p = pose.position;
+        let quat = pose.quaternion_xyzw();
+        if p.iter().chain(quat.iter()).any(|v| !v.is_finite()) {
+            return Err(Error::InvalidInput(format!(
+                "forward kinematics overflows for these finite joint values: position {:?}, \
+                 quaternion {quat:?}; joint values must be of a physical scale (within the joints' \
+                 limits: {})",
+                [p.x, p.y, p.z],
+                self.joints
+                    .iter()
+                    .map(|j| format!("`{}` [{}, {}]", j.name, j.lower, j.upper))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+        Ok(pose)
     }
 
     /// Geometric Jacobian of the tip, row-major 6 x dof into `jac` (rows: vx, vy, vz, wx, wy, wz,

@@ -16,8 +16,13 @@ pub(crate) struct Compiled {
     pub kin: Kinematics,
 }
 
+/// The largest length (metres) a URDF may hold in a joint origin or a prismatic joint's limits:
+/// beyond it forward kinematics can overflow f64 (an origin of 1e308 m does).
+pub const MAX_LENGTH_M: f64 = 1e6;
+
+/// A URDF error; names echoed from the document are cut to excerpts.
 fn urdf_err(msg: impl Into<String>) -> Error {
-    Error::Urdf(msg.into())
+    Error::Urdf(crate::text::bound_message(&msg.into()))
 }
 
 /// `a`, `b`, `c` as "`a`, `b`, `c`".
@@ -25,8 +30,158 @@ fn quoted_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
     names.into_iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
 }
 
+/// An error naming the joints and links of a cycle, if any link has no path up to `root` (with
+/// one root and one parent joint per link, such a link is on a cycle or below one), whether or
+/// not the cycle touches the chain that will be compiled.
+fn check_no_cycle(
+    robot: &urdf_rs::Robot,
+    parent_joint: &HashMap<&str, &urdf_rs::Joint>,
+    root: &str,
+) -> Result<()> {
+    let mut reaches_root: HashSet<&str> = HashSet::from([root]);
+    for l in &robot.links {
+        let mut trail: Vec<&str> = Vec::new();
+        let mut link = l.name.as_str();
+        while !reaches_root.contains(link) {
+            if let Some(at) = trail.iter().position(|t| *t == link) {
+                let links = &trail[at..];
+                let joints = links.iter().map(|l| parent_joint[l].name.as_str());
+                return Err(urdf_err(format!(
+                    "joints {} form a cycle through links {}; a URDF must be a tree",
+                    quoted_list(joints),
+                    quoted_list(links.iter().copied())
+                )));
+            }
+            trail.push(link);
+            // Every link but the root has a parent joint (`root` is the only link without one).
+            link = parent_joint[link].parent.link.as_str();
+        }
+        reaches_root.extend(trail);
+    }
+    Ok(())
+}
+
+/// The deepest element nesting a URDF may have (a URDF needs 4: robot, joint, limit; a deeper
+/// document could overflow the stack of the recursive XML parser).
+pub const MAX_XML_DEPTH: usize = 64;
+
+/// The largest URDF file read, bytes (64 MiB).
+pub const MAX_URDF_BYTES: u64 = 64 << 20;
+
+/// An error if `xml` nests elements deeper than [`MAX_XML_DEPTH`]: a scan of its tags (comments,
+/// CDATA, declarations and quoted attribute values skipped) without recursion. Malformed markup
+/// is left to the parser to report.
+fn check_xml_depth(xml: &str) -> Result<()> {
+    let b = xml.as_bytes();
+    let find = |from: usize, pat: &str| xml[from..].find(pat).map(|k| from + k);
+    let (mut depth, mut i) = (0usize, 0usize);
+    while let Some(open) = find(i, "<") {
+        let rest = &xml[open..];
+        let skip_to = |pat: &str| find(open, pat).map(|k| k + pat.len());
+        let next = if rest.starts_with("<!--") {
+            skip_to("-->")
+        } else if rest.starts_with("<![CDATA[") {
+            skip_to("]]>")
+        } else if rest.starts_with("<?") || rest.starts_with("<!") || rest.starts_with("</") {
+            if rest.starts_with("</") {
+                depth = depth.saturating_sub(1);
+            }
+            skip_to(">")
+        } else {
+            // A start tag: its end is the first `>` outside a quoted attribute value.
+            let mut quote = None;
+            let end = (open + 1..b.len()).find(|&k| match (quote, b[k]) {
+                (None, q @ (b'"' | b'\'')) => {
+                    quote = Some(q);
+                    false
+                }
+                (Some(q), c) if c == q => {
+                    quote = None;
+                    false
+                }
+                (None, b'>') => true,
+                _ => false,
+            });
+            if let Some(end) = end {
+                if b[end - 1] != b'/' {
+                    depth += 1;
+                    if depth > MAX_XML_DEPTH {
+                        return Err(urdf_err(format!(
+                            "elements are nested more than {MAX_XML_DEPTH} deep (at byte {open}); \
+                             a URDF needs a handful of levels"
+                        )));
+                    }
+                }
+            }
+            end.map(|e| e + 1)
+        };
+        match next {
+            Some(n) => i = n,
+            None => break,
+        }
+    }
+    Ok(())
+}
+
+/// A joint's origin (xyz metres, rpy radians): finite, and within [`MAX_LENGTH_M`].
+fn checked_origin(j: &urdf_rs::Joint) -> Result<([f64; 3], [f64; 3])> {
+    let xyz = j.origin.xyz.0;
+    let rpy = j.origin.rpy.0;
+    if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite()) {
+        return Err(urdf_err(format!(
+            "joint `{}` has a non-finite origin: xyz = {xyz:?}, rpy = {rpy:?}",
+            j.name
+        )));
+    }
+    if xyz.iter().any(|v| v.abs() > MAX_LENGTH_M) {
+        return Err(urdf_err(format!(
+            "joint `{}` has origin xyz = {xyz:?} m; each coordinate must be within \
+             +-{MAX_LENGTH_M:e} m",
+            j.name
+        )));
+    }
+    Ok((xyz, rpy))
+}
+
+/// An actuated joint's (lower, upper, velocity) limits (rad or m, rad/s or m/s): usable, and a
+/// prismatic joint's within [`MAX_LENGTH_M`]. Continuous joints are unbounded.
+fn checked_limits(j: &urdf_rs::Joint, kind: JointKind) -> Result<(f64, f64, f64)> {
+    let lim = &j.limit;
+    if j.joint_type == JointType::Continuous {
+        if !(lim.velocity.is_finite() && lim.velocity > 0.0) {
+            return Err(urdf_err(format!(
+                "continuous joint `{}` has no usable velocity limit (velocity = {}); \
+                 a finite <limit velocity> > 0 is required",
+                j.name, lim.velocity
+            )));
+        }
+        Ok((f64::NEG_INFINITY, f64::INFINITY, lim.velocity))
+    } else {
+        let usable = lim.lower.is_finite()
+            && lim.upper.is_finite()
+            && lim.velocity.is_finite()
+            && lim.lower < lim.upper
+            && lim.velocity > 0.0;
+        if !usable {
+            return Err(urdf_err(format!(
+                "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
+                 velocity = {}; finite lower < upper and velocity > 0 are required",
+                j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
+            )));
+        }
+        if kind == JointKind::Prismatic && lim.lower.abs().max(lim.upper.abs()) > MAX_LENGTH_M {
+            return Err(urdf_err(format!(
+                "prismatic joint `{}` has limits [{:?}, {:?}] m; they must be within +-{MAX_LENGTH_M:e} m",
+                j.name, lim.lower, lim.upper
+            )));
+        }
+        Ok((lim.lower, lim.upper, lim.velocity))
+    }
+}
+
 /// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf).
 pub(crate) fn compile_str(xml: &str, tip: Option<&str>) -> Result<Compiled> {
+    check_xml_depth(xml)?;
     let robot = urdf_rs::read_from_string(xml)
         .map_err(|e| urdf_err(format!("cannot parse the URDF document: {e}")))?;
     compile(&robot, tip)
@@ -41,6 +196,8 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     let root = tree.root()?;
     let tip = tree.tip(tip)?;
     let path = tree.path(root, tip)?;
+    // A cycle elsewhere in the document (beside the chain) is refused too.
+    check_no_cycle(robot, &tree.parent_joint, root)?;
     fold_chain(&path, root, tip)
 }
 
@@ -216,31 +373,7 @@ fn actuated(j: &urdf_rs::Joint, root: &str, tip: &str) -> Result<Option<Actuated
         )));
     }
     let axis = [axis[0] / norm, axis[1] / norm, axis[2] / norm];
-    let lim = &j.limit;
-    let (lower, upper, velocity) = if j.joint_type == JointType::Continuous {
-        if !(lim.velocity.is_finite() && lim.velocity > 0.0) {
-            return Err(urdf_err(format!(
-                "continuous joint `{}` has no usable velocity limit (velocity = {}); \
-                 a finite <limit velocity> > 0 is required",
-                j.name, lim.velocity
-            )));
-        }
-        (f64::NEG_INFINITY, f64::INFINITY, lim.velocity)
-    } else {
-        let usable = lim.lower.is_finite()
-            && lim.upper.is_finite()
-            && lim.velocity.is_finite()
-            && lim.lower < lim.upper
-            && lim.velocity > 0.0;
-        if !usable {
-            return Err(urdf_err(format!(
-                "joint `{}` ({:?}) has no usable <limit>: lower = {}, upper = {}, \
-                 velocity = {}; finite lower < upper and velocity > 0 are required",
-                j.name, j.joint_type, lim.lower, lim.upper, lim.velocity
-            )));
-        }
-        (lim.lower, lim.upper, lim.velocity)
-    };
+    let (lower, upper, velocity) = checked_limits(j, kind)?;
     Ok(Some((kind, axis, (lower, upper, velocity))))
 }
 
@@ -252,14 +385,7 @@ fn fold_chain(path: &[&urdf_rs::Joint], root: &str, tip: &str) -> Result<Compile
     let mut base: Option<Tf> = None;
     let mut pending: Tf = kin::IDENTITY;
     for j in path {
-        let xyz = j.origin.xyz.0;
-        let rpy = j.origin.rpy.0;
-        if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite()) {
-            return Err(urdf_err(format!(
-                "joint `{}` has a non-finite origin: xyz = {xyz:?}, rpy = {rpy:?}",
-                j.name
-            )));
-        }
+        let (xyz, rpy) = checked_origin(j)?;
         pending = kin::mul(&pending, &kin::origin(xyz, rpy));
         let Some((kind, axis, (lower, upper, velocity))) = actuated(j, root, tip)? else { continue };
         joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity });

@@ -85,8 +85,9 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
     let algo = ck.meta("algorithm")?;
     if algo != cfg.agent.algo.name() {
         return Err(Error::InvalidInput(format!(
-            "{}: checkpoint of algorithm `{algo}`, the config says `{}`",
+            "{}: checkpoint of algorithm `{}`, the config says `{}`",
             path.display(),
+            crate::text::excerpt(algo),
             cfg.agent.algo
         )));
     }
@@ -579,6 +580,12 @@ pub fn resume(
         return train_with(&cfg, out, opts, on_episode).map(Resumed::Finished);
     }
     let ck = Checkpoint::load(&latest)?;
+    // The run's other checkpoints are checked too: a corrupted one is refused, not kept.
+    for p in [dir.best(), dir.final_checkpoint()] {
+        if p.exists() {
+            Checkpoint::load(&p)?;
+        }
+    }
     let mut t = Trainer::restore(&cfg, dir, &ck)?;
     if t.state.finished {
         return Ok(Resumed::AlreadyFinished(t.summary()));

@@ -1,0 +1,163 @@
+//! Output errors are errors, never panics: a pipe closed early (`| head -1`) or a full disk
+//! (`> /dev/full`) give a non-zero exit (not 101, the code of a panic) and a message on standard
+//! error, and so does a closed standard output for `fk` and `reward`; `train` whose output goes away saves its run and says how to
+//! resume it.
+
+mod common;
+
+use common::{bin, scratch, spawn_piped};
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+use std::process::{Command, Output};
+
+const FK_LINE: &str = "{\"joints\":[0,0,0,0,0,0]}\n";
+const REWARD_LINE: &str =
+    "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n";
+
+/// Run `stagerl args` with its standard output opened by the shell redirection `redirect`
+/// (`>/dev/full`, `>&-`, ...), `stdin` on standard input.
+fn shell(args: &[&str], redirect: &str, stdin: &str) -> Output {
+    let script = format!("exec \"$0\" \"$@\" {redirect}");
+    let mut child =
+        spawn_piped(Command::new("sh").arg("-c").arg(script).arg(env!("CARGO_BIN_EXE_stagerl")).args(args));
+    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
+    child.wait_with_output().unwrap()
+}
+
+/// Run `stagerl args`, read one line of its output, then close the pipe (as `| head -1` does).
+fn head_1(args: &[&str], stdin: &str) -> (String, Output) {
+    let mut child = spawn_piped(bin().args(args));
+    let mut input = child.stdin.take().unwrap();
+    let stdin = stdin.to_string();
+    let feeder = std::thread::spawn(move || {
+        let _ = input.write_all(stdin.as_bytes());
+    });
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut first).unwrap();
+    // The reader is dropped here: the pipe is closed.
+    let out = child.wait_with_output().unwrap();
+    feeder.join().unwrap();
+    (first, out)
+}
+
+fn assert_clean_error(case: &str, out: &Output, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{case}: exit {:?}; stderr: {err}", out.status);
+    assert!(!err.contains("panicked"), "{case}: {err}");
+    assert!(err.contains(needle), "{case}: {needle:?} not in {err}");
+}
+
+#[test]
+fn full_disk_and_closed_stdout_are_errors() {
+    let many_fk = FK_LINE.repeat(2000);
+    for (args, stdin) in [
+        (&["config"][..], ""),
+        (&["--help"][..], ""),
+        (&["--version"][..], ""),
+        (&["fk", "--help"][..], ""),
+        (&["demo", "--trials", "5"][..], ""),
+        (&["fk"][..], many_fk.as_str()),
+        (&["reward", "--function", "sar"][..], REWARD_LINE),
+        (&["bench", "env", "--steps", "100"][..], ""),
+    ] {
+        let out = shell(args, ">/dev/full", stdin);
+        assert_clean_error(&format!("{args:?} >/dev/full"), &out, "No space left on device");
+        // Standard error closed as well: still a failure, silently.
+        let out = shell(args, ">/dev/full 2>&-", stdin);
+        assert_eq!(out.status.code(), Some(1), "{args:?} >/dev/full 2>&-");
+    }
+    // fk and reward, whose product is their output, refuse a closed standard output.
+    for (args, stdin) in [(&["fk"][..], FK_LINE), (&["reward", "--function", "sar"][..], REWARD_LINE)] {
+        let out = shell(args, ">&-", stdin);
+        assert_clean_error(&format!("{args:?} >&-"), &out, "standard output is closed");
+        let out = shell(args, ">&- 2>&-", stdin);
+        assert_eq!(out.status.code(), Some(1), "{args:?} >&- 2>&-");
+    }
+    // `> /dev/null` is not a closed output.
+    let out = shell(&["fk"], ">/dev/null", FK_LINE);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn a_pipe_closed_early_is_an_error() {
+    let (first, out) = head_1(&["demo", "--trials", "2000"], "");
+    assert!(first.starts_with("scripted Jacobian controller"), "{first}");
+    assert_clean_error("demo | head -1", &out, "Broken pipe");
+    // fk and reward answer line by line: the pipe closes while they still have input.
+    let (first, out) = head_1(&["fk"], &FK_LINE.repeat(200_000));
+    assert!(first.starts_with("{\"position\""), "{first}");
+    assert_clean_error("fk | head -1", &out, "Broken pipe");
+    let (first, out) = head_1(&["reward", "--function", "sar"], &REWARD_LINE.repeat(200_000));
+    assert!(first.starts_with("{\"distance\""), "{first}");
+    assert_clean_error("reward | head -1", &out, "Broken pipe");
+}
+
+#[test]
+fn train_whose_output_closes_saves_the_run_and_says_how_to_resume() {
+    let root = scratch("output-train");
+    let cfg = root.join("c.toml");
+    // The lines after "training ..." are printed at the evaluations, every 5 episodes.
+    std::fs::write(
+        &cfg,
+        "[agent]\nhidden = [8, 8]\nlearning_starts = 100\nbatch_size = 8\nbuffer_size = 5000\n\
+         [train]\nepisodes = 300\neval_every_episodes = 5\neval_trials = 2\ncheckpoint_every_episodes = 1000\n",
+    )
+    .unwrap();
+    let dir = root.join("run");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (first, out) = head_1(&["train", "--config", &s(&cfg), "--out", &s(&dir), "--eval-trials", "3"], "");
+    assert!(first.starts_with("training"), "{first}");
+    assert_clean_error("train | head -1", &out, "Broken pipe");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("stagerl train --resume {}", s(&dir))), "{err}");
+    // It stops at the first line that fails: an evaluation's (every 5 episodes), before the end.
+    let episode: u64 = err
+        .split("stopped after episode ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(episode % 5 == 0 && episode < 300, "{err}");
+    assert!(dir.join("checkpoints/latest.safetensors").exists());
+    assert!(!dir.join("checkpoints/final.safetensors").exists());
+
+    // It resumes and finishes like any interrupted run.
+    let out = bin().args(["train", "--resume", &s(&dir), "--eval-trials", "3"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(dir.join("checkpoints/final.safetensors").exists());
+    assert!(dir.join("eval-seed0.csv").exists());
+
+    // A full disk on standard output from the start: refused before anything is trained.
+    let full = root.join("full");
+    let out = shell(&["train", "--config", &s(&cfg), "--out", &s(&full)], ">/dev/full", "");
+    assert_clean_error("train >/dev/full", &out, "No space left on device");
+    assert!(!full.join("episodes.csv").exists());
+    std::fs::remove_dir_all(&root).ok();
+}
+
+#[test]
+fn reproduce_whose_output_closes_stops_and_resumes() {
+    let root = scratch("output-reproduce");
+    let preset = root.join("p.toml");
+    std::fs::write(
+        &preset,
+        "[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\", \"basic\", \"posture\"]\nseeds = [1]\neval_trials = 2\n\
+         [agent]\nhidden = [8, 8]\nbatch_size = 8\nbuffer_size = 2000\nlearning_starts = 50\n\
+         [train]\nepisodes = 40\neval_every_episodes = 0\ncheckpoint_every_episodes = 10\n",
+    )
+    .unwrap();
+    let out_dir = root.join("sweep");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let args = ["reproduce", "--preset", &s(&preset), "--out", &s(&out_dir), "--jobs", "1"];
+    // The first line is the sweep's; the line of the first finished run fails and stops the sweep.
+    let (first, out) = head_1(&args, "");
+    assert!(first.starts_with("reproduce"), "{first}");
+    assert_clean_error("reproduce | head -1", &out, "Broken pipe");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("Run the same command again"));
+    // The same command finishes the sweep.
+    let out = bin().args(args).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("all 3 runs done"));
+    std::fs::remove_dir_all(&root).ok();
+}
