@@ -35,6 +35,7 @@ pub mod report;
 pub mod reward;
 pub mod rng;
 pub mod robot;
+pub mod stats;
 pub mod train;
 
 pub use error::{Error, Result};
