@@ -30,6 +30,7 @@ pub mod io;
 pub mod log;
 pub mod metrics;
 pub mod nn;
+pub mod provenance;
 pub mod replay;
 pub mod report;
 pub mod reward;
