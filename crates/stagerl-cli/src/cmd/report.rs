@@ -67,9 +67,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     let count = |v: Verdict| r.claims.iter().filter(|c| c.verdict == v).count();
     outln!(
-        "claims: {} hold, {} do not hold, {} not measurable",
-        count(Verdict::Holds),
-        count(Verdict::DoesNotHold),
+        "claims: {} supported, {} contradicted, {} inconclusive, {} not measurable",
+        count(Verdict::Supported),
+        count(Verdict::Contradicted),
+        count(Verdict::Inconclusive),
         count(Verdict::NotMeasurable)
     )?;
     for w in &r.warnings {

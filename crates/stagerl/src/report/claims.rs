@@ -1,5 +1,24 @@
-//! The paper's claims from section VI, checked against our Table 1 (and against the paper's own
-//! Table 1, which does not always support the text).
+//! The paper's claims from section VI, checked against our runs with statistics (and against the
+//! paper's own Table 1, which does not always support the text).
+//!
+//! Every comparison "A is better than B on an indicator" takes one value per seed from each
+//! group and gets (see [`crate::stats`]):
+//! - the effect: difference and relative difference of the means;
+//! - a 95 % percentile-bootstrap CI of the difference ([`BOOTSTRAP_RESAMPLES`] resamples, seeded);
+//! - a two-sided permutation test of the difference of means (exact for small groups, else
+//!   100 000 seeded permutations): the indicators are far from normal (success rates pile up near
+//!   100 %, E_start is skewed), and the permutation test needs no normality;
+//! - Holm-Bonferroni over the whole family of comparisons of the report;
+//! - a verdict: **supported** (the paper's direction, significant at 5 % after correction),
+//!   **contradicted** (the opposite direction, significant) or **inconclusive**; for an
+//!   inconclusive comparison, the seeds per group that would resolve the observed effect at 80 %
+//!   power (two-sample t-test at the Bonferroni level 0.05 / m, a conservative bound).
+//!
+//! E_start of a seed that did not converge is censored at its episode count + 1 (it converged
+//! no earlier than the end), so convergence itself counts; the other training indicators exist
+//! only for converged seeds. Convergence counts (the basic reward's claim) use Fisher's exact
+//! test. A claim of several comparisons is supported only if all are, contradicted if any is,
+//! else inconclusive (or not measurable when a group it needs is missing).
 
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -9,35 +28,88 @@ use super::table::{algo_title, primary, reward_title, GroupSummary};
 use crate::agent::Algo;
 use crate::metrics::MeanStd;
 use crate::reward::RewardFunction::{self, Basic, Har, Posture, Sar, Stride};
+use crate::stats::{self, BOOTSTRAP_RESAMPLES};
 
-/// Our verdict on a claim.
+/// Our verdict on a comparison or a claim.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
-    Holds,
-    DoesNotHold,
+    /// The paper's direction, significant after correction.
+    Supported,
+    /// The opposite direction, significant after correction.
+    Contradicted,
+    /// Not significant at this number of seeds.
+    Inconclusive,
     /// A group it needs was not run, or did not produce the indicator.
     NotMeasurable,
 }
 
 impl Verdict {
+    pub const ALL: [Verdict; 4] =
+        [Verdict::Supported, Verdict::Contradicted, Verdict::Inconclusive, Verdict::NotMeasurable];
+
     pub fn text(self) -> &'static str {
         match self {
-            Verdict::Holds => "holds",
-            Verdict::DoesNotHold => "does not hold",
+            Verdict::Supported => "supported",
+            Verdict::Contradicted => "contradicted",
+            Verdict::Inconclusive => "inconclusive",
             Verdict::NotMeasurable => "not measurable",
         }
     }
 
-    /// Any failure decides; then anything unmeasurable; else it holds.
+    /// A claim of several comparisons: contradicted if any is; else not measurable if any is;
+    /// else supported if all are; else inconclusive.
     fn all(vs: impl IntoIterator<Item = Verdict>) -> Verdict {
         let vs: Vec<Verdict> = vs.into_iter().collect();
-        if vs.contains(&Verdict::DoesNotHold) {
-            Verdict::DoesNotHold
+        if vs.contains(&Verdict::Contradicted) {
+            Verdict::Contradicted
         } else if vs.is_empty() || vs.contains(&Verdict::NotMeasurable) {
             Verdict::NotMeasurable
+        } else if vs.iter().all(|v| *v == Verdict::Supported) {
+            Verdict::Supported
         } else {
-            Verdict::Holds
+            Verdict::Inconclusive
+        }
+    }
+
+    fn from_stats(v: stats::Verdict) -> Verdict {
+        match v {
+            stats::Verdict::Supported => Verdict::Supported,
+            stats::Verdict::Contradicted => Verdict::Contradicted,
+            stats::Verdict::Inconclusive => Verdict::Inconclusive,
+        }
+    }
+}
+
+/// What the paper's own Table 1 says of a claim: its means only (it gives no per-seed values),
+/// so a direction, not a test.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TableVerdict {
+    Holds,
+    DoesNotHold,
+    /// Not in the paper's table.
+    NotMeasurable,
+}
+
+impl TableVerdict {
+    pub fn text(self) -> &'static str {
+        match self {
+            TableVerdict::Holds => "holds",
+            TableVerdict::DoesNotHold => "does not hold",
+            TableVerdict::NotMeasurable => "not measurable",
+        }
+    }
+
+    /// Any failure decides; then anything unmeasurable; else it holds.
+    fn all(vs: impl IntoIterator<Item = TableVerdict>) -> TableVerdict {
+        let vs: Vec<TableVerdict> = vs.into_iter().collect();
+        if vs.contains(&TableVerdict::DoesNotHold) {
+            TableVerdict::DoesNotHold
+        } else if vs.is_empty() || vs.contains(&TableVerdict::NotMeasurable) {
+            TableVerdict::NotMeasurable
+        } else {
+            TableVerdict::Holds
         }
     }
 }
@@ -53,6 +125,8 @@ pub enum Metric {
     EvalReward,
     EvalSteps,
     SuccessRate,
+    /// Share of seeds whose training reward converged (E_start exists).
+    Converged,
 }
 
 impl Metric {
@@ -65,6 +139,7 @@ impl Metric {
             Metric::EvalReward => "evaluation reward",
             Metric::EvalSteps => "evaluation steps",
             Metric::SuccessRate => "success rate",
+            Metric::Converged => "seeds converged",
         }
     }
 
@@ -81,6 +156,11 @@ impl Metric {
             Metric::EvalReward => g.eval_reward,
             Metric::EvalSteps => g.eval_steps,
             Metric::SuccessRate => g.success_rate,
+            Metric::Converged => (g.seeds > 0).then(|| MeanStd {
+                mean: g.converged as f64 / g.seeds as f64,
+                std: None,
+                n: g.seeds,
+            }),
         }
     }
 
@@ -93,13 +173,46 @@ impl Metric {
             Metric::EvalReward => p.eval_reward,
             Metric::EvalSteps => p.eval_steps,
             Metric::SuccessRate => p.success_rate,
+            Metric::Converged => Some(if p.converged() { 1.0 } else { 0.0 }),
         }
+    }
+
+    /// One value per seed of a group: the training indicators of its converged seeds (E_start of
+    /// the others censored at their episode count + 1), the evaluation indicators of its
+    /// evaluated seeds. The second value counts the censored seeds.
+    pub fn per_seed(self, g: &GroupSummary) -> (Vec<f64>, usize) {
+        let mut censored = 0;
+        let values = g
+            .runs
+            .iter()
+            .filter_map(|r| {
+                let t = r.train.as_ref();
+                let e = r.eval.as_ref();
+                match self {
+                    Metric::EStart => Some(t.map_or_else(
+                        || {
+                            censored += 1;
+                            (r.episodes + 1) as f64
+                        },
+                        |t| t.e_start as f64,
+                    )),
+                    Metric::TrainReward => t.map(|t| t.mean_reward),
+                    Metric::TrainSteps => t.and_then(|t| t.mean_steps_success),
+                    Metric::VStdev => t.and_then(|t| t.v_stdev),
+                    Metric::EvalReward => e.map(|e| e.mean_reward),
+                    Metric::EvalSteps => e.and_then(|e| e.mean_steps),
+                    Metric::SuccessRate => e.map(|e| e.success_rate),
+                    Metric::Converged => Some(if t.is_some() { 1.0 } else { 0.0 }),
+                }
+            })
+            .collect();
+        (values, censored)
     }
 
     fn fmt(self, v: f64) -> String {
         match self {
             Metric::EStart => format!("{v:.0}"),
-            Metric::SuccessRate => format!("{:.1} %", 100.0 * v),
+            Metric::SuccessRate | Metric::Converged => format!("{:.1} %", 100.0 * v),
             Metric::TrainSteps | Metric::EvalSteps => format!("{v:.1}"),
             _ => format!("{v:.3}"),
         }
@@ -107,11 +220,46 @@ impl Metric {
 
     fn fmt_ms(self, m: &MeanStd) -> String {
         match m.std {
-            Some(s) if self == Metric::SuccessRate => format!("{:.1} ± {:.1} %", 100.0 * m.mean, 100.0 * s),
+            Some(s) if matches!(self, Metric::SuccessRate | Metric::Converged) => {
+                format!("{:.1} ± {:.1} %", 100.0 * m.mean, 100.0 * s)
+            }
             Some(s) => format!("{} ± {}", self.fmt(m.mean), self.fmt(s).trim_end_matches(" %")),
             None => self.fmt(m.mean),
         }
     }
+}
+
+/// The test behind a comparison.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Test {
+    /// Two-sided permutation test of the difference of the per-seed means.
+    Permutation,
+    /// Fisher's exact test on counts (converged or not).
+    FisherExact,
+}
+
+/// The statistics of one comparison, `better - worse` in the indicator's own units (for a
+/// lower-is-better indicator the paper's direction is a negative difference).
+#[derive(Clone, Debug, Serialize)]
+pub struct Stats {
+    pub test: Test,
+    /// Seeds (values) in each group.
+    pub n: (usize, usize),
+    pub diff: f64,
+    /// `diff / |worse|`.
+    pub relative: Option<f64>,
+    /// 95 % percentile-bootstrap CI of `diff`.
+    pub ci95: (f64, f64),
+    /// Uncorrected two-sided p-value.
+    pub p: f64,
+    /// Holm-Bonferroni adjusted over the report's family of comparisons.
+    pub p_holm: f64,
+    /// Cohen's d (or h for counts) of the observed effect.
+    pub effect_size: Option<f64>,
+    /// For an inconclusive comparison: seeds per group that would resolve the observed effect at
+    /// 80 % power (`None`: no effect observed, or more than 100 000).
+    pub seeds_needed: Option<u64>,
 }
 
 /// One "a is better than b on metric" check.
@@ -123,7 +271,9 @@ pub struct Comparison {
     pub verdict: Verdict,
     /// Our numbers, e.g. `SAC+SAR 812 ± 95 vs SAC+HAR 1032 ± 40: 21.3 % lower`.
     pub ours: String,
-    pub paper_verdict: Verdict,
+    /// `None` when not measurable.
+    pub stats: Option<Stats>,
+    pub paper_verdict: TableVerdict,
     pub paper: String,
 }
 
@@ -139,7 +289,7 @@ pub struct Claim {
     pub paper_text: &'static str,
     pub verdict: Verdict,
     /// The verdict the paper's own Table 1 gives.
-    pub paper_verdict: Verdict,
+    pub paper_verdict: TableVerdict,
     pub comparisons: Vec<Comparison>,
     /// Our numbers for claims that are not comparisons.
     pub detail: String,
@@ -170,69 +320,124 @@ fn relative(metric: Metric, a: f64, b: f64) -> String {
     format!(": {:.1} % {word}", 100.0 * rel.abs())
 }
 
+/// The paper's expected sign of `better - worse`.
+fn expected_sign(metric: Metric) -> f64 {
+    if metric.lower_is_better() {
+        -1.0
+    } else {
+        1.0
+    }
+}
+
+/// Effect, bootstrap CI and permutation p-value of `a - b` (Holm and the verdict come later,
+/// once the whole family is known). `seed` makes the resampling reproducible.
+fn permutation_stats(a: &[f64], b: &[f64], seed: u64) -> Stats {
+    let e = stats::Effect::of(a, b);
+    Stats {
+        test: Test::Permutation,
+        n: (a.len(), b.len()),
+        diff: e.diff,
+        relative: e.relative,
+        ci95: stats::bootstrap_diff_ci(a, b, 0.95, BOOTSTRAP_RESAMPLES, seed),
+        p: stats::permutation_test(a, b, seed),
+        p_holm: f64::NAN,
+        effect_size: e.cohen_d,
+        seeds_needed: None,
+    }
+}
+
+/// [`permutation_stats`] for 0/1 values (converged or not): Fisher's exact test on the counts,
+/// Cohen's h as the effect size.
+fn fisher_stats(a: &[f64], b: &[f64], seed: u64) -> Stats {
+    let count = |xs: &[f64]| xs.iter().filter(|&&x| x > 0.5).count() as u64;
+    let (ka, kb) = (count(a), count(b));
+    let (na, nb) = (a.len() as u64, b.len() as u64);
+    let e = stats::Effect::of(a, b);
+    let h = 2.0 * e.mean_a.sqrt().asin() - 2.0 * e.mean_b.sqrt().asin();
+    Stats {
+        test: Test::FisherExact,
+        n: (a.len(), b.len()),
+        diff: e.diff,
+        relative: e.relative,
+        ci95: stats::bootstrap_diff_ci(a, b, 0.95, BOOTSTRAP_RESAMPLES, seed),
+        p: stats::fisher_exact(ka, na - ka, kb, nb - kb),
+        p_holm: f64::NAN,
+        effect_size: Some(h),
+        seeds_needed: None,
+    }
+}
+
+/// Our side of a comparison: the statistics, or why it cannot be measured; and the text.
+fn ours(
+    groups: &[GroupSummary],
+    metric: Metric,
+    better: Cell,
+    worse: Cell,
+    seed: u64,
+) -> (Option<Stats>, String) {
+    let (la, lb) = (label(better), label(worse));
+    let ga = primary(groups, better.0, better.1).filter(|g| g.seeds > 0);
+    let gb = primary(groups, worse.0, worse.1).filter(|g| g.seeds > 0);
+    let (Some(ga), Some(gb)) = (ga, gb) else {
+        let missing: Vec<String> = [(ga, &la), (gb, &lb)]
+            .iter()
+            .filter(|(g, _)| g.is_none())
+            .map(|(_, l)| format!("{l} not run"))
+            .collect();
+        return (None, missing.join(", "));
+    };
+    let ((xa, ca), (xb, cb)) = (metric.per_seed(ga), metric.per_seed(gb));
+    let shown = |g: &GroupSummary, xs: &[f64], censored: usize, l: &str| {
+        let m = if metric == Metric::EStart { metric.ours(g) } else { MeanStd::of(xs) };
+        let value = m.map_or_else(|| "—".to_string(), |m| metric.fmt_ms(&m));
+        match censored {
+            0 => format!("{l} {value}"),
+            c if c == g.seeds => format!("{l} did not converge ({c} seeds)"),
+            c => format!("{l} {value} ({c} of {} seeds did not converge)", g.seeds),
+        }
+    };
+    let text = format!("{} vs {}", shown(ga, &xa, ca, &la), shown(gb, &xb, cb, &lb));
+    if xa.is_empty() || xb.is_empty() {
+        let why = |g: &GroupSummary, xs: &[f64], l: &str| {
+            (xs.is_empty()).then(|| {
+                if g.converged == 0 && metric != Metric::EvalReward {
+                    format!("{l} did not converge")
+                } else {
+                    format!("{l} has no {}", metric.name())
+                }
+            })
+        };
+        let parts: Vec<String> = [why(ga, &xa, &la), why(gb, &xb, &lb)].into_iter().flatten().collect();
+        return (None, parts.join(", "));
+    }
+    let (ma, mb) = (stats::mean(&xa), stats::mean(&xb));
+    let st = if metric == Metric::Converged {
+        fisher_stats(&xa, &xb, seed)
+    } else {
+        permutation_stats(&xa, &xb, seed)
+    };
+    (Some(st), format!("{text}{}", relative(metric, ma, mb)))
+}
+
 fn compare(
     groups: &[GroupSummary],
     paper_rows: &[PaperRow],
-    metric: Metric,
-    better: (Algo, RewardFunction),
-    worse: (Algo, RewardFunction),
+    (metric, better, worse): Check,
+    seed: u64,
 ) -> Comparison {
     let beats = |a: f64, b: f64| if metric.lower_is_better() { a < b } else { a > b };
-    let (la, lb) = (label(better), label(worse));
-    // Ours.
-    let ga = primary(groups, better.0, better.1).filter(|g| g.seeds > 0);
-    let gb = primary(groups, worse.0, worse.1).filter(|g| g.seeds > 0);
-    let (verdict, ours) = match (ga, gb) {
-        (None, _) | (_, None) => {
-            let missing: Vec<String> = [(ga, &la), (gb, &lb)]
-                .iter()
-                .filter(|(g, _)| g.is_none())
-                .map(|(_, l)| format!("{l} not run"))
-                .collect();
-            (Verdict::NotMeasurable, missing.join(", "))
-        }
-        (Some(ga), Some(gb)) => match (metric.ours(ga), metric.ours(gb)) {
-            (Some(a), Some(b)) => {
-                let v = if beats(a.mean, b.mean) { Verdict::Holds } else { Verdict::DoesNotHold };
-                let spread = a.std.unwrap_or(0.0).max(b.std.unwrap_or(0.0));
-                let within = if (a.mean - b.mean).abs() < spread { " (within the seed spread)" } else { "" };
-                let text = format!(
-                    "{la} {} vs {lb} {}{}{within}",
-                    metric.fmt_ms(&a),
-                    metric.fmt_ms(&b),
-                    relative(metric, a.mean, b.mean)
-                );
-                (v, text)
-            }
-            (Some(a), None) if metric == Metric::EStart && gb.converged == 0 => {
-                (Verdict::Holds, format!("{la} {} vs {lb} did not converge", metric.fmt_ms(&a)))
-            }
-            (None, Some(b)) if metric == Metric::EStart && ga.converged == 0 => {
-                (Verdict::DoesNotHold, format!("{la} did not converge vs {lb} {}", metric.fmt_ms(&b)))
-            }
-            (a, b) => {
-                let why = |g: &GroupSummary, m: Option<MeanStd>, l: &str| match m {
-                    Some(m) => format!("{l} {}", metric.fmt_ms(&m)),
-                    None if g.converged == 0 && metric != Metric::EvalReward => {
-                        format!("{l} did not converge")
-                    }
-                    None => format!("{l} has no {}", metric.name()),
-                };
-                (Verdict::NotMeasurable, format!("{}, {}", why(ga, a, &la), why(gb, b, &lb)))
-            }
-        },
-    };
-    // The paper's table.
+    let (stats, ours) = ours(groups, metric, better, worse, seed);
     let pa = paper::row(paper_rows, better.0, better.1);
     let pb = paper::row(paper_rows, worse.0, worse.1);
     let (paper_verdict, paper) = match (pa.map(|p| metric.paper(p)), pb.map(|p| metric.paper(p))) {
         (Some(Some(a)), Some(Some(b))) => (
-            if beats(a, b) { Verdict::Holds } else { Verdict::DoesNotHold },
+            if beats(a, b) { TableVerdict::Holds } else { TableVerdict::DoesNotHold },
             format!("{} vs {}{}", metric.fmt(a), metric.fmt(b), relative(metric, a, b)),
         ),
-        _ => (Verdict::NotMeasurable, "not in the paper's table".into()),
+        _ => (TableVerdict::NotMeasurable, "not in the paper's table".into()),
     };
-    Comparison { metric, better, worse, verdict, ours, paper_verdict, paper }
+    let verdict = if stats.is_some() { Verdict::Inconclusive } else { Verdict::NotMeasurable };
+    Comparison { metric, better, worse, verdict, ours, stats, paper_verdict, paper }
 }
 
 /// An (algorithm, reward function) pair: one row of Table 1.
@@ -247,6 +452,9 @@ struct Spec {
     paper_text: &'static str,
     checks: Vec<Check>,
 }
+
+/// The id of the basic reward's claim.
+const BASIC_CLAIM: &str = "basic-does-not-converge";
 
 const ALGOS: [Algo; 2] = [Algo::Sac, Algo::Ddpg];
 
@@ -264,6 +472,16 @@ fn specs_vi_a() -> Vec<Spec> {
     use Metric::*;
     let dense = [Posture, Stride, Har, Sar];
     vec![
+        Spec {
+            id: BASIC_CLAIM,
+            section: "VI.A",
+            statement: "The sparse basic reward (eq. 18) converges in fewer seeds than every dense reward, with SAC and DDPG (the paper: it does not converge at all)".into(),
+            paper_text: "\"DDPG and SAC could not converge even after a long training period based on a sparse reward function\"",
+            checks: ALGOS
+                .iter()
+                .flat_map(|&a| dense.iter().map(move |&r| (Converged, (a, r), (a, Basic))))
+                .collect(),
+        },
         Spec {
             id: "sac-converges-faster",
             section: "VI.A",
@@ -391,27 +609,54 @@ fn specs_vi_c() -> Vec<Spec> {
 /// Success-rate tolerance of the headline claim, in absolute terms (one percentage point).
 const HEADLINE_TOLERANCE: f64 = 0.01;
 
+/// Seed of the resampling of comparison `i` of the report (and of the headline claim).
+fn comparison_seed(i: usize) -> u64 {
+    0x5EED_C1A1_0000 + i as u64
+}
+
+/// The headline (DDPG+SAR at the paper's success rate and steps): supported when the 95 %
+/// bootstrap CIs over seeds lie on the paper's side of both thresholds, contradicted when
+/// either lies wholly on the other side, else inconclusive.
 fn headline(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Claim {
     let p = paper::row(paper_rows, Algo::Ddpg, Sar);
-    let (ps, pst) = (p.and_then(|p| p.success_rate), p.and_then(|p| p.eval_steps));
-    let target_s = ps.unwrap_or(0.996);
-    let target_steps = pst.unwrap_or(5.0);
+    let target_s = p.and_then(|p| p.success_rate).unwrap_or(0.996);
+    let target_steps = p.and_then(|p| p.eval_steps).unwrap_or(5.0);
+    let (need_s, need_steps) = (target_s - HEADLINE_TOLERANCE, target_steps + 0.5);
     let g = primary(groups, Algo::Ddpg, Sar).filter(|g| g.seeds > 0);
-    let (verdict, detail) = match g.map(|g| (g.success_rate, g.eval_steps)) {
-        Some((Some(s), Some(st))) => {
-            let ok = s.mean >= target_s - HEADLINE_TOLERANCE && st.mean < target_steps + 0.5;
-            (
-                if ok { Verdict::Holds } else { Verdict::DoesNotHold },
-                format!(
-                    "DDPG+SAR: success rate {}, evaluation steps {} (holds when the success rate is at least {:.1} % and the steps round to {target_steps:.0} or fewer)",
-                    Metric::SuccessRate.fmt_ms(&s),
-                    Metric::EvalSteps.fmt_ms(&st),
-                    100.0 * (target_s - HEADLINE_TOLERANCE)
-                ),
-            )
+    let (verdict, detail) = match g {
+        None => (Verdict::NotMeasurable, "DDPG+SAR not run".to_string()),
+        Some(g) => {
+            let (s, _) = Metric::SuccessRate.per_seed(g);
+            let (st, _) = Metric::EvalSteps.per_seed(g);
+            if s.len() < 2 || st.len() < 2 {
+                (Verdict::NotMeasurable, "DDPG+SAR needs at least 2 evaluated seeds with a success".into())
+            } else {
+                let seed = comparison_seed(usize::MAX >> 1);
+                let (slo, shi) = stats::bootstrap_mean_ci(&s, 0.95, BOOTSTRAP_RESAMPLES, seed);
+                let (tlo, thi) = stats::bootstrap_mean_ci(&st, 0.95, BOOTSTRAP_RESAMPLES, seed + 1);
+                let verdict = if slo >= need_s && thi < need_steps {
+                    Verdict::Supported
+                } else if shi < need_s || tlo >= need_steps {
+                    Verdict::Contradicted
+                } else {
+                    Verdict::Inconclusive
+                };
+                let detail = format!(
+                    "DDPG+SAR over {} seeds: success rate {:.1} % (95 % CI {:.1}-{:.1} %), evaluation steps {:.2} \
+                     (95 % CI {:.2}-{:.2}); supported when both CIs lie on the paper's side of {:.1} % and \
+                     {need_steps:.1} steps, contradicted when either lies wholly on the other side",
+                    s.len(),
+                    100.0 * stats::mean(&s),
+                    100.0 * slo,
+                    100.0 * shi,
+                    stats::mean(&st),
+                    tlo,
+                    thi,
+                    100.0 * need_s
+                );
+                (verdict, detail)
+            }
         }
-        Some(_) => (Verdict::NotMeasurable, "DDPG+SAR has no per-trial evaluation".into()),
-        None => (Verdict::NotMeasurable, "DDPG+SAR not run".into()),
     };
     Claim {
         id: "ddpg-sar-headline".into(),
@@ -422,97 +667,166 @@ fn headline(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Claim {
         ),
         paper_text: "\"the success rate of the trajectory planning reached 99.6 %. The average number of steps to complete the trajectory planning was 5\"",
         verdict,
-        paper_verdict: if p.is_some() { Verdict::Holds } else { Verdict::NotMeasurable },
+        paper_verdict: if p.is_some() { TableVerdict::Holds } else { TableVerdict::NotMeasurable },
         comparisons: Vec::new(),
         detail,
     }
 }
 
-fn basic(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Claim {
-    let mut verdicts = Vec::new();
+/// Which seeds of the basic reward converged, and why the others did not.
+fn basic_detail(groups: &[GroupSummary]) -> String {
     let mut parts = Vec::new();
     for a in ALGOS {
-        match primary(groups, a, Basic).filter(|g| g.seeds > 0) {
-            None => {
-                verdicts.push(Verdict::NotMeasurable);
-                parts.push(format!("{} not run", label((a, Basic))));
-            }
-            Some(g) => {
-                verdicts.push(if g.converged == 0 { Verdict::Holds } else { Verdict::DoesNotHold });
-                let why: Vec<String> = g
-                    .runs
-                    .iter()
-                    .map(|r| format!("seed {}: {}", r.seed, r.convergence.outcome.describe()))
-                    .collect();
-                parts.push(format!(
-                    "{}: {} of {} seeds converged ({})",
-                    label((a, Basic)),
-                    g.converged,
-                    g.seeds,
-                    why.join("; ")
-                ));
-            }
+        if let Some(g) = primary(groups, a, Basic).filter(|g| g.seeds > 0) {
+            let why: Vec<String> = g
+                .runs
+                .iter()
+                .map(|r| format!("seed {}: {}", r.seed, r.convergence.outcome.describe()))
+                .collect();
+            parts.push(format!(
+                "{}: {} of {} seeds converged ({})",
+                label((a, Basic)),
+                g.converged,
+                g.seeds,
+                why.join("; ")
+            ));
         }
     }
-    let paper_ok = ALGOS.iter().all(|&a| paper::row(paper_rows, a, Basic).is_some_and(|p| !p.converged()));
-    Claim {
-        id: "basic-does-not-converge".into(),
-        section: "VI.A",
-        statement: "The sparse basic reward (eq. 18) does not converge with SAC or DDPG".into(),
-        paper_text: "\"DDPG and SAC could not converge even after a long training period based on a sparse reward function\"",
-        verdict: Verdict::all(verdicts),
-        paper_verdict: if paper_ok { Verdict::Holds } else { Verdict::NotMeasurable },
-        comparisons: Vec::new(),
-        detail: parts.join("; "),
+    parts.join("; ")
+}
+
+/// Seeds per group that would resolve `st`'s observed effect at 80 % power at the Bonferroni
+/// level `ALPHA / family` (a conservative stand-in for Holm's step-down levels).
+fn seeds_needed(st: &Stats, family: usize) -> Option<u64> {
+    let alpha = stats::ALPHA / family.max(1) as f64;
+    let d = st.effect_size?;
+    match st.test {
+        Test::Permutation => stats::seeds_for_power(d, alpha, stats::POWER),
+        Test::FisherExact => {
+            // Two proportions, Cohen's h: n = ((z_{1-alpha/2} + z_power) / h)^2 per group.
+            let z = stats::special::normal_quantile(1.0 - alpha / 2.0)
+                + stats::special::normal_quantile(stats::POWER);
+            (d != 0.0).then(|| ((z / d).powi(2)).ceil() as u64).filter(|&n| n <= 100_000)
+        }
     }
 }
 
-/// Check every claim against our groups (their primary configurations) and the paper's table.
+/// Check every claim against our groups (their primary configurations) and the paper's table:
+/// the comparisons' p-values are Holm-corrected together, as one family.
 pub fn evaluate(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Vec<Claim> {
+    let mut i = 0;
     let mut claims: Vec<Claim> = specs()
         .into_iter()
         .map(|s| {
-            let comparisons: Vec<Comparison> =
-                s.checks.iter().map(|&(m, a, b)| compare(groups, paper_rows, m, a, b)).collect();
+            let comparisons: Vec<Comparison> = s
+                .checks
+                .iter()
+                .map(|&check| {
+                    i += 1;
+                    compare(groups, paper_rows, check, comparison_seed(i))
+                })
+                .collect();
             Claim {
                 id: s.id.into(),
                 section: s.section,
                 statement: s.statement,
                 paper_text: s.paper_text,
-                verdict: Verdict::all(comparisons.iter().map(|c| c.verdict)),
-                paper_verdict: Verdict::all(comparisons.iter().map(|c| c.paper_verdict)),
+                verdict: Verdict::NotMeasurable,
+                paper_verdict: TableVerdict::all(comparisons.iter().map(|c| c.paper_verdict)),
                 comparisons,
                 detail: String::new(),
             }
         })
         .collect();
-    claims.insert(0, basic(groups, paper_rows));
+    let tested: Vec<(usize, usize)> = claims
+        .iter()
+        .enumerate()
+        .flat_map(|(ci, c)| {
+            c.comparisons.iter().enumerate().filter(|(_, k)| k.stats.is_some()).map(move |(ki, _)| (ci, ki))
+        })
+        .collect();
+    let p: Vec<f64> = tested
+        .iter()
+        .map(|&(ci, ki)| claims[ci].comparisons[ki].stats.as_ref().map_or(1.0, |s| s.p))
+        .collect();
+    for (&(ci, ki), q) in tested.iter().zip(stats::holm(&p)) {
+        let k = &mut claims[ci].comparisons[ki];
+        if let Some(st) = k.stats.as_mut() {
+            st.p_holm = q;
+            k.verdict = Verdict::from_stats(stats::Verdict::of(st.diff, q, expected_sign(k.metric)));
+            if k.verdict == Verdict::Inconclusive {
+                st.seeds_needed = seeds_needed(st, tested.len());
+            }
+        }
+    }
+    for c in &mut claims {
+        c.verdict = Verdict::all(c.comparisons.iter().map(|k| k.verdict));
+        if c.id == BASIC_CLAIM {
+            c.detail = basic_detail(groups);
+        }
+    }
     claims.push(headline(groups, paper_rows));
     claims
 }
 
 fn mark(v: Verdict) -> &'static str {
     match v {
-        Verdict::Holds => "✓",
-        Verdict::DoesNotHold => "✗",
+        Verdict::Supported => "✓",
+        Verdict::Contradicted => "✗",
+        Verdict::Inconclusive => "~",
         Verdict::NotMeasurable => "?",
     }
 }
 
-/// The claims as Markdown: a summary table, then each claim with its numbers.
+fn table_mark(v: TableVerdict) -> &'static str {
+    match v {
+        TableVerdict::Holds => "✓",
+        TableVerdict::DoesNotHold => "✗",
+        TableVerdict::NotMeasurable => "?",
+    }
+}
+
+/// A comparison's statistics as table cells: difference [CI], p (Holm), seeds needed.
+fn stats_cells(metric: Metric, st: Option<&Stats>) -> [String; 3] {
+    let Some(st) = st else { return ["—".into(), "—".into(), "—".into()] };
+    let f = |v: f64| match metric {
+        Metric::SuccessRate | Metric::Converged => format!("{:+.1} pp", 100.0 * v),
+        Metric::EStart => format!("{v:+.0}"),
+        _ => format!("{v:+.3}"),
+    };
+    let test = if st.test == Test::FisherExact { " (Fisher)" } else { "" };
+    [
+        format!("{} [{}, {}]", f(st.diff), f(st.ci95.0), f(st.ci95.1)),
+        format!("{:.2e} ({:.2e}){test}", st.p, st.p_holm),
+        st.seeds_needed.map_or_else(|| "—".into(), |n| n.to_string()),
+    ]
+}
+
+/// The claims as Markdown: how they were tested, a summary table, then each claim with its
+/// numbers.
 pub fn render_markdown(claims: &[Claim]) -> String {
     let mut s = String::from("# The paper's claims (section VI) against our runs\n\n");
     let count = |v: Verdict| claims.iter().filter(|c| c.verdict == v).count();
+    let family: usize =
+        claims.iter().map(|c| c.comparisons.iter().filter(|k| k.stats.is_some()).count()).sum();
     let _ = writeln!(
         s,
-        "{} claims: {} hold, {} do not hold, {} not measurable. Ours are the primary configuration of each \
-         algorithm and reward function in `table1.md` (mean over seeds); \"paper's table\" is the verdict the \
-         paper's own Table 1 gives, which does not always support its text. Percentages are relative to the \
-         second value of each comparison; \"within the seed spread\": the difference is smaller than the larger \
-         std over seeds.\n",
+        "{} claims: {} supported, {} contradicted, {} inconclusive, {} not measurable.\n\n\
+         Ours are the primary configuration of each algorithm and reward function in `table1.md`, one value \
+         per seed. Each comparison has the difference of the means (first minus second, in the indicator's \
+         units; pp = percentage points) with its 95 % bootstrap CI ({BOOTSTRAP_RESAMPLES} resamples), and the \
+         p-value of a two-sided permutation test of the difference (Fisher's exact test for convergence \
+         counts), Holm-Bonferroni adjusted over the family of all {family} tested comparisons (in brackets). \
+         **Supported**: the paper's direction, adjusted p < 0.05; **contradicted**: the opposite direction, \
+         adjusted p < 0.05; **inconclusive**: not significant at this number of seeds, with the seeds per \
+         group that would resolve the observed effect at 80 % power (t-test at 0.05 / {family}). A claim is \
+         supported when all its comparisons are, contradicted when any is. E_start of a seed that did not \
+         converge counts as its episodes + 1. \"Paper's table\" is the direction the paper's own Table 1 \
+         gives (means only), which does not always support its text.\n",
         claims.len(),
-        count(Verdict::Holds),
-        count(Verdict::DoesNotHold),
+        count(Verdict::Supported),
+        count(Verdict::Contradicted),
+        count(Verdict::Inconclusive),
         count(Verdict::NotMeasurable)
     );
     s.push_str("| # | Section | Claim | Ours | Paper's table |\n|---|---|---|---|---|\n");
@@ -534,16 +848,21 @@ pub fn render_markdown(claims: &[Claim]) -> String {
             let _ = writeln!(s, "{}\n", c.detail);
         }
         if !c.comparisons.is_empty() {
-            s.push_str("| Indicator | Ours | | Paper's table | |\n|---|---|---|---|---|\n");
+            s.push_str(
+                "| Indicator | Ours | Difference [95 % CI] | p (Holm) | Verdict | Seeds for 80 % power | Paper's table | |\n\
+                 |---|---|---|---|---|---|---|---|\n",
+            );
             for k in &c.comparisons {
+                let [diff, p, need] = stats_cells(k.metric, k.stats.as_ref());
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {} | {} |",
+                    "| {} | {} | {diff} | {p} | {} {} | {need} | {} | {} |",
                     k.metric.name(),
                     k.ours,
                     mark(k.verdict),
+                    k.verdict.text(),
                     k.paper,
-                    mark(k.paper_verdict)
+                    table_mark(k.paper_verdict)
                 );
             }
         }
@@ -554,14 +873,21 @@ pub fn render_markdown(claims: &[Claim]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::metrics::{Convergence, ConvergenceOutcome, EvalSummary, TrainMetrics};
+    use crate::report::table::RunSummary;
+    use crate::rng::Rng;
 
     #[test]
     fn verdicts_combine() {
         use Verdict::*;
-        assert_eq!(Verdict::all([Holds, Holds]), Holds);
-        assert_eq!(Verdict::all([Holds, NotMeasurable]), NotMeasurable);
-        assert_eq!(Verdict::all([NotMeasurable, DoesNotHold, Holds]), DoesNotHold);
+        assert_eq!(Verdict::all([Supported, Supported]), Supported);
+        assert_eq!(Verdict::all([Supported, Inconclusive]), Inconclusive);
+        assert_eq!(Verdict::all([Supported, NotMeasurable]), NotMeasurable);
+        assert_eq!(Verdict::all([NotMeasurable, Contradicted, Supported]), Contradicted);
         assert_eq!(Verdict::all([]), NotMeasurable);
+        use TableVerdict as T;
+        assert_eq!(T::all([T::Holds, T::NotMeasurable]), T::NotMeasurable);
+        assert_eq!(T::all([T::NotMeasurable, T::DoesNotHold]), T::DoesNotHold);
     }
 
     #[test]
@@ -579,12 +905,141 @@ mod tests {
             "sar-lowest-std",
             "basic-does-not-converge",
         ] {
-            assert_eq!(by_id(id).paper_verdict, Verdict::Holds, "{id}");
+            assert_eq!(by_id(id).paper_verdict, TableVerdict::Holds, "{id}");
         }
         // ... but not "posture needs fewer steps" (DDPG: 11 vs 11).
-        assert_eq!(by_id("posture-fewer-steps").paper_verdict, Verdict::DoesNotHold);
+        assert_eq!(by_id("posture-fewer-steps").paper_verdict, TableVerdict::DoesNotHold);
         // Relative differences are computed like the paper's percentages: 10.8 % for posture.
         let c = &by_id("sac-converges-faster").comparisons[0];
         assert!(c.paper.contains("10.8 % earlier"), "{}", c.paper);
+    }
+
+    /// A group of `values.len()` seeds whose runs converged at `e_start[i]` (None: did not) with
+    /// evaluation success rates `success[i]`.
+    fn group(algo: Algo, reward: RewardFunction, e_start: &[Option<f64>], success: &[f64]) -> GroupSummary {
+        let runs: Vec<RunSummary> = e_start
+            .iter()
+            .zip(success)
+            .enumerate()
+            .map(|(i, (&e, &s))| RunSummary {
+                name: format!("{algo}-{}-{i}", reward.name()),
+                seed: i as u64,
+                episodes: 5000,
+                convergence: Convergence {
+                    outcome: if e.is_some() {
+                        ConvergenceOutcome::Converged
+                    } else {
+                        ConvergenceOutcome::NotSettled
+                    },
+                    e_start: e.map(|e| e as u64),
+                    tail_mean: 10.0,
+                    tail_std: 1.0,
+                    band: 1.0,
+                    first_window_mean: 0.0,
+                },
+                train: e.map(|e| TrainMetrics {
+                    e_start: e as u64,
+                    episodes: 5000 - e as u64,
+                    mean_reward: 15.0,
+                    v_stdev: Some(2.0),
+                    mean_steps_success: Some(6.0),
+                    mean_steps_all: 7.0,
+                    success_rate: 0.9,
+                }),
+                tail_mean_reward: 15.0,
+                eval: Some(EvalSummary {
+                    trials: 500,
+                    mean_reward: 18.0,
+                    mean_steps: Some(6.0),
+                    success_rate: s,
+                    median_final_distance_m: 0.005,
+                    mean_final_distance_m: 0.006,
+                }),
+                eval_file: None,
+                notes: Vec::new(),
+            })
+            .collect();
+        let present: Vec<f64> = e_start.iter().flatten().copied().collect();
+        GroupSummary {
+            algo,
+            reward,
+            variant: String::new(),
+            primary: true,
+            episodes: 5000,
+            seeds: runs.len(),
+            converged: present.len(),
+            e_start: MeanStd::of(&present),
+            train_reward: None,
+            train_steps: None,
+            v_stdev: None,
+            eval_reward: None,
+            eval_steps: None,
+            success_rate: MeanStd::of(success),
+            eval_trials: Some(500),
+            excluded: Vec::new(),
+            runs,
+            notes: Vec::new(),
+        }
+    }
+
+    fn normal(n: usize, mean: f64, sd: f64, rng: &mut Rng) -> Vec<Option<f64>> {
+        (0..n).map(|_| Some(mean + sd * rng.normal())).collect()
+    }
+
+    /// "With SAR, SAC converges faster than DDPG" with SAC's E_start `shift` standard deviations
+    /// earlier (negative: later) over `n` seeds each.
+    fn sac_vs_ddpg_sar(shift: f64, n: usize, seed: u64) -> Claim {
+        let mut rng = Rng::new(seed);
+        let sac = normal(n, 1000.0 - 100.0 * shift, 100.0, &mut rng);
+        let ddpg = normal(n, 1000.0, 100.0, &mut rng);
+        let ok = vec![0.99; n];
+        let groups = [group(Algo::Sac, Sar, &sac, &ok), group(Algo::Ddpg, Sar, &ddpg, &ok)];
+        evaluate(&groups, &paper::table1()).into_iter().find(|c| c.id == "sar-sac-faster-than-ddpg").unwrap()
+    }
+
+    #[test]
+    fn three_sd_over_20_seeds_is_supported_none_inconclusive_reverse_contradicted() {
+        let c = sac_vs_ddpg_sar(3.0, 20, 1);
+        assert_eq!(c.verdict, Verdict::Supported, "{:?}", c.comparisons[0].stats);
+        let st = c.comparisons[0].stats.as_ref().unwrap();
+        assert!(st.diff < -200.0 && st.ci95.1 < 0.0 && st.p_holm < 0.05 && st.p_holm >= st.p);
+        assert_eq!(sac_vs_ddpg_sar(-3.0, 20, 2).verdict, Verdict::Contradicted);
+        let c = sac_vs_ddpg_sar(0.0, 20, 3);
+        assert_eq!(c.verdict, Verdict::Inconclusive);
+        assert!(c.comparisons[0].stats.as_ref().unwrap().seeds_needed.is_some());
+        // Three seeds cannot resolve even a large effect: the permutation test's smallest p is 0.1.
+        let c = sac_vs_ddpg_sar(3.0, 3, 4);
+        assert_eq!(c.verdict, Verdict::Inconclusive);
+        let need = c.comparisons[0].stats.as_ref().unwrap().seeds_needed.unwrap();
+        assert!((3..=20).contains(&need), "{need}");
+    }
+
+    #[test]
+    fn a_group_that_never_converges_loses_on_e_start_and_convergence_counts() {
+        let mut rng = Rng::new(5);
+        let ok = vec![0.99; 20];
+        let dense = normal(20, 1500.0, 200.0, &mut rng);
+        let never = vec![None; 20];
+        let mut groups = vec![group(Algo::Ddpg, Basic, &never, &[0.0; 20])];
+        for a in ALGOS {
+            for r in [Posture, Stride, Har, Sar] {
+                groups.push(group(a, r, &dense, &ok));
+            }
+        }
+        groups.push(group(Algo::Sac, Basic, &never, &[0.0; 20]));
+        let claims = evaluate(&groups, &paper::table1());
+        let basic = claims.iter().find(|c| c.id == BASIC_CLAIM).unwrap();
+        assert_eq!(basic.verdict, Verdict::Supported, "{:#?}", basic.comparisons[0]);
+        assert_eq!(basic.comparisons[0].stats.as_ref().unwrap().test, Test::FisherExact);
+        assert!(basic.detail.contains("0 of 20 seeds converged"), "{}", basic.detail);
+    }
+
+    #[test]
+    fn markdown_names_the_method_and_every_verdict() {
+        let c = sac_vs_ddpg_sar(3.0, 20, 1);
+        let md = render_markdown(&[c]);
+        assert!(md.contains("permutation test") && md.contains("Holm-Bonferroni"), "{md}");
+        assert!(md.contains("1 claims: 1 supported, 0 contradicted, 0 inconclusive"), "{md}");
+        assert!(md.contains("| E_start | SAC+SAR"), "{md}");
     }
 }

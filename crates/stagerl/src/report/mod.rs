@@ -4,12 +4,14 @@
 //!
 //! - [`runs`]: finding and reading run directories;
 //! - [`table`]: grouping over seeds, the indicators of [`crate::metrics`], Table 1 as Markdown/CSV;
-//! - [`claims`]: the claims of section VI and our verdicts;
+//! - [`claims`]: the claims of section VI and our statistical verdicts;
+//! - [`aggregate`]: IQM, probability of improvement and performance profiles over seeds;
 //! - [`plot`], [`trajectory`]: the figures;
 //! - [`paper`]: the paper's Table 1 (compiled in from `assets/paper/table1.csv`).
 //!
 //! [`generate`] does all of it and writes into one output directory.
 
+pub mod aggregate;
 pub mod claims;
 pub mod paper;
 pub mod plot;
@@ -141,6 +143,8 @@ pub struct Report {
     pub groups: Vec<GroupSummary>,
     pub paper: Vec<PaperRow>,
     pub claims: Vec<Claim>,
+    /// IQM, probability of improvement and performance profiles over seeds.
+    pub aggregates: aggregate::Aggregates,
     /// E_start of the primary groups under other band widths.
     pub sensitivity: Vec<Sensitivity>,
     /// Directories that looked like runs but could not be read.
@@ -179,12 +183,14 @@ pub fn analyze(
     let summaries = groups.iter().map(|g| table::summarize(g, criterion)).collect::<Result<Vec<_>>>()?;
     let paper_rows = paper::table1();
     let claims = claims::evaluate(&summaries, &paper_rows);
+    let aggregates = aggregate::compute(&summaries);
     let sensitivity = sensitivity(&groups, criterion)?;
     let report = Report {
         input: dir.to_path_buf(),
         criterion: *criterion,
         groups: summaries,
         paper: paper_rows,
+        aggregates,
         claims,
         sensitivity,
         skipped,
@@ -273,6 +279,7 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     write("table1.md", &md)?;
     write("table1.csv", &table::render_csv(&report.groups, &report.paper))?;
     write("claims.md", &claims::render_markdown(&report.claims))?;
+    write("aggregates.md", &aggregate::render_markdown(&report.aggregates))?;
 
     files
         .extend(plot::save(&plot::figure7(&groups, &report.groups, opts.criterion.window), &out("figure7"))?);
