@@ -24,6 +24,15 @@ pub enum Error {
     /// A loss, gradient or parameter became NaN or infinite.
     #[error("numerical fault: {0}")]
     NumericalFault(String),
+    /// A run or sweep directory is being written by another process (it holds the directory's
+    /// advisory lock, released when that process ends, even by SIGKILL).
+    #[error(
+        "{} is in use by another stagerl process{}: wait for it to finish or stop it (lock file {})",
+        dir.display(),
+        holder.map(|p| format!(" (pid {p})")).unwrap_or_default(),
+        dir.join(crate::lock::LOCK_FILE).display()
+    )]
+    Locked { dir: PathBuf, holder: Option<u32> },
     /// A file could not be read or written. (The OS error is part of the message, not a chained
     /// source, so that `{:#}` does not print it twice.)
     #[error("{}: {error}", path.display())]

@@ -167,28 +167,27 @@ pub fn status(dir: &Path, eval_seed: u64) -> Result<RunStatus> {
     })
 }
 
-/// Train (or resume) and evaluate one run into `out/<name>`. A finished run is not repeated; a
-/// run whose config.toml differs from the preset's is refused rather than mixed.
+/// Train (or resume) and evaluate one run into `out/<name>`, holding the run directory's lock
+/// ([`Error::Locked`] when another process holds it). A finished run is not repeated; a run
+/// whose config.toml differs from the preset's is refused rather than mixed. Returns where the
+/// run stood before and its evaluation.
 pub fn run_one(
     spec: &RunSpec,
     out: &Path,
     sweep: &SweepSpec,
     opts: &TrainOptions<'_>,
     on_episode: &mut dyn FnMut(&Progress<'_>),
-) -> Result<EvalSummary> {
+) -> Result<(RunStatus, EvalSummary)> {
     let dir = out.join(&spec.name);
     let run = RunDir::new(&dir);
-    if run.config().exists() {
-        let existing = run.load_config()?;
-        if existing != spec.config {
-            return Err(Error::InvalidInput(format!(
-                "{} holds a run of another configuration than this sweep's; move it away or use another output directory",
-                dir.display()
-            )));
-        }
-    }
-    match status(&dir, sweep.eval_seed)? {
-        RunStatus::Done => return read_eval(&dir, sweep.eval_seed),
+    check_existing(spec, out)?;
+    // [runsafe] One process per run: another process's run is skipped (`Error::Locked`). The
+    // status is read under the lock, so a run another process finished is not trained again.
+    let _lock = crate::lock::DirLock::run(&dir)?;
+    check_existing(spec, out)?;
+    let before = status(&dir, sweep.eval_seed)?;
+    match before {
+        RunStatus::Done => return Ok((before, read_eval(&dir, sweep.eval_seed)?)),
         RunStatus::Trained => {}
         RunStatus::Partial { .. } => {
             train::resume(&dir, opts, on_episode)?;
@@ -204,7 +203,42 @@ pub fn run_one(
     let mut agent = train::load_agent(&spec.config, &env, &checkpoint)?;
     let (summary, trials) = train::evaluate(agent.as_mut(), &mut env, sweep.eval_trials, sweep.eval_seed)?;
     train::eval::write_trials_csv(&eval_csv(&dir, sweep.eval_seed), &trials)?;
-    Ok(summary)
+    Ok((before, summary))
+}
+
+/// Refuse a run directory that holds a run of another configuration than `spec`'s.
+pub fn check_existing(spec: &RunSpec, out: &Path) -> Result<()> {
+    let dir = out.join(&spec.name);
+    let run = RunDir::new(&dir);
+    if run.config().exists() && run.load_config()? != spec.config {
+        return Err(Error::InvalidInput(format!(
+            "{} holds a run of another configuration than this sweep's; move it away or use another output directory",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// [`check_existing`] for every run, before anything is written: all refusals in one error.
+pub fn check_all_existing(runs: &[RunSpec], out: &Path) -> Result<()> {
+    let refused: Vec<String> =
+        runs.iter().filter_map(|r| check_existing(r, out).err()).map(|e| e.to_string()).collect();
+    if refused.is_empty() {
+        Ok(())
+    } else {
+        Err(Error::InvalidInput(format!("nothing was written:\n  {}", refused.join("\n  "))))
+    }
+}
+
+/// Write the sweep's `preset.toml` (atomically, under the sweep directory's lock) unless it
+/// already holds `text`: several processes sharing the sweep write it once.
+pub fn write_preset(out: &Path, text: &str) -> Result<()> {
+    let _lock = crate::lock::DirLock::sweep(out)?;
+    let path = out.join("preset.toml");
+    if std::fs::read(&path).is_ok_and(|old| old == text.as_bytes()) {
+        return Ok(());
+    }
+    crate::io::write_atomic(&path, text.as_bytes())
 }
 
 /// Summarise an existing evaluation file.

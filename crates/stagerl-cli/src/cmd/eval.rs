@@ -37,6 +37,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let mut env = ReachEnv::from_config(&cfg, 0)?;
     let mut agent = train::load_agent(&cfg, &env, &checkpoint)?;
+    let _lock = super::train::lock_run(&args.run)?; // [runsafe] it writes into the run
     let (s, trials) = evaluate(agent.as_mut(), &mut env, args.trials, args.seed)?;
     let csv = args.run.join(format!("eval-seed{}.csv", args.seed));
     train::eval::write_trials_csv(&csv, &trials)?;

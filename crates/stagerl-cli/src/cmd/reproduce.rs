@@ -80,8 +80,11 @@ pub fn run(args: Args) -> Result<()> {
     let (preset, text) = load_preset(&args.preset)?;
     let (index, count) = shard_of(&args)?;
     let runs = experiment::shard(preset.runs(), index, count)?;
+    // [runsafe] Check every run first: a refusal writes nothing. preset.toml is written under
+    // the sweep's lock, once (left as is when it already holds this text).
+    experiment::check_all_existing(&runs, &args.out)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    stagerl::io::write_atomic(&args.out.join("preset.toml"), text.as_bytes())?;
+    experiment::write_preset(&args.out, &text)?;
     let total = runs.len();
     println!(
         "reproduce `{}`: {} runs in this shard ({} of {}), {} at once -> {}",
@@ -96,6 +99,7 @@ pub fn run(args: Args) -> Result<()> {
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
+    let taken = AtomicUsize::new(0);
     let interrupted = AtomicBool::new(false);
     let start = Instant::now();
     std::thread::scope(|scope| {
@@ -107,14 +111,13 @@ pub fn run(args: Args) -> Result<()> {
                 }
                 let spec = &runs[k];
                 let t0 = Instant::now();
-                let before = experiment::status(&args.out.join(&spec.name), preset.sweep.eval_seed);
                 let result = one(spec, &args.out, &preset, &stop);
                 let n = done.fetch_add(1, Ordering::SeqCst) + 1;
                 match result {
-                    Ok(s) => {
+                    Ok((before, s)) => {
                         let what = match before {
-                            Ok(RunStatus::Done) => "already done".to_string(),
-                            Ok(RunStatus::Partial { episode }) => format!("resumed after episode {episode}, done"),
+                            RunStatus::Done => "already done".to_string(),
+                            RunStatus::Partial { episode } => format!("resumed after episode {episode}, done"),
                             _ => "done".to_string(),
                         };
                         println!(
@@ -129,6 +132,11 @@ pub fn run(args: Args) -> Result<()> {
                     Err(stagerl::Error::Interrupted { episode, .. }) => {
                         interrupted.store(true, Ordering::SeqCst);
                         println!("[{n}/{total}] {}: interrupted after episode {episode}, saved", spec.name);
+                    }
+                    Err(stagerl::Error::Locked { holder, .. }) => {
+                        taken.fetch_add(1, Ordering::SeqCst);
+                        let pid = holder.map(|p| format!(" (pid {p})")).unwrap_or_default();
+                        println!("[{n}/{total}] {}: taken by another process{pid}, finishes there", spec.name);
                     }
                     Err(e) => {
                         println!("[{n}/{total}] {}: FAILED: {e}", spec.name);
@@ -149,6 +157,17 @@ pub fn run(args: Args) -> Result<()> {
     if !failures.is_empty() {
         bail!("{} of {total} runs failed:\n  {}", failures.len(), failures.join("\n  "));
     }
+    let taken = taken.into_inner();
+    if taken > 0 {
+        println!(
+            "{} of {total} runs done here in {:.0} s, {taken} taken by other processes (they finish there). \
+             Once all are done, tables and figures: stagerl report {}",
+            total - taken,
+            start.elapsed().as_secs_f64(),
+            args.out.display()
+        );
+        return Ok(());
+    }
     println!(
         "all {total} runs done in {:.0} s. Tables and figures: stagerl report {}",
         start.elapsed().as_secs_f64(),
@@ -162,7 +181,7 @@ fn one(
     out: &Path,
     preset: &Preset,
     stop: &Arc<AtomicBool>,
-) -> stagerl::Result<stagerl::train::EvalSummary> {
+) -> stagerl::Result<(RunStatus, stagerl::train::EvalSummary)> {
     let opts = TrainOptions { stop: Some(stop) };
     experiment::run_one(spec, out, &preset.sweep, &opts, &mut |_| {})
 }

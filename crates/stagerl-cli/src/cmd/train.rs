@@ -53,6 +53,11 @@ pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     Ok(flag)
 }
 
+/// Take the lock of the run directory `dir` (created if needed) for this process.
+pub fn lock_run(dir: &std::path::Path) -> Result<stagerl::lock::DirLock> {
+    stagerl::lock::DirLock::run(dir).with_context(|| format!("taking the run directory {}", dir.display()))
+}
+
 /// Map an interruption to a message and the interrupted exit code.
 fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path) -> Result<T> {
     match r {
@@ -96,12 +101,21 @@ pub fn run(args: Args) -> Result<()> {
             .expect("some directory name is free")
     });
     let dir = RunDir::new(&out);
-    if dir.config().exists() && !args.force {
-        bail!(
-            "{} already holds a run (its config.toml exists): pass --force to replace it, or choose another --out",
-            out.display()
-        );
-    }
+    let refuse_existing = || -> Result<()> {
+        if dir.config().exists() && !args.force {
+            stagerl::lock::DirLock::check_free(&out)?; // [runsafe] "in use" says more than "exists"
+            bail!(
+                "{} already holds a run (its config.toml exists): pass --force to replace it, or choose another --out",
+                out.display()
+            );
+        }
+        Ok(())
+    };
+    refuse_existing()?;
+    // [runsafe] Hold the run directory's lock from here to the end (a second process fails
+    // fast); look again under the lock, another process may have started a run meanwhile.
+    let _lock = lock_run(&out)?;
+    refuse_existing()?;
     std::fs::create_dir_all(&out).with_context(|| format!("creating the run directory {}", out.display()))?;
     let probe = out.join(".write-test");
     std::fs::write(&probe, b"")
@@ -128,6 +142,7 @@ pub fn run(args: Args) -> Result<()> {
 fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
     let run = RunDir::new(dir);
     let cfg = run.load_config().with_context(|| format!("reading the run in {}", dir.display()))?;
+    let _lock = lock_run(dir)?; // [runsafe]
     match train::checkpointed_episode(dir)? {
         Some((episode, false)) => println!("resuming {} after episode {episode}", dir.display()),
         Some((_, true)) => {}
