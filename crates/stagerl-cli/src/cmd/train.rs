@@ -116,6 +116,11 @@ pub fn run(args: Args) -> Result<()> {
     // fast); look again under the lock, another process may have started a run meanwhile.
     let _lock = lock_run(&out)?;
     refuse_existing()?;
+    if dir.config().exists() {
+        // [runsafe] --force: nothing of the older run may be read as the new one's.
+        let removed = train::replace::remove_previous_run(&dir)?;
+        println!("--force: removed the older run's {}", train::replace::describe(&removed));
+    }
     std::fs::create_dir_all(&out).with_context(|| format!("creating the run directory {}", out.display()))?;
     let probe = out.join(".write-test");
     std::fs::write(&probe, b"")

@@ -22,6 +22,7 @@
 //! are bit-identical to those of an uninterrupted run.
 
 pub mod eval;
+pub mod replace;
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -367,7 +368,9 @@ impl Trainer {
             out.push('\n');
         }
         crate::io::write_atomic(&path, out.as_bytes())?;
-        crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())
+        crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
+        // [runsafe] The TensorBoard log too: each tag's steps up to the checkpoint, once.
+        crate::log::tensorboard::rewind(&self.dir.tb(), self.state.episode as i64).map(|_| ())
     }
 
     fn check_loss(&self, what: &str, v: Option<f64>) -> Result<()> {
@@ -532,6 +535,7 @@ impl Trainer {
             let k = cfg.train.checkpoint_every_episodes;
             if k > 0 && episode % k == 0 && episode < cfg.train.episodes {
                 self.state.wall_s = record.wall_s;
+                tb.flush()?; // [runsafe] what the checkpoint has seen is on disk (for the rewind)
                 self.save_latest()?;
             }
             on_episode(&Progress {
@@ -582,12 +586,8 @@ pub fn train_with(
     cfg.validate()?;
     let dir = RunDir::new(out);
     std::fs::create_dir_all(&dir.root).map_err(|e| Error::io(&dir.root, e))?;
-    // A new run: no checkpoint of an older one may be mistaken for this run's.
-    for p in [dir.latest(), dir.final_checkpoint(), dir.best(), dir.eval()] {
-        if p.exists() {
-            std::fs::remove_file(&p).map_err(|e| Error::io(&p, e))?;
-        }
-    }
+    // A new run: nothing of an older one may be mistaken for this run's. [runsafe]
+    replace::remove_previous_run(&dir)?;
     crate::io::write_atomic(&dir.config(), cfg.to_toml_string().as_bytes())?;
     Trainer::new(cfg, dir)?.run(opts, on_episode)
 }
