@@ -21,6 +21,10 @@ pub enum Error {
     /// Training stopped on request (SIGINT/SIGTERM); the state was saved to `checkpoint`.
     #[error("interrupted at episode {episode}; the run was saved to {checkpoint} and can be resumed")]
     Interrupted { episode: u64, checkpoint: PathBuf },
+    /// A stop request (SIGINT/SIGTERM) ended `what` (an evaluation, say) before it finished;
+    /// nothing of it was written.
+    #[error("stopped during {what} on request; nothing of it was written")]
+    Stopped { what: String },
     /// A loss, gradient or parameter became NaN or infinite.
     #[error("numerical fault: {0}")]
     NumericalFault(String),

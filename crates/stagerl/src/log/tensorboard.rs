@@ -182,13 +182,13 @@ pub fn event_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// Cut the event log in `dir` back to what a checkpoint taken after episode `last_step` has
-/// seen, so that a resumed run logs every (tag, step) exactly once, as an uninterrupted run
-/// does: keep each tag's scalars with step <= `last_step` (the first of any duplicate), drop
-/// torn or corrupt trailing records, and write them into one file (the oldest file's name,
+/// Cut the event log in `dir` back to what a checkpoint has seen, so that a resumed run logs
+/// every (tag, step) exactly once, as an uninterrupted run does: keep the scalars for which
+/// `keep(tag, step)` holds (say, step <= the checkpoint's episode; the first of any duplicate),
+/// drop torn or corrupt trailing records, and write them into one file (the oldest file's name,
 /// replaced atomically) before removing the others. Killed at any point, a later rewind still
 /// gives the same result. Returns the scalars kept.
-pub fn rewind(dir: &Path, last_step: i64) -> Result<usize> {
+pub fn rewind(dir: &Path, keep: impl Fn(&str, i64) -> bool) -> Result<usize> {
     let files = event_files(dir)?;
     let Some(first) = files.first() else { return Ok(0) };
     let mut seen = std::collections::HashSet::new();
@@ -197,7 +197,7 @@ pub fn rewind(dir: &Path, last_step: i64) -> Result<usize> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         for rec in valid_records(&bytes).0 {
             if let Some((tag, step, _)) = decode_scalar(rec.data) {
-                if step <= last_step && seen.insert((tag, step)) {
+                if keep(&tag, step) && seen.insert((tag, step)) {
                     out.extend_from_slice(&frame(rec.data));
                 }
             }
@@ -317,7 +317,7 @@ mod tests {
         write("events.out.tfevents.100.h.1", 1..=7, true);
         write("events.out.tfevents.200.h.2", 6..=9, false);
         std::fs::write(dir.join("events.out.tfevents.300.h.3.tmp-3"), b"junk").unwrap();
-        assert_eq!(rewind(&dir, 8).unwrap(), 16);
+        assert_eq!(rewind(&dir, |_, s| s <= 8).unwrap(), 16);
         let files = event_files(&dir).unwrap();
         assert_eq!(files, [dir.join("events.out.tfevents.100.h.1")]);
         let got = read_scalars(&files[0]).unwrap();
@@ -328,11 +328,11 @@ mod tests {
         }
         assert_eq!(got, want);
         // Rewinding again, or to an earlier step, is consistent.
-        assert_eq!(rewind(&dir, 8).unwrap(), 16);
-        assert_eq!(rewind(&dir, 3).unwrap(), 6);
-        assert_eq!(read_scalars(&files[0]).unwrap(), want[..6]);
+        assert_eq!(rewind(&dir, |_, s| s <= 8).unwrap(), 16);
+        assert_eq!(rewind(&dir, |t, s| s < 3 || (s == 3 && t == "a")).unwrap(), 5);
+        assert_eq!(read_scalars(&files[0]).unwrap(), want[..5]);
         assert_eq!(remove_all(&dir).unwrap().len(), 1);
-        assert_eq!(rewind(&dir, 3).unwrap(), 0);
+        assert_eq!(rewind(&dir, |_, _| true).unwrap(), 0);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

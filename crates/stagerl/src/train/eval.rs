@@ -1,6 +1,7 @@
 //! Evaluation: the deterministic policy on random targets (the paper's 500 trials).
 
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::agent::Agent;
 use crate::env::ReachEnv;
@@ -46,17 +47,47 @@ pub fn evaluate(
     trials: u32,
     seed: u64,
 ) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    evaluate_until(agent, env, trials, seed, None)
+}
+
+/// [`evaluate`] that stops before any trial once `stop` is set (a trial lasts at most
+/// `task.max_steps` steps), with [`Error::Stopped`](crate::Error::Stopped); the environment's
+/// target stream is restored either way.
+pub fn evaluate_until(
+    agent: &mut dyn Agent,
+    env: &mut ReachEnv,
+    trials: u32,
+    seed: u64,
+    stop: Option<&AtomicBool>,
+) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    let saved_rng = env.rng().clone();
+    let result = run_trials(agent, env, trials, seed, stop);
+    env.set_rng(saved_rng);
+    result.map(|records| (summarize(&records), records))
+}
+
+fn run_trials(
+    agent: &mut dyn Agent,
+    env: &mut ReachEnv,
+    trials: u32,
+    seed: u64,
+    stop: Option<&AtomicBool>,
+) -> Result<Vec<TrialRecord>> {
     if trials > super::MAX_EVAL_TRIALS {
         return Err(crate::Error::InvalidInput(format!(
             "{trials} evaluation trials: at most {}",
             super::MAX_EVAL_TRIALS
         )));
     }
-    let saved_rng = env.rng().clone();
     env.reset_with_seed(seed);
     let mut action = vec![0.0f32; env.act_dim()];
     let mut records = Vec::with_capacity(trials as usize);
     for trial in 0..trials {
+        if stop.is_some_and(|s| s.load(Ordering::SeqCst)) {
+            return Err(crate::Error::Stopped {
+                what: format!("an evaluation of {trials} trials (after {trial})"),
+            });
+        }
         if trial > 0 {
             env.reset();
         }
@@ -89,8 +120,7 @@ pub fn evaluate(
             target: [target.x, target.y, target.z],
         });
     }
-    env.set_rng(saved_rng);
-    Ok((summarize(&records), records))
+    Ok(records)
 }
 
 /// Summary statistics of evaluation trials.

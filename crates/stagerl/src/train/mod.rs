@@ -38,7 +38,7 @@ use crate::replay::{Batch, ReplayBuffer};
 use crate::rng::Rng;
 use crate::{Error, Result};
 
-pub use eval::{evaluate, EvalSummary, TrialRecord};
+pub use eval::{evaluate, evaluate_until, EvalSummary, TrialRecord};
 
 /// The largest evaluation asked for at once (its per-trial records are kept in memory).
 pub const MAX_EVAL_TRIALS: u32 = 10_000_000;
@@ -217,6 +217,23 @@ struct LoopState {
     /// Best periodic evaluation so far: (success rate, mean reward), for `best.safetensors`.
     #[serde(default)]
     best_eval: Option<(f64, f64)>,
+    /// [runsafe] A stop came between the updates of this environment step: they go on first.
+    #[serde(default)]
+    step_under_way: Option<StepUnderWay>,
+    /// [runsafe] A stop came during the periodic evaluation of episode `episode`: it runs first.
+    #[serde(default)]
+    eval_due: bool,
+}
+
+/// An environment step taken whose updates are not all done yet (see [`LoopState`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+struct StepUnderWay {
+    /// Updates of this step still to do.
+    updates_left: u32,
+    terminated: bool,
+    done: bool,
+    /// D_PT after the step, metres, as `f64::to_bits` (exact through JSON).
+    final_distance_m_bits: u64,
 }
 
 /// Options of a training session.
@@ -264,6 +281,8 @@ impl Trainer {
             wall_s: 0.0,
             finished: false,
             best_eval: None,
+            step_under_way: None,
+            eval_due: false,
         };
         Ok(Trainer {
             hash: config_hash(cfg),
@@ -369,8 +388,86 @@ impl Trainer {
         }
         crate::io::write_atomic(&path, out.as_bytes())?;
         crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
-        // [runsafe] The TensorBoard log too: each tag's steps up to the checkpoint, once.
-        crate::log::tensorboard::rewind(&self.dir.tb(), self.state.episode as i64).map(|_| ())
+        // [runsafe] The TensorBoard log too: each tag's steps up to the checkpoint, once (but an
+        // evaluation still due at the checkpoint's episode, which runs again).
+        let (ep, eval_due) = (self.state.episode as i64, self.state.eval_due);
+        let keep = |tag: &str, step: i64| step < ep || (step == ep && !(eval_due && tag.starts_with("eval/")));
+        crate::log::tensorboard::rewind(&self.dir.tb(), keep).map(|_| ())
+    }
+
+    /// One environment step of the episode under way (a random action before learning starts,
+    /// the agent's otherwise), stored in the replay buffer; its updates are still to do.
+    fn env_step(&mut self, obs: &mut [f32], action: &mut [f32]) -> Result<StepUnderWay> {
+        let cfg = &self.cfg;
+        if self.state.env_steps < cfg.agent.learning_starts {
+            for a in action.iter_mut() {
+                *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;
+            }
+        } else {
+            self.agent.act(obs, action);
+            if let Some(i) = action.iter().position(|a| !a.is_finite()) {
+                return Err(Error::NumericalFault(format!(
+                    "the actor's action[{i}] = {} at episode {}, step {} (update {}); \
+                     the last good checkpoint is left in place",
+                    action[i],
+                    self.state.episode + 1,
+                    self.env.steps() + 1,
+                    self.state.updates
+                )));
+            }
+        }
+        let s = self.env.step(action)?;
+        self.state.episode_reward += s.total();
+        self.buffer.push(obs, action, s.total(), self.env.observation(), s.terminated);
+        obs.copy_from_slice(self.env.observation());
+        self.state.env_steps += 1;
+        let learning = self.state.env_steps >= cfg.agent.learning_starts;
+        Ok(StepUnderWay {
+            updates_left: if learning { cfg.agent.updates_per_step } else { 0 },
+            terminated: s.terminated,
+            done: s.done(),
+            final_distance_m_bits: s.terms.distance.to_bits(),
+        })
+    }
+
+    /// The periodic evaluation of the episode just finished, when due (`state.eval_due`): the
+    /// row of `eval.csv`, its TensorBoard scalars and `best.safetensors` when it is the best.
+    /// A stop request ends it with [`Error::Stopped`], `eval_due` still set. [runsafe]
+    fn periodic_eval(&mut self, tb: &mut EventWriter, stop: Option<&AtomicBool>) -> Result<Option<EvalSummary>> {
+        if !self.state.eval_due {
+            return Ok(None);
+        }
+        let (episode, cfg) = (self.state.episode, &self.cfg);
+        let (summary, _) = evaluate_until(
+            self.agent.as_mut(),
+            &mut self.eval_env,
+            cfg.train.eval_trials,
+            cfg.train.eval_seed,
+            stop,
+        )?;
+        self.eval_csv.push_str(&format!(
+            "{episode},{},{},{},{},{}\n",
+            self.state.env_steps,
+            summary.success_rate,
+            summary.mean_reward,
+            summary.mean_steps.map(|s| s.to_string()).unwrap_or_default(),
+            summary.median_final_distance_m
+        ));
+        crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
+        let ep = episode as i64;
+        tb.scalar("eval/success_rate", ep, summary.success_rate)?;
+        tb.scalar("eval/mean_reward", ep, summary.mean_reward)?;
+        tb.scalar("eval/median_final_distance_m", ep, summary.median_final_distance_m)?;
+        let score = (summary.success_rate, summary.mean_reward);
+        if self.state.best_eval.is_none_or(|best| score > best) {
+            self.state.best_eval = Some(score);
+            let mut ck = self.checkpoint_base();
+            ck.put_json("eval_success_rate", &summary.success_rate);
+            ck.put_json("eval_mean_reward", &summary.mean_reward);
+            ck.save(&self.dir.best())?;
+        }
+        self.state.eval_due = false;
+        Ok(Some(summary))
     }
 
     fn check_loss(&self, what: &str, v: Option<f64>) -> Result<()> {
@@ -416,6 +513,13 @@ impl Trainer {
             }
         };
 
+        // [runsafe] A periodic evaluation a stop interrupted runs first, as it would have.
+        match self.periodic_eval(&mut tb, opts.stop) {
+            Err(Error::Stopped { .. }) => return Err(interrupted(self, wall0)),
+            other => {
+                other?;
+            }
+        }
         while self.state.episode < cfg.train.episodes {
             if self.state.in_episode {
                 obs.copy_from_slice(self.env.observation());
@@ -426,40 +530,27 @@ impl Trainer {
                 self.state.in_episode = true;
             }
             let step = loop {
-                if self.state.env_steps < cfg.agent.learning_starts {
-                    for a in action.iter_mut() {
-                        *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;
+                // [runsafe] A step whose updates a stop interrupted goes on with them.
+                let mut step = match self.state.step_under_way.take() {
+                    Some(s) => s,
+                    None => self.env_step(&mut obs, &mut action)?,
+                };
+                while step.updates_left > 0 {
+                    if stop_requested() {
+                        // [runsafe] Between updates: many updates_per_step no longer delay a stop.
+                        self.state.step_under_way = Some(step);
+                        return Err(interrupted(self, wall0 + start.elapsed().as_secs_f64()));
                     }
-                } else {
-                    self.agent.act(&obs, &mut action);
-                    if let Some(i) = action.iter().position(|a| !a.is_finite()) {
-                        return Err(Error::NumericalFault(format!(
-                            "the actor's action[{i}] = {} at episode {}, step {} (update {}); \
-                             the last good checkpoint is left in place",
-                            action[i],
-                            self.state.episode + 1,
-                            self.env.steps() + 1,
-                            self.state.updates
-                        )));
-                    }
+                    self.buffer.sample_into(&mut self.state.replay_rng, &mut self.batch);
+                    let stats = self.agent.update(&self.batch);
+                    self.state.updates += 1;
+                    step.updates_left -= 1;
+                    self.check_loss("critic loss", Some(stats.critic_loss))?;
+                    self.check_loss("actor loss", stats.actor_loss)?;
+                    last_stats = Some(stats);
                 }
-                let s = self.env.step(&action)?;
-                self.state.episode_reward += s.total();
-                self.buffer.push(&obs, &action, s.total(), self.env.observation(), s.terminated);
-                obs.copy_from_slice(self.env.observation());
-                self.state.env_steps += 1;
-                if self.state.env_steps >= cfg.agent.learning_starts {
-                    for _ in 0..cfg.agent.updates_per_step {
-                        self.buffer.sample_into(&mut self.state.replay_rng, &mut self.batch);
-                        let stats = self.agent.update(&self.batch);
-                        self.state.updates += 1;
-                        self.check_loss("critic loss", Some(stats.critic_loss))?;
-                        self.check_loss("actor loss", stats.actor_loss)?;
-                        last_stats = Some(stats);
-                    }
-                }
-                if s.done() {
-                    break s;
+                if step.done {
+                    break step;
                 }
                 if stop_requested() {
                     return Err(interrupted(self, wall0 + start.elapsed().as_secs_f64()));
@@ -480,7 +571,7 @@ impl Trainer {
                 reward: self.state.episode_reward,
                 steps: self.env.steps(),
                 success: step.terminated,
-                final_distance_m: step.terms.distance,
+                final_distance_m: f64::from_bits(step.final_distance_m_bits),
                 env_steps: self.state.env_steps,
                 wall_s: wall0 + start.elapsed().as_secs_f64(),
             };
@@ -501,36 +592,10 @@ impl Trainer {
                 }
             }
             let every = cfg.train.eval_every_episodes;
-            let eval = if every > 0 && (episode % every == 0 || episode == cfg.train.episodes) {
-                let (summary, _) = evaluate(
-                    self.agent.as_mut(),
-                    &mut self.eval_env,
-                    cfg.train.eval_trials,
-                    cfg.train.eval_seed,
-                )?;
-                self.eval_csv.push_str(&format!(
-                    "{episode},{},{},{},{},{}\n",
-                    self.state.env_steps,
-                    summary.success_rate,
-                    summary.mean_reward,
-                    summary.mean_steps.map(|s| s.to_string()).unwrap_or_default(),
-                    summary.median_final_distance_m
-                ));
-                crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
-                tb.scalar("eval/success_rate", ep, summary.success_rate)?;
-                tb.scalar("eval/mean_reward", ep, summary.mean_reward)?;
-                tb.scalar("eval/median_final_distance_m", ep, summary.median_final_distance_m)?;
-                let score = (summary.success_rate, summary.mean_reward);
-                if self.state.best_eval.is_none_or(|best| score > best) {
-                    self.state.best_eval = Some(score);
-                    let mut ck = self.checkpoint_base();
-                    ck.put_json("eval_success_rate", &summary.success_rate);
-                    ck.put_json("eval_mean_reward", &summary.mean_reward);
-                    ck.save(&self.dir.best())?;
-                }
-                Some(summary)
-            } else {
-                None
+            self.state.eval_due = every > 0 && (episode % every == 0 || episode == cfg.train.episodes);
+            let eval = match self.periodic_eval(&mut tb, opts.stop) {
+                Err(Error::Stopped { .. }) => return Err(interrupted(self, record.wall_s)), // [runsafe]
+                other => other?,
             };
             let k = cfg.train.checkpoint_every_episodes;
             if k > 0 && episode % k == 0 && episode < cfg.train.episodes {
