@@ -104,7 +104,7 @@ fn two_reproduce_processes_share_a_sweep_and_train_each_run_once() {
         let rows = episodes_without_wall(&dir);
         assert_eq!(rows.len(), 61, "{run}: episodes.csv rows");
         assert_eq!(rows, episodes_without_wall(&single.join(run)), "{run}: differs from the single sweep");
-        let eval = |d: &Path| std::fs::read(d.join(run).join("eval-seed0.csv")).unwrap();
+        let eval = |d: &Path| std::fs::read(d.join(run).join("eval-final-seed0.csv")).unwrap();
         assert_eq!(eval(&shared), eval(&single), "{run}: evaluation differs");
         let tb_files = std::fs::read_dir(dir.join("tb")).unwrap().count();
         assert_eq!(tb_files, 1, "{run}: one session, one event file");

@@ -17,17 +17,19 @@
 //!
 //! Run `i` of the sweep (algorithm-major, then reward, then seed) lives in
 //! `OUT/<algo>-<reward>-seed<seed>/`, a normal run directory; its evaluation is
-//! `eval-seed<eval_seed>.csv` there. A run is finished when its checkpoint says so and that file
-//! exists; a run with a checkpoint is resumed; any other starts from scratch.
+//! `eval-final-seed<eval_seed>.csv` there, recorded with its settings (see
+//! [`train::final_eval`]). A run is finished when its checkpoint says so and its evaluation is
+//! recorded with the sweep's settings (else only the evaluation runs again); a run with a
+//! checkpoint is resumed; any other starts from scratch. Several processes can share one sweep
+//! directory: each run is locked by the process working on it, and skipped by the others.
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 use crate::agent::Algo;
 use crate::config::Config;
-use crate::env::ReachEnv;
 use crate::reward::RewardFunction;
-use crate::train::{self, EvalSummary, Progress, RunDir, TrainOptions};
+use crate::train::{self, final_eval, EvalSummary, Progress, RunDir, TrainOptions};
 use crate::{Error, Result};
 
 /// The `[sweep]` section of a preset.
@@ -70,8 +72,11 @@ pub struct RunSpec {
 pub enum RunStatus {
     /// Trained and evaluated.
     Done,
-    /// Trained, not yet evaluated.
+    /// Trained, not yet evaluated (or killed during its evaluation).
     Trained,
+    /// Trained and evaluated with other settings (trials, seed, checkpoint, config) than the
+    /// sweep's: only the evaluation runs again.
+    StaleEval,
     /// Has a checkpoint to continue from.
     Partial { episode: u64 },
     /// Nothing usable yet.
@@ -152,15 +157,18 @@ pub fn shard(runs: Vec<RunSpec>, index: usize, count: usize) -> Result<Vec<RunSp
     Ok(runs.into_iter().filter(|r| r.index % count == index).collect())
 }
 
-/// The evaluation file of a run.
+/// The evaluation file of a run (its closing evaluation, see [`train::final_eval`]).
 pub fn eval_csv(dir: &Path, eval_seed: u64) -> PathBuf {
-    dir.join(format!("eval-seed{eval_seed}.csv"))
+    final_eval::csv_path(dir, eval_seed)
 }
 
-/// Where the run `dir` stands.
-pub fn status(dir: &Path, eval_seed: u64) -> Result<RunStatus> {
+/// Where the run `dir` of `spec` stands in `sweep`: done only when its closing evaluation is
+/// recorded with the sweep's evaluation settings.
+pub fn status(dir: &Path, spec: &RunSpec, sweep: &SweepSpec) -> Result<RunStatus> {
+    let (trials, seed) = (sweep.eval_trials, sweep.eval_seed);
     Ok(match train::checkpointed_episode(dir)? {
-        Some((_, true)) if eval_csv(dir, eval_seed).exists() => RunStatus::Done,
+        Some((_, true)) if final_eval::is_current(dir, &spec.config, trials, seed) => RunStatus::Done,
+        Some((_, true)) if final_eval::recorded(dir, seed).is_some() => RunStatus::StaleEval,
         Some((_, true)) => RunStatus::Trained,
         Some((episode, false)) => RunStatus::Partial { episode },
         None => RunStatus::New,
@@ -179,16 +187,15 @@ pub fn run_one(
     on_episode: &mut dyn FnMut(&Progress<'_>),
 ) -> Result<(RunStatus, EvalSummary)> {
     let dir = out.join(&spec.name);
-    let run = RunDir::new(&dir);
     check_existing(spec, out)?;
     // [runsafe] One process per run: another process's run is skipped (`Error::Locked`). The
     // status is read under the lock, so a run another process finished is not trained again.
     let _lock = crate::lock::DirLock::run(&dir)?;
     check_existing(spec, out)?;
-    let before = status(&dir, sweep.eval_seed)?;
+    let before = status(&dir, spec, sweep)?;
     match before {
         RunStatus::Done => return Ok((before, read_eval(&dir, sweep.eval_seed)?)),
-        RunStatus::Trained => {}
+        RunStatus::Trained | RunStatus::StaleEval => {}
         RunStatus::Partial { .. } => {
             train::resume(&dir, opts, on_episode)?;
         }
@@ -196,13 +203,7 @@ pub fn run_one(
             train::train_with(&spec.config, &dir, opts, on_episode)?;
         }
     }
-    let checkpoint = run
-        .best_available_checkpoint()
-        .ok_or_else(|| Error::InvalidInput(format!("{}: trained but no checkpoint", dir.display())))?;
-    let mut env = ReachEnv::from_config(&spec.config, 0)?;
-    let mut agent = train::load_agent(&spec.config, &env, &checkpoint)?;
-    let (summary, trials) = train::evaluate(agent.as_mut(), &mut env, sweep.eval_trials, sweep.eval_seed)?;
-    train::eval::write_trials_csv(&eval_csv(&dir, sweep.eval_seed), &trials)?;
+    let (summary, _) = final_eval::run(&dir, &spec.config, sweep.eval_trials, sweep.eval_seed, opts.stop)?;
     Ok((before, summary))
 }
 
@@ -243,7 +244,7 @@ pub fn write_preset(out: &Path, text: &str) -> Result<()> {
 
 /// Summarise an existing evaluation file.
 pub fn read_eval(dir: &Path, eval_seed: u64) -> Result<EvalSummary> {
-    Ok(train::eval::summarize(&train::eval::read_trials_csv(&eval_csv(dir, eval_seed))?))
+    final_eval::read(dir, eval_seed)
 }
 
 #[cfg(test)]

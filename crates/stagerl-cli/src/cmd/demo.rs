@@ -2,6 +2,7 @@ use anyhow::{Context, Result};
 use stagerl::controller::JacobianController;
 use stagerl::env::ReachEnv;
 use std::path::PathBuf;
+use std::sync::atomic::Ordering;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -34,7 +35,15 @@ pub fn run(args: Args) -> Result<()> {
         cfg.reward.function,
         args.seed
     );
+    let stop = super::train::stop_flag()?;
+    let stopped = |done: u32, what: &str| -> ! {
+        eprintln!("stagerl: stopped on request after {done} {what}");
+        std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
+    };
     for ep in 1..=args.show {
+        if stop.load(Ordering::SeqCst) {
+            stopped(ep - 1, "episodes shown"); // [runsafe]
+        }
         env.reset();
         let t = env.target();
         println!(
@@ -93,7 +102,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     if args.trials > 0 {
         let (mut successes, mut success_steps, mut total_reward) = (0u32, 0u64, 0.0);
-        for _ in 0..args.trials {
+        for trial in 0..args.trials {
+            if stop.load(Ordering::SeqCst) {
+                stopped(trial, "evaluation trials"); // [runsafe]
+            }
             env.reset();
             let mut r = 0.0;
             loop {

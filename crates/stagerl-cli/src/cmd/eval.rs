@@ -1,7 +1,7 @@
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use stagerl::env::ReachEnv;
-use stagerl::train::{self, evaluate, EvalSummary, RunDir};
-use std::path::PathBuf;
+use stagerl::train::{self, evaluate_until, final_eval, EvalSummary, RunDir, TrialRecord};
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -20,6 +20,10 @@ pub struct Args {
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
+    /// Replace an existing evaluation file of the same checkpoint, trials and seed that holds
+    /// other results (an identical one is left as is).
+    #[arg(long)]
+    force: bool,
 }
 
 /// Seed of the evaluation targets unless told otherwise (differs from `train.eval_seed`, the
@@ -38,12 +42,21 @@ pub fn run(args: Args) -> Result<()> {
     let mut env = ReachEnv::from_config(&cfg, 0)?;
     let mut agent = train::load_agent(&cfg, &env, &checkpoint)?;
     let _lock = super::train::lock_run(&args.run)?; // [runsafe] it writes into the run
-    let (s, trials) = evaluate(agent.as_mut(), &mut env, args.trials, args.seed)?;
-    let csv = args.run.join(format!("eval-seed{}.csv", args.seed));
-    train::eval::write_trials_csv(&csv, &trials)?;
+                                                    // [runsafe] Its own file, named by checkpoint, trials and seed: never the closing evaluation
+                                                    // (eval-final-seed<N>.csv) a report reads.
+    let csv = args.run.join(final_eval::eval_file_name(&checkpoint, args.trials, args.seed));
+    let stop = super::train::stop_flag()?;
+    let (s, trials) = match evaluate_until(agent.as_mut(), &mut env, args.trials, args.seed, Some(&stop)) {
+        Err(e @ stagerl::Error::Stopped { .. }) => {
+            eprintln!("stagerl: {e}");
+            std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
+        }
+        other => other?,
+    };
+    let what = write_evaluation(&csv, &trials, args.force)?;
     if !args.json {
         println!(
-            "{} on {} trials (seed {}), per-trial CSV {}",
+            "{} on {} trials (seed {}), per-trial CSV {} ({what})",
             checkpoint.display(),
             args.trials,
             args.seed,
@@ -52,6 +65,28 @@ pub fn run(args: Args) -> Result<()> {
     }
     print_summary(&s, args.json);
     Ok(())
+}
+
+/// Write the per-trial CSV unless `csv` already holds these results; an existing file with other
+/// results is replaced only with `force`.
+fn write_evaluation(csv: &Path, trials: &[TrialRecord], force: bool) -> Result<&'static str> {
+    if csv.exists() {
+        let old = train::eval::read_trials_csv(csv).ok();
+        if old.as_deref() == Some(trials) {
+            return Ok("unchanged: the same results");
+        }
+        if !force {
+            bail!(
+                "{} holds another evaluation of this checkpoint, trial count and seed (the checkpoint \
+                 changed since?); pass --force to replace it",
+                csv.display()
+            );
+        }
+        train::eval::write_trials_csv(csv, trials)?;
+        return Ok("replaced (--force)");
+    }
+    train::eval::write_trials_csv(csv, trials)?;
+    Ok("written")
 }
 
 pub fn print_summary(s: &EvalSummary, json: bool) {

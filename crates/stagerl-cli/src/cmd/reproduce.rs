@@ -118,6 +118,10 @@ pub fn run(args: Args) -> Result<()> {
                         let what = match before {
                             RunStatus::Done => "already done".to_string(),
                             RunStatus::Partial { episode } => format!("resumed after episode {episode}, done"),
+                            RunStatus::Trained => "trained before, evaluated, done".to_string(),
+                            RunStatus::StaleEval => {
+                                "re-evaluated (its evaluation had other settings), done".to_string()
+                            }
                             _ => "done".to_string(),
                         };
                         println!(
@@ -132,6 +136,10 @@ pub fn run(args: Args) -> Result<()> {
                     Err(stagerl::Error::Interrupted { episode, .. }) => {
                         interrupted.store(true, Ordering::SeqCst);
                         println!("[{n}/{total}] {}: interrupted after episode {episode}, saved", spec.name);
+                    }
+                    Err(stagerl::Error::Stopped { .. }) => {
+                        interrupted.store(true, Ordering::SeqCst);
+                        println!("[{n}/{total}] {}: interrupted during its evaluation (runs again)", spec.name);
                     }
                     Err(stagerl::Error::Locked { holder, .. }) => {
                         taken.fetch_add(1, Ordering::SeqCst);

@@ -2,7 +2,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use stagerl::agent::Algo;
 use stagerl::reward::RewardFunction;
-use stagerl::train::{self, evaluate, Progress, Resumed, RunDir, TrainOptions};
+use stagerl::train::{self, final_eval, Progress, Resumed, RunDir, TrainOptions};
 use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -33,7 +33,8 @@ pub struct Args {
     /// Replace a run already in the output directory.
     #[arg(long, conflicts_with = "resume")]
     force: bool,
-    /// Continue the run in this directory from its last checkpoint (with its own config).
+    /// Continue the run in this directory from its last checkpoint (with its own config); a
+    /// trained run without its closing evaluation (killed during it) is evaluated.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "seed", "episodes", "out", "config"])]
     resume: Option<PathBuf>,
     /// Trials of the closing evaluation (deterministic policy); 0 skips it.
@@ -67,6 +68,10 @@ fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path) -> Result<T> {
                 checkpoint.display(),
                 dir.display()
             );
+            std::process::exit(i32::from(INTERRUPTED_EXIT));
+        }
+        Err(e @ stagerl::Error::Stopped { .. }) => {
+            eprintln!("stagerl: {e}. Continue with: stagerl train --resume {}", dir.display());
             std::process::exit(i32::from(INTERRUPTED_EXIT));
         }
         other => other.context("training"),
@@ -141,7 +146,8 @@ pub fn run(args: Args) -> Result<()> {
     let mut reporter = Reporter::new(cfg.train.episodes);
     let summary = finish(train::train_with(&cfg, &out, &opts, &mut |p| reporter.episode(p)), &out)?;
     reporter.finish();
-    report_and_evaluate(&cfg, &out, &summary, args.eval_trials)
+    print_summary(&summary);
+    closing_evaluation(&cfg, &out, args.eval_trials, &stop)
 }
 
 fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
@@ -157,23 +163,31 @@ fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
     let opts = TrainOptions { stop: Some(&stop) };
     let mut reporter = Reporter::new(cfg.train.episodes);
     match finish(train::resume(dir, &opts, &mut |p| reporter.episode(p)), dir)? {
+        // [runsafe] Trained but never evaluated (killed during its closing evaluation, say):
+        // the evaluation runs now.
+        Resumed::AlreadyFinished(s)
+            if eval_trials > 0 && final_eval::recorded(dir, super::eval::DEFAULT_SEED).is_none() =>
+        {
+            println!(
+                "{} already trained ({} episodes) but not evaluated: running its closing evaluation",
+                dir.display(),
+                s.episodes
+            );
+            closing_evaluation(&cfg, dir, eval_trials, &stop)
+        }
         Resumed::AlreadyFinished(s) => {
             println!("{} already finished ({} episodes); nothing to do", dir.display(), s.episodes);
             Ok(())
         }
         Resumed::Finished(s) => {
             reporter.finish();
-            report_and_evaluate(&cfg, dir, &s, eval_trials)
+            print_summary(&s);
+            closing_evaluation(&cfg, dir, eval_trials, &stop)
         }
     }
 }
 
-fn report_and_evaluate(
-    cfg: &stagerl::config::Config,
-    out: &std::path::Path,
-    summary: &train::TrainSummary,
-    eval_trials: u32,
-) -> Result<()> {
+fn print_summary(summary: &train::TrainSummary) {
     println!(
         "trained {} episodes, {} env steps, {} updates in {:.1} s ({:.0} env steps/s)",
         summary.episodes,
@@ -182,24 +196,28 @@ fn report_and_evaluate(
         summary.wall_s,
         summary.env_steps as f64 / summary.wall_s
     );
-    if eval_trials > 0 {
-        // The checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0: not
-        // the `train.eval_seed` targets the best checkpoint was chosen on.
-        let checkpoint =
-            RunDir::new(out).best_available_checkpoint().unwrap_or(summary.final_checkpoint.clone());
-        let mut env = stagerl::env::ReachEnv::from_config(cfg, 0)?;
-        let mut agent = train::load_agent(cfg, &env, &checkpoint)?;
-        let seed = super::eval::DEFAULT_SEED;
-        let (s, trials) = evaluate(agent.as_mut(), &mut env, eval_trials, seed)?;
-        let csv = out.join(format!("eval-seed{seed}.csv"));
-        train::eval::write_trials_csv(&csv, &trials)?;
-        println!(
-            "{} on {eval_trials} new targets (seed {seed}), per-trial CSV {}",
-            checkpoint.display(),
-            csv.display()
-        );
-        super::eval::print_summary(&s, false);
+}
+
+/// The closing evaluation, recorded as the run's last step (see `train::final_eval`): the
+/// checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0, not the
+/// `train.eval_seed` targets the best checkpoint was chosen on. A stop ends it (exit 130).
+fn closing_evaluation(
+    cfg: &stagerl::config::Config,
+    out: &std::path::Path,
+    eval_trials: u32,
+    stop: &AtomicBool,
+) -> Result<()> {
+    if eval_trials == 0 {
+        return Ok(());
     }
+    let seed = super::eval::DEFAULT_SEED;
+    let (s, checkpoint) = finish(final_eval::run(out, cfg, eval_trials, seed, Some(stop)), out)?;
+    println!(
+        "{} on {eval_trials} new targets (seed {seed}), per-trial CSV {}",
+        checkpoint.display(),
+        final_eval::csv_path(out, seed).display()
+    );
+    super::eval::print_summary(&s, false);
     Ok(())
 }
 

@@ -1,5 +1,6 @@
 //! Finding run directories and reading what a run wrote: `config.toml`, `episodes.csv`,
-//! `eval.csv` and the per-trial evaluation CSV (`eval-final-seed<N>.csv`, else `eval-seed<N>.csv`).
+//! `eval.csv` and the per-trial evaluation CSV (`eval-final-seed<N>.csv`, else `eval-seed<N>.csv`,
+//! else one of `stagerl eval`).
 
 use std::path::{Path, PathBuf};
 
@@ -140,8 +141,17 @@ fn seed_of(name: &str, prefix: &str) -> Option<u64> {
     name.strip_prefix(prefix)?.strip_suffix(".csv")?.parse().ok()
 }
 
-/// The per-trial evaluation files of a run: `eval-final-seed<N>.csv` first, then
-/// `eval-seed<N>.csv` (from `stagerl eval`), each sorted by seed.
+/// The seed of a file of `stagerl eval`, `eval-<checkpoint>-trials<T>-seed<N>.csv`.
+fn eval_command_seed(name: &str) -> Option<u64> {
+    let (head, seed) = name.strip_prefix("eval-")?.strip_suffix(".csv")?.rsplit_once("-seed")?;
+    let (_, trials) = head.rsplit_once("-trials")?;
+    trials.parse::<u32>().ok()?;
+    seed.parse().ok()
+}
+
+/// The per-trial evaluation files of a run: the closing evaluation `eval-final-seed<N>.csv`
+/// first, then `eval-seed<N>.csv` (older versions), then the files of `stagerl eval`
+/// (`eval-<checkpoint>-trials<T>-seed<N>.csv`), each sorted by seed.
 pub fn trial_files(dir: &Path) -> Vec<(PathBuf, Option<u64>)> {
     let mut found: Vec<(u8, u64, PathBuf)> = std::fs::read_dir(dir)
         .into_iter()
@@ -151,8 +161,10 @@ pub fn trial_files(dir: &Path) -> Vec<(PathBuf, Option<u64>)> {
             let name = e.file_name().to_string_lossy().into_owned();
             if let Some(s) = seed_of(&name, "eval-final-seed") {
                 Some((0, s, e.path()))
+            } else if let Some(s) = seed_of(&name, "eval-seed") {
+                Some((1, s, e.path()))
             } else {
-                seed_of(&name, "eval-seed").map(|s| (1, s, e.path()))
+                eval_command_seed(&name).map(|s| (2, s, e.path()))
             }
         })
         .collect();
@@ -206,5 +218,9 @@ mod tests {
         assert_eq!(seed_of("eval-seed0.csv", "eval-seed"), Some(0));
         assert_eq!(seed_of("eval-seedx.csv", "eval-seed"), None);
         assert_eq!(seed_of("eval.csv", "eval-seed"), None);
+        assert_eq!(eval_command_seed("eval-best-trials500-seed7.csv"), Some(7));
+        assert_eq!(eval_command_seed("eval-my-ck-trials5-seed0.csv"), Some(0));
+        assert_eq!(eval_command_seed("eval-best-seed7.csv"), None);
+        assert_eq!(eval_command_seed("eval-final-seed7.csv"), None);
     }
 }

@@ -22,6 +22,7 @@
 //! are bit-identical to those of an uninterrupted run.
 
 pub mod eval;
+pub mod final_eval;
 pub mod replace;
 
 use serde::{Deserialize, Serialize};
@@ -391,7 +392,8 @@ impl Trainer {
         // [runsafe] The TensorBoard log too: each tag's steps up to the checkpoint, once (but an
         // evaluation still due at the checkpoint's episode, which runs again).
         let (ep, eval_due) = (self.state.episode as i64, self.state.eval_due);
-        let keep = |tag: &str, step: i64| step < ep || (step == ep && !(eval_due && tag.starts_with("eval/")));
+        let keep =
+            |tag: &str, step: i64| step < ep || (step == ep && !(eval_due && tag.starts_with("eval/")));
         crate::log::tensorboard::rewind(&self.dir.tb(), keep).map(|_| ())
     }
 
@@ -433,7 +435,11 @@ impl Trainer {
     /// The periodic evaluation of the episode just finished, when due (`state.eval_due`): the
     /// row of `eval.csv`, its TensorBoard scalars and `best.safetensors` when it is the best.
     /// A stop request ends it with [`Error::Stopped`], `eval_due` still set. [runsafe]
-    fn periodic_eval(&mut self, tb: &mut EventWriter, stop: Option<&AtomicBool>) -> Result<Option<EvalSummary>> {
+    fn periodic_eval(
+        &mut self,
+        tb: &mut EventWriter,
+        stop: Option<&AtomicBool>,
+    ) -> Result<Option<EvalSummary>> {
         if !self.state.eval_due {
             return Ok(None);
         }
