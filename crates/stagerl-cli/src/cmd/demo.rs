@@ -2,7 +2,7 @@ use anyhow::{Context, Result};
 use stagerl::controller::JacobianController;
 use stagerl::env::ReachEnv;
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -36,10 +36,6 @@ pub fn run(args: Args) -> Result<()> {
         args.seed
     );
     let stop = super::train::stop_flag()?;
-    let stopped = |done: u32, what: &str| -> ! {
-        eprintln!("stagerl: stopped on request after {done} {what}");
-        std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
-    };
     for ep in 1..=args.show {
         if stop.load(Ordering::SeqCst) {
             stopped(ep - 1, "episodes shown"); // [runsafe]
@@ -101,36 +97,56 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     if args.trials > 0 {
-        let (mut successes, mut success_steps, mut total_reward) = (0u32, 0u64, 0.0);
-        for trial in 0..args.trials {
-            if stop.load(Ordering::SeqCst) {
-                stopped(trial, "evaluation trials"); // [runsafe]
-            }
-            env.reset();
-            let mut r = 0.0;
-            loop {
-                ctl.act(&chain, env.joint_positions(), &env.target(), dt, &mut action);
-                let s = env.step(&action)?;
-                r += s.total();
-                if s.done() {
-                    if s.terminated {
-                        successes += 1;
-                        success_steps += u64::from(env.steps());
-                    }
-                    break;
-                }
-            }
-            total_reward += r;
-        }
-        let n = f64::from(args.trials);
-        let mean_steps = if successes > 0 { success_steps as f64 / f64::from(successes) } else { f64::NAN };
-        println!(
-            "\nevaluation over {} random targets: success {:.1} %, mean episode reward {:.3}, mean steps (successful) {:.2}",
-            args.trials,
-            100.0 * f64::from(successes) / n,
-            total_reward / n,
-            mean_steps
-        );
+        evaluate_controller(&mut env, &mut ctl, args.trials, &stop)?;
     }
+    Ok(())
+}
+
+/// Exit 130 after a stop request, saying how far the loop got. [runsafe]
+fn stopped(done: u32, what: &str) -> ! {
+    eprintln!("stagerl: stopped on request after {done} {what}");
+    std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
+}
+
+/// The controller on `trials` random targets: success rate, mean reward and steps.
+fn evaluate_controller(
+    env: &mut ReachEnv,
+    ctl: &mut JacobianController,
+    trials: u32,
+    stop: &AtomicBool,
+) -> Result<()> {
+    let chain = env.chain().clone();
+    let dt = env.task().dt_s;
+    let mut action = vec![0.0f32; env.act_dim()];
+    let (mut successes, mut success_steps, mut total_reward) = (0u32, 0u64, 0.0);
+    for trial in 0..trials {
+        if stop.load(Ordering::SeqCst) {
+            stopped(trial, "evaluation trials"); // [runsafe]
+        }
+        env.reset();
+        let mut r = 0.0;
+        loop {
+            ctl.act(&chain, env.joint_positions(), &env.target(), dt, &mut action);
+            let s = env.step(&action)?;
+            r += s.total();
+            if s.done() {
+                if s.terminated {
+                    successes += 1;
+                    success_steps += u64::from(env.steps());
+                }
+                break;
+            }
+        }
+        total_reward += r;
+    }
+    let n = f64::from(trials);
+    let mean_steps = if successes > 0 { success_steps as f64 / f64::from(successes) } else { f64::NAN };
+    println!(
+        "\nevaluation over {} random targets: success {:.1} %, mean episode reward {:.3}, mean steps (successful) {:.2}",
+        trials,
+        100.0 * f64::from(successes) / n,
+        total_reward / n,
+        mean_steps
+    );
     Ok(())
 }

@@ -115,23 +115,7 @@ pub fn run(args: Args) -> Result<()> {
                 let n = done.fetch_add(1, Ordering::SeqCst) + 1;
                 match result {
                     Ok((before, s)) => {
-                        let what = match before {
-                            RunStatus::Done => "already done".to_string(),
-                            RunStatus::Partial { episode } => format!("resumed after episode {episode}, done"),
-                            RunStatus::Trained => "trained before, evaluated, done".to_string(),
-                            RunStatus::StaleEval => {
-                                "re-evaluated (its evaluation had other settings), done".to_string()
-                            }
-                            _ => "done".to_string(),
-                        };
-                        println!(
-                            "[{n}/{total}] {}: {what} in {:.0} s: success {:.1} %, mean reward {:.3}, mean steps {}",
-                            spec.name,
-                            t0.elapsed().as_secs_f64(),
-                            100.0 * s.success_rate,
-                            s.mean_reward,
-                            s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into())
-                        );
+                        println!("[{n}/{total}] {}: {}", spec.name, done_line(before, &s, t0.elapsed()));
                     }
                     Err(stagerl::Error::Interrupted { episode, .. }) => {
                         interrupted.store(true, Ordering::SeqCst);
@@ -139,12 +123,18 @@ pub fn run(args: Args) -> Result<()> {
                     }
                     Err(stagerl::Error::Stopped { .. }) => {
                         interrupted.store(true, Ordering::SeqCst);
-                        println!("[{n}/{total}] {}: interrupted during its evaluation (runs again)", spec.name);
+                        println!(
+                            "[{n}/{total}] {}: interrupted during its evaluation (runs again)",
+                            spec.name
+                        );
                     }
                     Err(stagerl::Error::Locked { holder, .. }) => {
                         taken.fetch_add(1, Ordering::SeqCst);
                         let pid = holder.map(|p| format!(" (pid {p})")).unwrap_or_default();
-                        println!("[{n}/{total}] {}: taken by another process{pid}, finishes there", spec.name);
+                        println!(
+                            "[{n}/{total}] {}: taken by another process{pid}, finishes there",
+                            spec.name
+                        );
                     }
                     Err(e) => {
                         println!("[{n}/{total}] {}: FAILED: {e}", spec.name);
@@ -182,6 +172,24 @@ pub fn run(args: Args) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// What a finished run's line says: what was done, how long it took, its evaluation.
+fn done_line(before: RunStatus, s: &stagerl::train::EvalSummary, took: std::time::Duration) -> String {
+    let what = match before {
+        RunStatus::Done => "already done".to_string(),
+        RunStatus::Partial { episode } => format!("resumed after episode {episode}, done"),
+        RunStatus::Trained => "trained before, evaluated, done".to_string(),
+        RunStatus::StaleEval => "re-evaluated (its evaluation had other settings), done".to_string(),
+        RunStatus::New => "done".to_string(),
+    };
+    format!(
+        "{what} in {:.0} s: success {:.1} %, mean reward {:.3}, mean steps {}",
+        took.as_secs_f64(),
+        100.0 * s.success_rate,
+        s.mean_reward,
+        s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into())
+    )
 }
 
 fn one(

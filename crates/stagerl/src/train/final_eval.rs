@@ -69,10 +69,11 @@ pub fn planned(dir: &Path, cfg: &Config, trials: u32, seed: u64) -> Option<(Path
     Some((checkpoint, record))
 }
 
-/// Whether the run's recorded closing evaluation is the one [`planned`] now.
+/// Whether the run's recorded closing evaluation is the one [`planned`] now (the version that
+/// made it is recorded, not compared: a new version does not re-evaluate every run).
 pub fn is_current(dir: &Path, cfg: &Config, trials: u32, seed: u64) -> bool {
     match (recorded(dir, seed), planned(dir, cfg, trials, seed)) {
-        (Some(r), Some((_, p))) => r == p,
+        (Some(r), Some((_, p))) => FinalEvalRecord { version: p.version.clone(), ..r } == p,
         _ => false,
     }
 }
