@@ -17,6 +17,10 @@
 //!   agents, DDPG above all, oscillate after converging; the best checkpoint is the usual remedy
 //!   (as Stable-Baselines3's `EvalCallback`). Test it on other targets than it was chosen on.
 //!
+//! - `eval-final-seed<N>.csv` and its record `eval-final-seed<N>.json`: the closing evaluation
+//!   (see [`final_eval`]); `eval-<checkpoint>-trials<T>-seed<N>.csv`: evaluations by `stagerl eval`;
+//! - `.stagerl.lock`: the advisory lock of the process writing the run (see [`crate::lock`]).
+//!
 //! Metadata in both names the algorithm, the shapes and the config hash. [`resume`] continues a
 //! run from `latest.safetensors` so that its `episodes.csv` (but the wall time) and its networks
 //! are bit-identical to those of an uninterrupted run.
