@@ -275,7 +275,7 @@ fn bad_input_to_the_cli_is_an_error_naming_the_problem() {
     let ok =
         run(&["eval".into(), "--run".into(), format!("{d}/runs/sac"), "--trials".into(), "2".into()], "");
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
-    std::fs::remove_file(dir.join("runs/sac/eval-seed0.csv")).unwrap();
+    std::fs::remove_file(dir.join("runs/sac/eval-final-trials2-seed0.csv")).unwrap();
     let ok = run(&["reward".into(), "--function".into(), "sar".into()], &format!("{GOOD_REWARD}\n"));
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
     let two = format!("{d}/two.urdf");

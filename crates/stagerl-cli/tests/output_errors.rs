@@ -126,7 +126,7 @@ fn train_whose_output_closes_saves_the_run_and_says_how_to_resume() {
     let out = bin().args(["train", "--resume", &s(&dir), "--eval-trials", "3"]).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(dir.join("checkpoints/final.safetensors").exists());
-    assert!(dir.join("eval-seed0.csv").exists());
+    assert!(dir.join("eval-final-seed0.csv").exists() && dir.join("eval-final-seed0.json").exists());
 
     // A full disk on standard output from the start: refused before anything is trained.
     let full = root.join("full");

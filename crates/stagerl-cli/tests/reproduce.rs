@@ -15,7 +15,7 @@ fn finished(out: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(out)
         .unwrap()
         .filter_map(|e| e.ok())
-        .filter(|e| e.path().join("eval-seed0.csv").exists())
+        .filter(|e| e.path().join("eval-final-seed0.csv").exists())
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .collect();
     v.sort();
@@ -53,8 +53,10 @@ fn killed_sweep_loses_and_repeats_nothing() {
     child.wait().unwrap();
     let done_before = finished(&cut);
     assert!(!done_before.is_empty() && done_before.len() < 8, "killed mid-sweep: {done_before:?}");
-    let kept: Vec<Vec<u8>> =
-        done_before.iter().map(|r| std::fs::read(cut.join(r).join("eval-seed0.csv")).unwrap()).collect();
+    let kept: Vec<Vec<u8>> = done_before
+        .iter()
+        .map(|r| std::fs::read(cut.join(r).join("eval-final-seed0.csv")).unwrap())
+        .collect();
 
     let out = bin()
         .args(["reproduce", "--preset", p, "--out", cut.to_str().unwrap(), "--jobs", "2"])
@@ -67,14 +69,14 @@ fn killed_sweep_loses_and_repeats_nothing() {
             text.lines().any(|l| l.contains(r.as_str()) && l.contains("already done")),
             "{r} repeated?\n{text}"
         );
-        assert_eq!(&std::fs::read(cut.join(r).join("eval-seed0.csv")).unwrap(), bytes, "{r} changed");
+        assert_eq!(&std::fs::read(cut.join(r).join("eval-final-seed0.csv")).unwrap(), bytes, "{r} changed");
     }
     assert_eq!(finished(&cut), finished(&full));
     for r in finished(&full) {
         assert_eq!(episodes_without_wall(&full.join(&r)), episodes_without_wall(&cut.join(&r)), "{r}");
         assert_eq!(
-            std::fs::read(full.join(&r).join("eval-seed0.csv")).unwrap(),
-            std::fs::read(cut.join(&r).join("eval-seed0.csv")).unwrap(),
+            std::fs::read(full.join(&r).join("eval-final-seed0.csv")).unwrap(),
+            std::fs::read(cut.join(&r).join("eval-final-seed0.csv")).unwrap(),
             "{r}: evaluation differs"
         );
     }
@@ -189,7 +191,7 @@ fn smoke_preset_then_report_writes_every_file() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let runs = std::fs::read_dir(&out)
         .unwrap()
-        .filter(|e| e.as_ref().unwrap().path().join("eval-seed0.csv").exists())
+        .filter(|e| e.as_ref().unwrap().path().join("eval-final-seed0.csv").exists())
         .count();
     assert_eq!(runs, 10, "2 algorithms x 5 rewards x 1 seed, each evaluated");
     let r = bin().args(["report", out.to_str().unwrap()]).output().unwrap();

@@ -21,9 +21,22 @@ pub enum Error {
     /// Training stopped on request (SIGINT/SIGTERM); the state was saved to `checkpoint`.
     #[error("interrupted at episode {episode}; the run was saved to {checkpoint} and can be resumed")]
     Interrupted { episode: u64, checkpoint: PathBuf },
+    /// A stop request (SIGINT/SIGTERM) ended `what` (an evaluation, say) before it finished;
+    /// nothing of it was written.
+    #[error("stopped during {what} on request; nothing of it was written")]
+    Stopped { what: String },
     /// A loss, gradient or parameter became NaN or infinite.
     #[error("numerical fault: {0}")]
     NumericalFault(String),
+    /// A run or sweep directory is being written by another process (it holds the directory's
+    /// advisory lock, released when that process ends, even by SIGKILL).
+    #[error(
+        "{} is in use by another stagerl process{}: wait for it to finish or stop it (lock file {})",
+        dir.display(),
+        holder.map(|p| format!(" (pid {p})")).unwrap_or_default(),
+        lock_file.display()
+    )]
+    Locked { dir: PathBuf, holder: Option<u32>, lock_file: PathBuf },
     /// A file could not be read or written. (The OS error is part of the message, not a chained
     /// source, so that `{:#}` does not print it twice.)
     #[error("{}: {error}", path.display())]

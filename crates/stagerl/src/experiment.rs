@@ -21,8 +21,11 @@
 //!
 //! Run `i` of the sweep (algorithm-major, then reward, then seed) lives in
 //! `OUT/<algo>-<reward>-seed<seed>/`, a normal run directory; its evaluation is
-//! `eval-seed<eval_seed>.csv` there. A run is finished when its checkpoint says so and that file
-//! exists; a run with a checkpoint is resumed; any other starts from scratch.
+//! `eval-final-seed<eval_seed>.csv` there, recorded with its settings (see
+//! [`train::final_eval`]). A run is finished when its checkpoint says so and its evaluation is
+//! recorded with the sweep's settings (else only the evaluation runs again); a run with a
+//! checkpoint is resumed; any other starts from scratch. Several processes can share one sweep
+//! directory: each run is locked by the process working on it, and skipped by the others.
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -33,7 +36,7 @@ use std::time::Instant;
 use crate::agent::Algo;
 use crate::config::Config;
 use crate::reward::RewardFunction;
-use crate::train::{self, EvalSummary, Progress, RunDir, TrainOptions};
+use crate::train::{self, final_eval, EvalSummary, Progress, RunDir, TrainOptions};
 use crate::{Error, Result};
 
 /// The `[sweep]` section of a preset.
@@ -76,8 +79,11 @@ pub struct RunSpec {
 pub enum RunStatus {
     /// Trained and evaluated.
     Done,
-    /// Trained, not yet evaluated.
+    /// Trained, not yet evaluated (or killed during its evaluation).
     Trained,
+    /// Trained and evaluated with other settings (trials, seed, checkpoint, config) than the
+    /// sweep's: only the evaluation runs again.
+    StaleEval,
     /// Has a checkpoint to continue from.
     Partial { episode: u64 },
     /// Nothing usable yet.
@@ -182,10 +188,16 @@ impl Preset {
     }
 }
 
-/// Create the sweep directory `out` and record the preset's text in it (`preset.toml`).
+/// Create the sweep directory `out` and record the preset's text in it (`preset.toml`,
+/// atomically, under the sweep directory's lock) unless it already holds `text`: several
+/// processes sharing the sweep write it once.
 pub fn write_preset(out: &Path, text: &str) -> Result<()> {
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    crate::io::write_atomic(&out.join("preset.toml"), text.as_bytes())
+    let _lock = crate::lock::DirLock::sweep(out)?;
+    let path = out.join("preset.toml");
+    if std::fs::read(&path).is_ok_and(|old| old == text.as_bytes()) {
+        return Ok(());
+    }
+    crate::io::write_atomic(&path, text.as_bytes())
 }
 
 /// The name of a config's run directory: `<algo>-<reward>-seed<seed>`.
@@ -259,39 +271,40 @@ pub fn shard(runs: Vec<RunSpec>, index: usize, count: usize) -> Result<Vec<RunSp
     Ok(runs.into_iter().filter(|r| r.index % count == index).collect())
 }
 
-/// Where the run `dir` stands.
-pub fn status(dir: &Path, eval_seed: u64) -> Result<RunStatus> {
+/// Where the run `dir` of `spec` stands in `sweep`: done only when its closing evaluation is
+/// recorded with the sweep's evaluation settings.
+pub fn status(dir: &Path, spec: &RunSpec, sweep: &SweepSpec) -> Result<RunStatus> {
+    let (trials, seed) = (sweep.eval_trials, sweep.eval_seed);
     Ok(match train::checkpointed_episode(dir)? {
-        Some((_, true)) if RunDir::new(dir).trial_eval(eval_seed).exists() => RunStatus::Done,
+        Some((_, true)) if final_eval::is_current(dir, &spec.config, trials, seed) => RunStatus::Done,
+        Some((_, true)) if final_eval::recorded(dir, seed).is_some() => RunStatus::StaleEval,
         Some((_, true)) => RunStatus::Trained,
         Some((episode, false)) => RunStatus::Partial { episode },
         None => RunStatus::New,
     })
 }
 
-/// Train (or resume) and evaluate one run into `out/<name>`. A finished run is not repeated; a
-/// run whose config.toml differs from the preset's is refused rather than mixed.
+/// Train (or resume) and evaluate one run into `out/<name>`, holding the run directory's lock
+/// ([`Error::Locked`] when another process holds it). A finished run is not repeated; a run
+/// whose config.toml differs from the preset's is refused rather than mixed. Returns where the
+/// run stood before and its evaluation.
 pub fn run_one(
     spec: &RunSpec,
     out: &Path,
     sweep: &SweepSpec,
     opts: &TrainOptions<'_>,
     on_episode: &mut dyn FnMut(&Progress<'_>),
-) -> Result<EvalSummary> {
+) -> Result<(RunStatus, EvalSummary)> {
     let dir = out.join(&spec.name);
-    let run = RunDir::new(&dir);
-    if run.config().exists() {
-        let existing = run.load_config()?;
-        if existing != spec.config {
-            return Err(Error::InvalidInput(format!(
-                "{} holds a run of another configuration than this sweep's; move it away or use another output directory",
-                dir.display()
-            )));
-        }
-    }
-    match status(&dir, sweep.eval_seed)? {
-        RunStatus::Done => return read_eval(&dir, sweep.eval_seed),
-        RunStatus::Trained => {}
+    check_existing(spec, out)?;
+    // One process per run: another process's run is skipped (`Error::Locked`). The status is
+    // read under the lock, so a run another process finished is not trained again.
+    let _lock = crate::lock::DirLock::run(&dir)?;
+    check_existing(spec, out)?;
+    let before = status(&dir, spec, sweep)?;
+    match before {
+        RunStatus::Done => return Ok((before, read_eval(&dir, sweep.eval_seed)?)),
+        RunStatus::Trained | RunStatus::StaleEval => {}
         RunStatus::Partial { .. } => {
             train::resume(&dir, opts, on_episode)?;
         }
@@ -299,7 +312,32 @@ pub fn run_one(
             train::train_with(&spec.config, &dir, opts, on_episode)?;
         }
     }
-    Ok(train::evaluate_run(&run, &spec.config, None, sweep.eval_trials, sweep.eval_seed)?.summary)
+    let (summary, _) = final_eval::run(&dir, &spec.config, sweep.eval_trials, sweep.eval_seed, opts.stop)?;
+    Ok((before, summary))
+}
+
+/// Refuse a run directory that holds a run of another configuration than `spec`'s.
+pub fn check_existing(spec: &RunSpec, out: &Path) -> Result<()> {
+    let dir = out.join(&spec.name);
+    let run = RunDir::new(&dir);
+    if run.holds_run() && run.load_config()? != spec.config {
+        return Err(Error::InvalidInput(format!(
+            "{} holds a run of another configuration than this sweep's; move it away or use another output directory",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// [`check_existing`] for every run, before anything is written: all refusals in one error.
+pub fn check_all_existing(runs: &[RunSpec], out: &Path) -> Result<()> {
+    let refused: Vec<String> =
+        runs.iter().filter_map(|r| check_existing(r, out).err()).map(|e| e.to_string()).collect();
+    if refused.is_empty() {
+        Ok(())
+    } else {
+        Err(Error::InvalidInput(format!("nothing was written:\n  {}", refused.join("\n  "))))
+    }
 }
 
 /// One run of a sweep, as [`run_sweep`] reports it when the run ends.
@@ -309,11 +347,14 @@ pub struct RunReport<'a> {
     pub n: usize,
     /// Runs in the sweep (or shard).
     pub total: usize,
-    /// Where the run stood before this session (`None` when that could not be read).
+    /// Where the run stood before this session, read under its lock (`None` when the run
+    /// failed).
     pub before: Option<RunStatus>,
     /// Wall seconds of this session's work on the run.
     pub wall_s: f64,
-    /// The run's evaluation, or why there is none ([`Error::Interrupted`] on a stop).
+    /// The run's evaluation, or why there is none ([`Error::Interrupted`] on a stop during
+    /// training, [`Error::Stopped`] during its evaluation, [`Error::Locked`] when another
+    /// process works on it).
     pub result: &'a Result<EvalSummary>,
 }
 
@@ -324,12 +365,15 @@ pub struct SweepOutcome {
     pub failures: Vec<String>,
     /// A stop was requested (or a run was interrupted): runs may be left to do.
     pub interrupted: bool,
+    /// Runs skipped because another process holds them (it finishes them).
+    pub taken: usize,
     pub wall_s: f64,
 }
 
 /// Train and evaluate `runs` into `out`, `jobs` at once (threads, each run single-threaded),
-/// taking them in order; a finished run is not repeated (see [`run_one`]). Setting `stop`
-/// interrupts the runs under way (each saves its checkpoint) and starts no other.
+/// taking them in order; a finished run is not repeated and a run another process holds is
+/// skipped (see [`run_one`]). Setting `stop` interrupts the runs under way (each saves its
+/// checkpoint) and starts no other.
 /// `on_run` sees each run as it ends.
 pub fn run_sweep(
     runs: &[RunSpec],
@@ -343,6 +387,7 @@ pub fn run_sweep(
     let (next, done) = (AtomicUsize::new(0), AtomicUsize::new(0));
     let failures: Mutex<Vec<String>> = Mutex::new(Vec::new());
     let interrupted = AtomicBool::new(false);
+    let taken = AtomicUsize::new(0);
     let start = Instant::now();
     let worker = || loop {
         let k = next.fetch_add(1, Ordering::SeqCst);
@@ -351,12 +396,19 @@ pub fn run_sweep(
         }
         let spec = &runs[k];
         let t0 = Instant::now();
-        let before = status(&out.join(&spec.name), sweep.eval_seed).ok();
         let opts = TrainOptions { stop: Some(stop) };
-        let result = run_one(spec, out, sweep, &opts, &mut |_| {});
+        let (before, result) = match run_one(spec, out, sweep, &opts, &mut |_| {}) {
+            Ok((before, summary)) => (Some(before), Ok(summary)),
+            Err(e) => (None, Err(e)),
+        };
         match &result {
             Ok(_) => {}
-            Err(Error::Interrupted { .. }) => interrupted.store(true, Ordering::SeqCst),
+            Err(Error::Interrupted { .. } | Error::Stopped { .. }) => {
+                interrupted.store(true, Ordering::SeqCst)
+            }
+            Err(Error::Locked { .. }) => {
+                taken.fetch_add(1, Ordering::SeqCst);
+            }
             Err(e) => failures.lock().unwrap_or_else(|p| p.into_inner()).push(format!("{}: {e}", spec.name)),
         }
         let n = done.fetch_add(1, Ordering::SeqCst) + 1;
@@ -370,6 +422,7 @@ pub fn run_sweep(
     SweepOutcome {
         failures: failures.into_inner().unwrap_or_else(|p| p.into_inner()),
         interrupted: interrupted.load(Ordering::SeqCst) || stop.load(Ordering::SeqCst),
+        taken: taken.into_inner(),
         wall_s: start.elapsed().as_secs_f64(),
     }
 }

@@ -37,6 +37,37 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
+/// Whether `name` is a temporary file of [`write_atomic`] (`<name>.tmp-<pid>`).
+pub fn is_temp_name(name: &str) -> bool {
+    name.rsplit_once(".tmp-")
+        .is_some_and(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Remove the temporary files of [`write_atomic`] in `dir` (not recursively) that a killed
+/// writer left behind; a missing `dir` has none. Call it only while no live process can be
+/// writing into `dir` (under its lock, see [`crate::lock`]). Returns what was removed.
+pub fn remove_stale_temps(dir: &Path) -> Result<Vec<PathBuf>> {
+    let entries = match fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(Error::io(dir, e)),
+    };
+    let mut removed = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(dir, e))?;
+        let is_file = entry.file_type().is_ok_and(|t| t.is_file());
+        if is_file && is_temp_name(&entry.file_name().to_string_lossy()) {
+            let p = entry.path();
+            match fs::remove_file(&p) {
+                Ok(()) => removed.push(p),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(Error::io(&p, e)),
+            }
+        }
+    }
+    Ok(removed)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -53,6 +84,32 @@ mod tests {
         assert_eq!(names.len(), 1, "{names:?}");
         let e = write_atomic(&dir.join("missing/b.txt"), b"x").unwrap_err().to_string();
         assert!(e.contains("missing/b.txt"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn stale_temps_are_removed_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("stagerl-io-stale-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        for name in
+            ["latest.safetensors.tmp-4242", "eval.csv.tmp-1", "keep.tmp-", "keep.tmp-12a", "notes.txt"]
+        {
+            fs::write(dir.join(name), b"x").unwrap();
+        }
+        let mut removed: Vec<String> = remove_stale_temps(&dir)
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        removed.sort();
+        assert_eq!(removed, ["eval.csv.tmp-1", "latest.safetensors.tmp-4242"]);
+        let mut left: Vec<String> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["keep.tmp-", "keep.tmp-12a", "notes.txt"]);
+        assert!(remove_stale_temps(&dir.join("missing")).unwrap().is_empty());
         fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -32,6 +32,7 @@ pub mod env;
 pub mod error;
 pub mod experiment;
 pub mod io;
+pub mod lock;
 pub mod log;
 pub mod metrics;
 pub mod nn;

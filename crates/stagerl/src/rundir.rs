@@ -5,9 +5,12 @@
 //! - `config.toml`: the resolved configuration (seed included);
 //! - `episodes.csv`: one row per episode ([`crate::log::EpisodeRecord`]);
 //! - `eval.csv`: the periodic evaluations ([`crate::log::EvalPoint`]);
-//! - `eval-seed<N>.csv`: per-trial evaluations of the run's best checkpoint on the targets of
-//!   seed `N` ([`crate::log::TrialRecord`]), written by `stagerl train`, `stagerl eval` and
-//!   `stagerl reproduce` (by `train::evaluate_run`);
+//! - `eval-final-seed<N>.csv` and its record `eval-final-seed<N>.json`: the closing evaluation
+//!   of the run's best checkpoint on the targets of seed `N` ([`crate::log::TrialRecord`]),
+//!   written by `stagerl train` and `stagerl reproduce` (see `train::final_eval`);
+//! - `eval-<checkpoint>-trials<T>-seed<N>.csv`: evaluations by `stagerl eval` (all through
+//!   `train::evaluate_run`); `eval-seed<N>.csv`: the per-trial evaluations of older versions,
+//!   still read;
 //! - `tb/`: TensorBoard event files with the same scalars and the losses;
 //! - `checkpoints/latest.safetensors`: everything the run needs to continue (networks, targets,
 //!   optimiser moments, the replay buffer, every random state, the counters, where the logs
@@ -18,6 +21,7 @@
 //!   then mean reward, on the `eval_seed` targets), for evaluation and deployment. Off-policy
 //!   agents, DDPG above all, oscillate after converging; the best checkpoint is the usual remedy
 //!   (as Stable-Baselines3's `EvalCallback`). Test it on other targets than it was chosen on.
+//! - `.stagerl.lock`: the advisory lock of the process writing the run (see `crate::lock`).
 
 use std::path::{Path, PathBuf};
 
@@ -30,7 +34,13 @@ pub struct RunDir {
     pub root: PathBuf,
 }
 
-/// Prefix and suffix of the per-trial evaluation files, `eval-seed<N>.csv`.
+/// The lock file's name inside a locked run or sweep directory.
+pub const LOCK_FILE: &str = ".stagerl.lock";
+
+/// Prefix and suffix of the closing evaluation's per-trial file, `eval-final-seed<N>.csv`.
+const FINAL_EVAL: (&str, &str) = ("eval-final-seed", ".csv");
+
+/// Prefix and suffix of the per-trial evaluation files of older versions, `eval-seed<N>.csv`.
 const TRIAL_EVAL: (&str, &str) = ("eval-seed", ".csv");
 
 impl RunDir {
@@ -66,20 +76,49 @@ impl RunDir {
     pub fn best_available_checkpoint(&self) -> Option<PathBuf> {
         [self.best(), self.final_checkpoint(), self.latest()].into_iter().find(|p| p.exists())
     }
-    /// The per-trial evaluation on the targets of seed `seed`: `eval-seed<seed>.csv`.
+    /// The directories a run writes files into (where a killed writer may leave temporary files).
+    pub fn written_dirs(&self) -> [PathBuf; 3] {
+        [self.root.clone(), self.checkpoints(), self.tb()]
+    }
+    /// The lock file of the process writing the run.
+    pub fn lock_file(&self) -> PathBuf {
+        self.root.join(LOCK_FILE)
+    }
+    /// The closing evaluation's per-trial CSV on the targets of `seed`: `eval-final-seed<N>.csv`.
+    pub fn final_eval(&self, seed: u64) -> PathBuf {
+        self.root.join(format!("{}{seed}{}", FINAL_EVAL.0, FINAL_EVAL.1))
+    }
+    /// The record of the closing evaluation on the targets of `seed` (its settings, written
+    /// last): `eval-final-seed<N>.json`.
+    pub fn final_eval_record(&self, seed: u64) -> PathBuf {
+        self.root.join(format!("{}{seed}.json", FINAL_EVAL.0))
+    }
+    /// The file `stagerl eval` writes: named by the checkpoint (its file stem), the trial count
+    /// and the seed, `eval-<checkpoint>-trials<T>-seed<N>.csv`, so that evaluations of other
+    /// settings sit side by side and none replaces the closing evaluation a report reads.
+    pub fn eval_command(&self, checkpoint: &Path, trials: u32, seed: u64) -> PathBuf {
+        let stem = checkpoint.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        self.root.join(format!("eval-{stem}-trials{trials}-seed{seed}.csv"))
+    }
+    /// The per-trial evaluation on the targets of seed `seed` of older versions: `eval-seed<seed>.csv`.
     pub fn trial_eval(&self, seed: u64) -> PathBuf {
         self.root.join(format!("{}{seed}{}", TRIAL_EVAL.0, TRIAL_EVAL.1))
     }
-    /// The per-trial evaluation files present, `(seed, path)` sorted by seed.
+    /// The per-trial evaluation files present, `(seed, path)`: the closing evaluations
+    /// (`eval-final-seed<N>.csv`) first, then `eval-seed<N>.csv` (older versions), then the files
+    /// of `stagerl eval`, each sorted by seed.
     pub fn trial_evals(&self) -> Vec<(u64, PathBuf)> {
-        let mut found: Vec<(u64, PathBuf)> = std::fs::read_dir(&self.root)
+        let mut found: Vec<(u8, u64, PathBuf)> = std::fs::read_dir(&self.root)
             .into_iter()
             .flatten()
             .filter_map(|e| e.ok())
-            .filter_map(|e| Some((trial_eval_seed(&e.file_name().to_string_lossy())?, e.path())))
+            .filter_map(|e| {
+                let (kind, seed) = trial_eval_kind(&e.file_name().to_string_lossy())?;
+                Some((kind, seed, e.path()))
+            })
             .collect();
         found.sort();
-        found
+        found.into_iter().map(|(_, seed, p)| (seed, p)).collect()
     }
     /// Read the run's resolved config.
     pub fn load_config(&self) -> Result<Config> {
@@ -112,9 +151,29 @@ pub fn first_free(parent: &Path, name: &str) -> PathBuf {
         .expect("some directory name is free")
 }
 
-/// The seed in a per-trial evaluation file's name, `eval-seed<N>.csv`.
-fn trial_eval_seed(name: &str) -> Option<u64> {
-    name.strip_prefix(TRIAL_EVAL.0)?.strip_suffix(TRIAL_EVAL.1)?.parse().ok()
+/// The seed in a file name `<prefix><N><suffix>`.
+fn seed_of(name: &str, (prefix, suffix): (&str, &str)) -> Option<u64> {
+    name.strip_prefix(prefix)?.strip_suffix(suffix)?.parse().ok()
+}
+
+/// The seed of a file of `stagerl eval`, `eval-<checkpoint>-trials<T>-seed<N>.csv`.
+fn eval_command_seed(name: &str) -> Option<u64> {
+    let (head, seed) = name.strip_prefix("eval-")?.strip_suffix(".csv")?.rsplit_once("-seed")?;
+    let (_, trials) = head.rsplit_once("-trials")?;
+    trials.parse::<u32>().ok()?;
+    seed.parse().ok()
+}
+
+/// The kind (0: closing evaluation, 1: older `eval-seed<N>.csv`, 2: `stagerl eval`) and seed of a
+/// per-trial evaluation file's name.
+fn trial_eval_kind(name: &str) -> Option<(u8, u64)> {
+    if let Some(s) = seed_of(name, FINAL_EVAL) {
+        Some((0, s))
+    } else if let Some(s) = seed_of(name, TRIAL_EVAL) {
+        Some((1, s))
+    } else {
+        eval_command_seed(name).map(|s| (2, s))
+    }
 }
 
 #[cfg(test)]
@@ -125,9 +184,18 @@ mod tests {
     fn trial_eval_names_round_trip() {
         let d = RunDir::new(Path::new("/r"));
         assert_eq!(d.trial_eval(1_000_003), Path::new("/r/eval-seed1000003.csv"));
-        assert_eq!(trial_eval_seed("eval-seed0.csv"), Some(0));
-        assert_eq!(trial_eval_seed("eval-seed1000003.csv"), Some(1_000_003));
-        assert_eq!(trial_eval_seed("eval-seedx.csv"), None);
-        assert_eq!(trial_eval_seed("eval.csv"), None);
+        assert_eq!(d.final_eval(7), Path::new("/r/eval-final-seed7.csv"));
+        assert_eq!(d.final_eval_record(7), Path::new("/r/eval-final-seed7.json"));
+        let best = d.best();
+        assert_eq!(d.eval_command(&best, 5, 3), Path::new("/r/eval-best-trials5-seed3.csv"));
+        assert_eq!(trial_eval_kind("eval-final-seed1000003.csv"), Some((0, 1_000_003)));
+        assert_eq!(trial_eval_kind("eval-seed0.csv"), Some((1, 0)));
+        assert_eq!(trial_eval_kind("eval-seed1000003.csv"), Some((1, 1_000_003)));
+        assert_eq!(trial_eval_kind("eval-seedx.csv"), None);
+        assert_eq!(trial_eval_kind("eval.csv"), None);
+        assert_eq!(trial_eval_kind("eval-best-trials500-seed7.csv"), Some((2, 7)));
+        assert_eq!(trial_eval_kind("eval-my-ck-trials5-seed0.csv"), Some((2, 0)));
+        assert_eq!(trial_eval_kind("eval-best-seed7.csv"), None);
+        assert_eq!(trial_eval_kind("eval-final-seed7.json"), None);
     }
 }

@@ -1,7 +1,7 @@
 use anyhow::{Context, Result};
 use stagerl::controller::JacobianController;
-use stagerl::env::{rollout, Flow, Observed, Outcome, Policy, ReachEnv, Scratch, Transition};
-use stagerl::train::eval::evaluate_with;
+use stagerl::env::{rollout, Flow, Observed, Outcome, ReachEnv, Scratch, Transition};
+use stagerl::train::eval::{evaluate_with, stop_when};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -34,7 +34,11 @@ pub fn run(args: Args) -> Result<()> {
         args.seed
     )?;
     let mut scratch = Scratch::new(&env);
+    let stop = super::train::stop_flag()?;
     for ep in 1..=args.show {
+        if stop.load(std::sync::atomic::Ordering::SeqCst) {
+            stopped(&format!("stopped on request after {} episodes shown", ep - 1));
+        }
         env.reset();
         let t = env.target();
         outln!(
@@ -70,8 +74,19 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     if args.trials > 0 {
-        let (s, _) = evaluate_with(&mut env, args.trials, args.seed, &mut Policy(ctl.policy()))?;
+        let mut driver = Observed(ctl.policy(), stop_when(Some(&stop)));
+        let (s, _) = match evaluate_with(&mut env, args.trials, args.seed, &mut driver) {
+            Err(e @ stagerl::Error::Stopped { .. }) => stopped(&e.to_string()),
+            other => other?,
+        };
         outln!("\n{}", super::eval::summary_line(&s, false))?;
     }
     Ok(())
+}
+
+/// Exit 130 after a stop request, saying how far the demo got.
+fn stopped(what: &str) -> ! {
+    // Standard error may be closed too; the exit code still tells.
+    let _ = errln!("stagerl: {what}");
+    std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
 }

@@ -19,19 +19,42 @@ pub struct Args {
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
+    /// Replace an existing evaluation file of the same checkpoint, trials and seed that holds
+    /// other results (an identical one is left as is).
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
     let dir = RunDir::new(&args.run);
     let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.display()))?;
-    let e = train::evaluate_run(&dir, &cfg, args.checkpoint.as_deref(), args.trials, args.seed)?;
+    let _lock = super::train::lock_run(&args.run)?; // it writes into the run
+    let stop = super::train::stop_flag()?;
+    let e = match train::evaluate_run(
+        &dir,
+        &cfg,
+        args.checkpoint.as_deref(),
+        args.trials,
+        args.seed,
+        Some(&stop),
+    ) {
+        Err(e @ stagerl::Error::Stopped { .. }) => {
+            // Standard error may be closed too; the exit code still tells.
+            let _ = errln!("stagerl: {e}");
+            std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
+        }
+        other => other?,
+    };
+    // Its own file, named by checkpoint, trials and seed: never the closing evaluation
+    // (eval-final-seed<N>.csv) a report reads.
+    let (csv, written) = train::eval::write_command_eval(&dir, &e, args.seed, args.force)?;
     if !args.json {
         outln!(
-            "{} on {} trials (seed {}), per-trial CSV {}",
+            "{} on {} trials (seed {}), per-trial CSV {} ({written})",
             e.checkpoint.display(),
             args.trials,
             args.seed,
-            e.csv.display()
+            csv.display()
         )?;
     }
     outln!("{}", summary_line(&e.summary, args.json))

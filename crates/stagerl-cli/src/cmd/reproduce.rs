@@ -31,6 +31,9 @@ pub fn run(args: Args) -> Result<()> {
     let (index, count) =
         experiment::resolve_shard(args.task_index, args.task_count, &|name| std::env::var(name).ok())?;
     let runs = experiment::shard(preset.runs(), index, count)?;
+    // Check every run first: a refusal writes nothing. preset.toml is written under the sweep's
+    // lock, once (left as is when it already holds this text).
+    experiment::check_all_existing(&runs, &args.out)?;
     experiment::write_preset(&args.out, &text)?;
     let total = runs.len();
     outln!(
@@ -61,6 +64,16 @@ pub fn run(args: Args) -> Result<()> {
     if !outcome.failures.is_empty() {
         bail!("{} of {total} runs failed:\n  {}", outcome.failures.len(), outcome.failures.join("\n  "));
     }
+    if outcome.taken > 0 {
+        return outln!(
+            "{} of {total} runs done here in {:.0} s, {} taken by other processes (they finish there). \
+             Once all are done, tables and figures: stagerl report {}",
+            total - outcome.taken,
+            outcome.wall_s,
+            outcome.taken,
+            args.out.display()
+        );
+    }
     outln!(
         "all {total} runs done in {:.0} s. Tables and figures: stagerl report {}",
         outcome.wall_s,
@@ -75,7 +88,11 @@ fn print_run(output: &crate::out::RunOutput, r: &RunReport<'_>) {
             let what = match r.before {
                 Some(RunStatus::Done) => "already done".to_string(),
                 Some(RunStatus::Partial { episode }) => format!("resumed after episode {episode}, done"),
-                _ => "done".to_string(),
+                Some(RunStatus::Trained) => "trained before, evaluated, done".to_string(),
+                Some(RunStatus::StaleEval) => {
+                    "re-evaluated (its evaluation had other settings), done".to_string()
+                }
+                Some(RunStatus::New) | None => "done".to_string(),
             };
             output.line(format_args!(
                 "[{n}/{total}] {name}: {what} in {:.0} s: success {:.1} %, mean reward {:.3}, mean steps {}",
@@ -87,6 +104,13 @@ fn print_run(output: &crate::out::RunOutput, r: &RunReport<'_>) {
         }
         Err(stagerl::Error::Interrupted { episode, .. }) => {
             output.line(format_args!("[{n}/{total}] {name}: interrupted after episode {episode}, saved"));
+        }
+        Err(stagerl::Error::Stopped { .. }) => {
+            output.line(format_args!("[{n}/{total}] {name}: interrupted during its evaluation (runs again)"));
+        }
+        Err(stagerl::Error::Locked { holder, .. }) => {
+            let pid = holder.map(|p| format!(" (pid {p})")).unwrap_or_default();
+            output.line(format_args!("[{n}/{total}] {name}: taken by another process{pid}, finishes there"));
         }
         Err(e) => output.line(format_args!("[{n}/{total}] {name}: FAILED: {e}")),
     }

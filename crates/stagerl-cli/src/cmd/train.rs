@@ -2,7 +2,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use stagerl::agent::Algo;
 use stagerl::reward::RewardFunction;
-use stagerl::train::{self, Progress, Resumed, RunDir, TrainOptions};
+use stagerl::train::{self, final_eval, Progress, Resumed, RunDir, TrainOptions};
 use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -35,7 +35,8 @@ pub struct Args {
     /// Replace a run already in the output directory.
     #[arg(long, conflicts_with = "resume")]
     force: bool,
-    /// Continue the run in this directory from its last checkpoint (with its own config).
+    /// Continue the run in this directory from its last checkpoint (with its own config); a
+    /// trained run without its closing evaluation (killed during it) is evaluated.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "seed", "episodes", "out", "config"])]
     resume: Option<PathBuf>,
     /// Trials of the closing evaluation (deterministic policy); 0 skips it.
@@ -55,6 +56,18 @@ pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     Ok(flag)
 }
 
+/// The stop flag of training (raised by SIGINT, SIGTERM and a failing output, see
+/// [`RunOutput`]) and that of the closing evaluation (signals alone: output that fails after the
+/// last episode lets the run finish, evaluation included).
+fn stop_flags() -> Result<(Arc<AtomicBool>, Arc<AtomicBool>)> {
+    Ok((stop_flag()?, stop_flag()?))
+}
+
+/// Take the lock of the run directory `dir` (created if needed) for this process.
+pub fn lock_run(dir: &Path) -> Result<stagerl::lock::DirLock> {
+    stagerl::lock::DirLock::run(dir).with_context(|| format!("taking the run directory {}", dir.display()))
+}
+
 /// Map an interruption to a message and the interrupted exit code; a stop caused by standard
 /// output failing (closed pipe, full disk) is an error saying how to resume.
 fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path, output: &RunOutput) -> Result<T> {
@@ -70,6 +83,14 @@ fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path, output: &RunOutput) -
             let _ = errln!(
                 "stagerl: interrupted after episode {episode}; saved to {saved}. Continue with: stagerl train --resume {resume}"
             );
+            std::process::exit(i32::from(INTERRUPTED_EXIT));
+        }
+        Err(e @ stagerl::Error::Stopped { .. }) => {
+            let resume = dir.display();
+            if let Some(failed) = output.failed() {
+                bail!("{failed}: {e}. Continue with: stagerl train --resume {resume}");
+            }
+            let _ = errln!("stagerl: {e}. Continue with: stagerl train --resume {resume}");
             std::process::exit(i32::from(INTERRUPTED_EXIT));
         }
         other => other.context("training"),
@@ -111,11 +132,25 @@ pub fn run(args: Args) -> Result<()> {
         stagerl::rundir::first_free(Path::new("runs"), &stagerl::experiment::run_name(&cfg))
     });
     let dir = RunDir::new(&out);
-    if dir.holds_run() && !args.force {
-        bail!(
-            "{} already holds a run (its config.toml exists): pass --force to replace it, or choose another --out",
-            out.display()
-        );
+    let refuse_existing = || -> Result<()> {
+        if dir.holds_run() && !args.force {
+            stagerl::lock::DirLock::check_free(&out)?; // "in use" says more than "exists"
+            bail!(
+                "{} already holds a run (its config.toml exists): pass --force to replace it, or choose another --out",
+                out.display()
+            );
+        }
+        Ok(())
+    };
+    refuse_existing()?;
+    // Hold the run directory's lock from here to the end (a second process fails fast); look
+    // again under the lock, another process may have started a run meanwhile.
+    let _lock = lock_run(&out)?;
+    refuse_existing()?;
+    if dir.holds_run() {
+        // --force: nothing of the older run may be read as the new one's.
+        let removed = train::replace::remove_previous_run(&dir)?;
+        outln!("--force: removed the older run's {}", train::replace::describe(&removed))?;
     }
     dir.ensure_writable().with_context(|| format!("the run directory {} is not writable", out.display()))?;
 
@@ -128,47 +163,57 @@ pub fn run(args: Args) -> Result<()> {
         cfg.train.episodes,
         out.display()
     )?;
-    let stop = stop_flag()?;
+    let (stop, signals) = stop_flags()?;
     let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };
     let mut reporter = Reporter::new(cfg.train.episodes, &output);
     let summary = finish(train::train_with(&cfg, &out, &opts, &mut |p| reporter.episode(p)), &out, &output)?;
     reporter.finish();
-    report_and_evaluate(&cfg, &out, &summary, args.eval_trials, &output)?;
+    print_summary(&summary, &output);
+    closing_evaluation(&cfg, &out, args.eval_trials, &signals, &output)?;
     output_ok(&output, &out)
 }
 
 fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
     let run = RunDir::new(dir);
     let cfg = run.load_config().with_context(|| format!("reading the run in {}", dir.display()))?;
+    let _lock = lock_run(dir)?;
     match train::checkpointed_episode(dir)? {
         Some((episode, false)) => outln!("resuming {} after episode {episode}", dir.display())?,
         Some((_, true)) => {}
         None => outln!("{} has no checkpoint yet: starting it over", dir.display())?,
     }
-    let stop = stop_flag()?;
+    let (stop, signals) = stop_flags()?;
     let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };
     let mut reporter = Reporter::new(cfg.train.episodes, &output);
     match finish(train::resume(dir, &opts, &mut |p| reporter.episode(p)), dir, &output)? {
+        // Trained but never evaluated (killed during its closing evaluation, say): the
+        // evaluation runs now.
+        Resumed::AlreadyFinished(s)
+            if eval_trials > 0 && final_eval::recorded(dir, train::eval::DEFAULT_EVAL_SEED).is_none() =>
+        {
+            output.line(format_args!(
+                "{} already trained ({} episodes) but not evaluated: running its closing evaluation",
+                dir.display(),
+                s.episodes
+            ));
+            closing_evaluation(&cfg, dir, eval_trials, &signals, &output)?;
+            output_ok(&output, dir)
+        }
         Resumed::AlreadyFinished(s) => {
             outln!("{} already finished ({} episodes); nothing to do", dir.display(), s.episodes)
         }
         Resumed::Finished(s) => {
             reporter.finish();
-            report_and_evaluate(&cfg, dir, &s, eval_trials, &output)?;
+            print_summary(&s, &output);
+            closing_evaluation(&cfg, dir, eval_trials, &signals, &output)?;
             output_ok(&output, dir)
         }
     }
 }
 
-fn report_and_evaluate(
-    cfg: &stagerl::config::Config,
-    out: &std::path::Path,
-    summary: &train::TrainSummary,
-    eval_trials: u32,
-    output: &RunOutput,
-) -> Result<()> {
+fn print_summary(summary: &train::TrainSummary, output: &RunOutput) {
     output.line(format_args!(
         "trained {} episodes, {} env steps, {} updates in {:.1} s ({:.0} env steps/s)",
         summary.episodes,
@@ -177,18 +222,29 @@ fn report_and_evaluate(
         summary.wall_s,
         summary.env_steps as f64 / summary.wall_s
     ));
-    if eval_trials > 0 {
-        // The checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0: not
-        // the `train.eval_seed` targets the best checkpoint was chosen on.
-        let seed = train::eval::DEFAULT_EVAL_SEED;
-        let e = train::evaluate_run(&RunDir::new(out), cfg, None, eval_trials, seed)?;
-        output.line(format_args!(
-            "{} on {eval_trials} new targets (seed {seed}), per-trial CSV {}",
-            e.checkpoint.display(),
-            e.csv.display()
-        ));
-        output.line(format_args!("{}", super::eval::summary_line(&e.summary, false)));
+}
+
+/// The closing evaluation, recorded as the run's last step (see `train::final_eval`): the
+/// checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0, not the
+/// `train.eval_seed` targets the best checkpoint was chosen on. A stop ends it (exit 130).
+fn closing_evaluation(
+    cfg: &stagerl::config::Config,
+    out: &Path,
+    eval_trials: u32,
+    stop: &AtomicBool,
+    output: &RunOutput,
+) -> Result<()> {
+    if eval_trials == 0 {
+        return Ok(());
     }
+    let seed = train::eval::DEFAULT_EVAL_SEED;
+    let (s, checkpoint) = finish(final_eval::run(out, cfg, eval_trials, seed, Some(stop)), out, output)?;
+    output.line(format_args!(
+        "{} on {eval_trials} new targets (seed {seed}), per-trial CSV {}",
+        checkpoint.display(),
+        RunDir::new(out).final_eval(seed).display()
+    ));
+    output.line(format_args!("{}", super::eval::summary_line(&s, false)));
     Ok(())
 }
 

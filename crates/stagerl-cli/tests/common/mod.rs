@@ -79,3 +79,35 @@ pub fn assert_same_run(full: &Path, cut: &Path, episodes: usize, evals: usize, w
     assert!(a.tensor_names().count() > 20);
     assert!(a.same_contents(&b), "final networks or metadata differ {what}");
 }
+
+/// Every scalar of a run's TensorBoard event files (`tb/`), as `(tag, step, value)`, files in
+/// name order.
+pub fn tb_scalars(dir: &Path) -> Vec<(String, i64, f32)> {
+    let mut files: Vec<PathBuf> =
+        std::fs::read_dir(dir.join("tb")).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    files.iter().flat_map(|f| stagerl::log::tensorboard::read_scalars(f).unwrap()).collect()
+}
+
+/// Panics unless every tag of `scalars` has the steps `1..=n` exactly once each (`eval/` tags:
+/// the multiples of `eval_every` and `n`).
+pub fn assert_steps_once(scalars: &[(String, i64, f32)], n: i64, eval_every: i64, what: &str) {
+    let mut by_tag: std::collections::BTreeMap<&str, Vec<i64>> = Default::default();
+    for (tag, step, _) in scalars {
+        by_tag.entry(tag.as_str()).or_default().push(*step);
+    }
+    assert!(by_tag.contains_key("train/episode_reward"), "{what}: no train/episode_reward");
+    for (tag, mut steps) in by_tag {
+        steps.sort_unstable();
+        let expect: Vec<i64> = if tag.starts_with("eval/") {
+            (1..=n).filter(|s| s % eval_every == 0 || *s == n).collect()
+        } else if tag.starts_with("train/") {
+            (1..=n).collect()
+        } else {
+            // Losses start with learning: a contiguous range ending at n.
+            let first = *steps.first().unwrap();
+            (first..=n).collect()
+        };
+        assert_eq!(steps, expect, "{what}: steps of {tag}");
+    }
+}

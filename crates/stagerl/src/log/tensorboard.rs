@@ -121,34 +121,102 @@ impl EventWriter {
 /// tests and by tools that summarise runs.
 pub fn read_scalars(path: &Path) -> Result<Vec<(String, i64, f32)>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let bad = |what: &str| Error::InvalidInput(format!("{}: {what}", path.display()));
+    let (records, valid) = valid_records(&bytes);
+    if valid != bytes.len() {
+        return Err(Error::InvalidInput(format!(
+            "{}: torn or corrupt record (length or CRC mismatch) at byte {valid} of {}",
+            path.display(),
+            bytes.len()
+        )));
+    }
+    Ok(records.iter().filter_map(|r| decode_scalar(r.data)).collect())
+}
+
+/// One record of an event file: its `Event` bytes (as written, wall time included).
+struct Record<'a> {
+    data: &'a [u8],
+}
+
+/// The records of an event file up to the first torn or corrupt one (a length or data CRC
+/// mismatch, or a record cut short, as a killed writer leaves at the end), with the offset where
+/// the valid part ends.
+fn valid_records(bytes: &[u8]) -> (Vec<Record<'_>>, usize) {
     let mut out = Vec::new();
     let mut i = 0;
-    while i < bytes.len() {
-        if i + 12 > bytes.len() {
-            return Err(bad("truncated record header"));
-        }
+    while i + 12 <= bytes.len() {
         let len_bytes = &bytes[i..i + 8];
-        let len = u64::from_le_bytes(len_bytes.try_into().unwrap()) as usize;
-        let crc = u32::from_le_bytes(bytes[i + 8..i + 12].try_into().unwrap());
-        if crc != masked_crc32c(len_bytes) {
-            return Err(bad("length CRC mismatch"));
-        }
+        let len = u64::from_le_bytes(len_bytes.try_into().expect("8 bytes"));
+        let crc = u32::from_le_bytes(bytes[i + 8..i + 12].try_into().expect("4 bytes"));
         let start = i + 12;
-        if start + len + 4 > bytes.len() {
-            return Err(bad("truncated record"));
+        let Some(end) = usize::try_from(len).ok().and_then(|l| start.checked_add(l)) else { break };
+        if crc != masked_crc32c(len_bytes) || end + 4 > bytes.len() {
+            break;
         }
-        let data = &bytes[start..start + len];
-        let crc = u32::from_le_bytes(bytes[start + len..start + len + 4].try_into().unwrap());
-        if crc != masked_crc32c(data) {
-            return Err(bad("data CRC mismatch"));
+        let data = &bytes[start..end];
+        if u32::from_le_bytes(bytes[end..end + 4].try_into().expect("4 bytes")) != masked_crc32c(data) {
+            break;
         }
-        if let Some(s) = decode_scalar(data) {
-            out.push(s);
-        }
-        i = start + len + 4;
+        out.push(Record { data });
+        i = end + 4;
     }
-    Ok(out)
+    (out, i)
+}
+
+/// The event files of a TensorBoard directory, sorted by name (which starts with the creation
+/// time); a missing directory has none.
+pub fn event_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(Error::io(dir, e)),
+    };
+    let mut files = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(dir, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with("events.out.tfevents.") && !crate::io::is_temp_name(&name) {
+            files.push(entry.path());
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// Cut the event log in `dir` back to what a checkpoint has seen, so that a resumed run logs
+/// every (tag, step) exactly once, as an uninterrupted run does: keep the scalars for which
+/// `keep(tag, step)` holds (say, step <= the checkpoint's episode; the first of any duplicate),
+/// drop torn or corrupt trailing records, and write them into one file (the oldest file's name,
+/// replaced atomically) before removing the others. Killed at any point, a later rewind still
+/// gives the same result. Returns the scalars kept.
+pub fn rewind(dir: &Path, keep: impl Fn(&str, i64) -> bool) -> Result<usize> {
+    let files = event_files(dir)?;
+    let Some(first) = files.first() else { return Ok(0) };
+    let mut seen = std::collections::HashSet::new();
+    let mut out = frame(&encode_event(now(), 0, Some("brain.Event:2"), None));
+    for path in &files {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        for rec in valid_records(&bytes).0 {
+            if let Some((tag, step, _)) = decode_scalar(rec.data) {
+                if keep(&tag, step) && seen.insert((tag, step)) {
+                    out.extend_from_slice(&frame(rec.data));
+                }
+            }
+        }
+    }
+    crate::io::write_atomic(first, &out)?;
+    for path in &files[1..] {
+        std::fs::remove_file(path).map_err(|e| Error::io(path, e))?;
+    }
+    Ok(seen.len())
+}
+
+/// Remove every event file of `dir` (a new run replacing an older one).
+pub fn remove_all(dir: &Path) -> Result<Vec<PathBuf>> {
+    let files = event_files(dir)?;
+    for path in &files {
+        std::fs::remove_file(path).map_err(|e| Error::io(path, e))?;
+    }
+    Ok(files)
 }
 
 fn get_varint(d: &[u8], i: &mut usize) -> Option<u64> {
@@ -225,6 +293,46 @@ mod tests {
         bytes[n - 6] ^= 1;
         std::fs::write(w.path(), &bytes).unwrap();
         assert!(read_scalars(w.path()).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn rewind_keeps_each_step_once_up_to_the_checkpoint_and_drops_a_torn_tail() {
+        let dir = std::env::temp_dir().join(format!("stagerl-tb-rewind-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let write = |name: &str, steps: std::ops::RangeInclusive<i64>, torn: bool| {
+            let mut bytes = frame(&encode_event(1.0, 0, Some("brain.Event:2"), None));
+            for s in steps {
+                bytes.extend(frame(&encode_event(2.0, s, None, Some(("a", s as f32)))));
+                bytes.extend(frame(&encode_event(2.0, s, None, Some(("b", -s as f32)))));
+            }
+            if torn {
+                let rec = frame(&encode_event(2.0, 99, None, Some(("a", 99.0))));
+                bytes.extend(&rec[..rec.len() - 3]);
+            }
+            std::fs::write(dir.join(name), bytes).unwrap();
+        };
+        // Session 1 logged 1..=7 (checkpoint at 5) and was killed mid-record; session 2 resumed
+        // at 5 without a rewind (as before this fix) and logged 6..=9.
+        write("events.out.tfevents.100.h.1", 1..=7, true);
+        write("events.out.tfevents.200.h.2", 6..=9, false);
+        std::fs::write(dir.join("events.out.tfevents.300.h.3.tmp-3"), b"junk").unwrap();
+        assert_eq!(rewind(&dir, |_, s| s <= 8).unwrap(), 16);
+        let files = event_files(&dir).unwrap();
+        assert_eq!(files, [dir.join("events.out.tfevents.100.h.1")]);
+        let got = read_scalars(&files[0]).unwrap();
+        let mut want = Vec::new();
+        for s in 1..=8 {
+            want.push(("a".to_string(), s, s as f32));
+            want.push(("b".to_string(), s, -s as f32));
+        }
+        assert_eq!(got, want);
+        // Rewinding again, or to an earlier step, is consistent.
+        assert_eq!(rewind(&dir, |_, s| s <= 8).unwrap(), 16);
+        assert_eq!(rewind(&dir, |t, s| s < 3 || (s == 3 && t == "a")).unwrap(), 5);
+        assert_eq!(read_scalars(&files[0]).unwrap(), want[..5]);
+        assert_eq!(remove_all(&dir).unwrap().len(), 1);
+        assert_eq!(rewind(&dir, |_, _| true).unwrap(), 0);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -1,6 +1,7 @@
 //! Finding run directories and reading what a run wrote: `config.toml`, `episodes.csv`,
-//! `eval.csv` and the per-trial evaluation CSV `eval-seed<N>.csv` (the readers are beside their
-//! writers in [`crate::log::csv`], the file names in [`crate::rundir`]).
+//! `eval.csv` and the per-trial evaluation CSV (`eval-final-seed<N>.csv`, else `eval-seed<N>.csv`,
+//! else one of `stagerl eval`; the readers are beside their writers in [`crate::log::csv`], the
+//! file names in [`crate::rundir`]).
 
 use std::path::{Path, PathBuf};
 

@@ -312,7 +312,7 @@ fn group_notes(group: &Group, runs: &[RunSummary], converged: usize) -> (Vec<Str
     let no_eval: Vec<u64> = runs.iter().filter(|r| r.eval.is_none()).map(|r| r.seed).collect();
     if !no_eval.is_empty() && n > 0 {
         if no_eval.len() == n {
-            notes.push("no per-trial evaluation CSV (eval-seed<N>.csv)".into());
+            notes.push("no per-trial evaluation CSV (eval-final-seed<N>.csv, eval-seed<N>.csv or one of stagerl eval)".into());
         } else {
             notes.push(format!(
                 "no per-trial evaluation CSV for seed(s) {}; the evaluation columns average the others",

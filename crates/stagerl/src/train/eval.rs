@@ -2,10 +2,11 @@
 //! path that evaluates a run directory's checkpoint and writes its per-trial CSV.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::agent::Agent;
 use crate::config::Config;
-use crate::env::{rollout, Driver, Outcome, Policy, ReachEnv, Scratch};
+use crate::env::{rollout, Driver, Flow, Observed, Outcome, ReachEnv, Scratch, Transition};
 use crate::rundir::RunDir;
 use crate::{Error, Result};
 
@@ -28,7 +29,24 @@ pub fn evaluate(
     trials: u32,
     seed: u64,
 ) -> Result<(EvalSummary, Vec<TrialRecord>)> {
-    evaluate_with(env, trials, seed, &mut Policy(deterministic(agent)))
+    evaluate_until(agent, env, trials, seed, None)
+}
+
+/// [`evaluate`] that a stop request (`stop` set) ends within a step, with [`Error::Stopped`]
+/// (the environment's target stream is restored either way).
+pub fn evaluate_until(
+    agent: &mut dyn Agent,
+    env: &mut ReachEnv,
+    trials: u32,
+    seed: u64,
+    stop: Option<&AtomicBool>,
+) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    evaluate_with(env, trials, seed, &mut Observed(deterministic(agent), stop_when(stop)))
+}
+
+/// A rollout observer that stops the rollout ([`Flow::Stop`]) once `stop` is set.
+pub fn stop_when(stop: Option<&AtomicBool>) -> impl FnMut(&Transition<'_>) -> Result<Flow> + '_ {
+    move |_| Ok(if stop.is_some_and(|s| s.load(Ordering::SeqCst)) { Flow::Stop } else { Flow::Continue })
 }
 
 /// The deterministic policy of `agent` as a rollout policy; a non-finite action is a
@@ -49,8 +67,8 @@ pub fn deterministic(agent: &mut dyn Agent) -> impl FnMut(&ReachEnv, &mut [f32])
 
 /// Run `trials` episodes (eq. 16 rollouts) of `driver` on the targets of `seed` (the
 /// environment's own target stream is left as it was). A driver that stops a rollout
-/// ([`crate::env::Flow::Stop`]) ends the evaluation with [`Error::Interrupted`] (episode 0, no
-/// checkpoint), for the caller that owns the stop request to report.
+/// ([`Flow::Stop`], on a stop request) ends the evaluation with [`Error::Stopped`], for the
+/// caller that owns the stop request to report; nothing of it is returned.
 pub fn evaluate_with(
     env: &mut ReachEnv,
     trials: u32,
@@ -61,6 +79,20 @@ pub fn evaluate_with(
         return Err(Error::InvalidInput(format!("{trials} evaluation trials: need 1 to {MAX_EVAL_TRIALS}")));
     }
     let saved_rng = env.rng().clone();
+    let result = run_trials(env, trials, seed, driver);
+    env.set_rng(saved_rng);
+    let records = result?;
+    let summary = EvalSummary::of(&records).expect("at least one trial");
+    Ok((summary, records))
+}
+
+/// The trials of [`evaluate_with`].
+fn run_trials(
+    env: &mut ReachEnv,
+    trials: u32,
+    seed: u64,
+    driver: &mut impl Driver,
+) -> Result<Vec<TrialRecord>> {
     let mut scratch = Scratch::new(env);
     let mut records = Vec::with_capacity(trials as usize);
     for trial in 1..=trials {
@@ -72,7 +104,8 @@ pub fn evaluate_with(
         let (start, target) = (env.distance(), env.target());
         let result = rollout(env, &mut scratch, driver);
         let Outcome::Finished { reward, last } = result.map_err(|e| in_trial(e, trial))? else {
-            return Err(Error::Interrupted { episode: 0, checkpoint: PathBuf::new() });
+            let what = format!("an evaluation of {trials} trials (after {})", trial - 1);
+            return Err(Error::Stopped { what });
         };
         records.push(TrialRecord {
             trial,
@@ -84,9 +117,7 @@ pub fn evaluate_with(
             target: [target.x, target.y, target.z],
         });
     }
-    env.set_rng(saved_rng);
-    let summary = EvalSummary::of(&records).expect("at least one trial");
-    Ok((summary, records))
+    Ok(records)
 }
 
 /// A numerical fault names the trial it happened in.
@@ -115,35 +146,80 @@ pub fn load_run_agent(
     Ok((checkpoint, env, agent))
 }
 
-/// What [`evaluate_run`] did.
+/// What [`evaluate_run`] found.
 #[derive(Clone, Debug)]
 pub struct RunEval {
     /// The checkpoint evaluated.
     pub checkpoint: PathBuf,
     pub summary: EvalSummary,
-    /// The per-trial CSV written.
-    pub csv: PathBuf,
+    /// Every trial, for the per-trial CSV.
+    pub trials: Vec<TrialRecord>,
 }
 
 /// Evaluate a run directory's checkpoint (`checkpoint`, else the best available: best, final,
-/// latest) on `trials` targets of `seed` and write the per-trial CSV, `eval-seed<seed>.csv`.
+/// latest) on `trials` targets of `seed`, stopped by `stop` ([`Error::Stopped`]). Writes
+/// nothing: the closing evaluation ([`super::final_eval::run`]) and `stagerl eval`
+/// ([`write_command_eval`]) write their own files.
 pub fn evaluate_run(
     run: &RunDir,
     cfg: &Config,
     checkpoint: Option<&Path>,
     trials: u32,
     seed: u64,
+    stop: Option<&AtomicBool>,
 ) -> Result<RunEval> {
     let (checkpoint, mut env, mut agent) = load_run_agent(run, cfg, checkpoint)?;
-    let (summary, records) = evaluate(agent.as_mut(), &mut env, trials, seed)?;
-    let csv = run.trial_eval(seed);
-    write_trials_csv(&csv, &records)?;
-    Ok(RunEval { checkpoint, summary, csv })
+    let (summary, trials) = evaluate_until(agent.as_mut(), &mut env, trials, seed, stop)?;
+    Ok(RunEval { checkpoint, summary, trials })
 }
 
-/// Summarise a run's per-trial evaluation on the targets of `seed`.
+/// What [`write_command_eval`] did with the per-trial CSV.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Written {
+    /// A new file.
+    New,
+    /// The file held these very results; left as is.
+    Unchanged,
+    /// The file held other results and was replaced (`force`).
+    Replaced,
+}
+
+impl std::fmt::Display for Written {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Written::New => "written",
+            Written::Unchanged => "unchanged: the same results",
+            Written::Replaced => "replaced (--force)",
+        })
+    }
+}
+
+/// Write the per-trial CSV of an evaluation by `stagerl eval`, its own file
+/// ([`RunDir::eval_command`], never the closing evaluation a report reads), unless it already
+/// holds these results; a file with other results is replaced only with `force`. Returns the file.
+pub fn write_command_eval(run: &RunDir, e: &RunEval, seed: u64, force: bool) -> Result<(PathBuf, Written)> {
+    let trials = u32::try_from(e.trials.len()).expect("at most MAX_EVAL_TRIALS trials");
+    let csv = run.eval_command(&e.checkpoint, trials, seed);
+    let written = if !csv.exists() {
+        Written::New
+    } else if read_trials_csv(&csv).ok().as_deref() == Some(&e.trials[..]) {
+        return Ok((csv, Written::Unchanged));
+    } else if force {
+        Written::Replaced
+    } else {
+        return Err(Error::InvalidInput(format!(
+            "{} holds another evaluation of this checkpoint, trial count and seed (the checkpoint \
+             changed since?); pass --force to replace it",
+            csv.display()
+        )));
+    };
+    write_trials_csv(&csv, &e.trials)?;
+    Ok((csv, written))
+}
+
+/// Summarise a run's closing evaluation on the targets of `seed`.
 pub fn read_run_eval(run: &RunDir, seed: u64) -> Result<EvalSummary> {
-    let path = run.trial_eval(seed);
+    let path = run.final_eval(seed);
     EvalSummary::of(&read_trials_csv(&path)?)
         .ok_or_else(|| Error::InvalidInput(format!("{}: holds no trials", path.display())))
 }

@@ -16,12 +16,17 @@
 //!   then mean reward, on the `eval_seed` targets), for evaluation and deployment. Off-policy
 //!   agents, DDPG above all, oscillate after converging; the best checkpoint is the usual remedy
 //!   (as Stable-Baselines3's `EvalCallback`). Test it on other targets than it was chosen on.
+//! - `eval-final-seed<N>.csv` and its record `eval-final-seed<N>.json`: the closing evaluation
+//!   (see [`final_eval`]); `eval-<checkpoint>-trials<T>-seed<N>.csv`: evaluations by `stagerl eval`;
+//! - `.stagerl.lock`: the advisory lock of the process writing the run (see [`crate::lock`]).
 //!
 //! Metadata in both names the algorithm, the shapes and the config hash. [`resume`] continues a
 //! run from `latest.safetensors` so that its `episodes.csv` (but the wall time) and its networks
 //! are bit-identical to those of an uninterrupted run.
 
 pub mod eval;
+pub mod final_eval;
+pub mod replace;
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -40,7 +45,7 @@ use crate::{Error, Result};
 
 pub use crate::rundir::RunDir;
 pub use crate::schedule::{TrainConfig, MAX_EVAL_TRIALS};
-pub use eval::{evaluate, evaluate_run, EvalSummary, RunEval, TrialRecord};
+pub use eval::{evaluate, evaluate_run, evaluate_until, EvalSummary, RunEval, TrialRecord};
 
 /// What the loop reports after each episode.
 pub struct Progress<'a> {
@@ -118,6 +123,36 @@ struct LoopState {
     /// Best periodic evaluation so far: (success rate, mean reward), for `best.safetensors`.
     #[serde(default)]
     best_eval: Option<(f64, f64)>,
+    /// A stop came between the updates of this environment step: they go on first.
+    #[serde(default)]
+    step_under_way: Option<StepUnderWay>,
+    /// A stop came during the periodic evaluation of episode `episode`: it runs first.
+    #[serde(default)]
+    eval_due: bool,
+}
+
+/// An environment step taken whose updates are not all done yet (see [`LoopState`]); once they
+/// are, what the episode's end needs of it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+struct StepUnderWay {
+    /// Updates of this step still to do.
+    updates_left: u32,
+    terminated: bool,
+    done: bool,
+    /// D_PT after the step, metres, as `f64::to_bits` (exact through JSON).
+    final_distance_m_bits: u64,
+}
+
+impl StepUnderWay {
+    /// The step `step` with `updates_left` updates to do.
+    fn of(step: &Step, updates_left: u32) -> StepUnderWay {
+        StepUnderWay {
+            updates_left,
+            terminated: step.terminated,
+            done: step.done(),
+            final_distance_m_bits: step.terms.distance.to_bits(),
+        }
+    }
 }
 
 /// Options of a training session.
@@ -162,6 +197,8 @@ impl Trainer {
             wall_s: 0.0,
             finished: false,
             best_eval: None,
+            step_under_way: None,
+            eval_due: false,
         };
         Ok(Trainer {
             hash: config_hash(cfg),
@@ -266,7 +303,13 @@ impl Trainer {
             out.push('\n');
         }
         crate::io::write_atomic(&path, out.as_bytes())?;
-        crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())
+        crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
+        // The TensorBoard log too: each tag's steps up to the checkpoint, once (but an evaluation
+        // still due at the checkpoint's episode, which runs again).
+        let (ep, eval_due) = (self.state.episode as i64, self.state.eval_due);
+        let keep =
+            |tag: &str, step: i64| step < ep || (step == ep && !(eval_due && tag.starts_with("eval/")));
+        crate::log::tensorboard::rewind(&self.dir.tb(), keep).map(|_| ())
     }
 
     /// Train until `train.episodes` episodes are done or `stop` is set.
@@ -282,13 +325,21 @@ impl Trainer {
         let mut scratch = Scratch::new(&self.env);
         let mut last_stats: Option<UpdateStats> = None;
         let episodes = self.cfg.train.episodes;
+        // A periodic evaluation a stop interrupted runs first, as it would have.
+        if let Err(e) = self.periodic_eval(&mut logs.tb, opts.stop) {
+            return Err(self.stopped(e, wall()));
+        }
         while self.state.episode < episodes {
             let Some(last) = self.collect_episode(&mut scratch, &mut last_stats, &stop_requested)? else {
                 return Err(self.interrupted(wall()));
             };
             let record = self.end_episode(&last, wall(), &mut logs, last_stats.as_ref())?;
-            let eval = self.evaluate_and_keep_best(&mut logs.tb)?;
-            self.checkpoint(&record)?;
+            self.state.eval_due = self.cfg.train.is_eval_point(record.episode);
+            let eval = match self.periodic_eval(&mut logs.tb, opts.stop) {
+                Ok(eval) => eval,
+                Err(e) => return Err(self.stopped(e, record.wall_s)),
+            };
+            self.checkpoint(&record, &mut logs.tb)?;
             on_episode(&Progress { record: &record, stats: last_stats, eval: eval.as_ref(), episodes });
             if record.episode % 50 == 0 {
                 logs.tb.flush()?;
@@ -318,6 +369,15 @@ impl Trainer {
         Ok(Logs { episodes, tb: EventWriter::create(&self.dir.tb())? })
     }
 
+    /// A stop request that ended an evaluation ([`Error::Stopped`]) saves the run as any stop;
+    /// other errors pass.
+    fn stopped(&mut self, e: Error, wall_s: f64) -> Error {
+        match e {
+            Error::Stopped { .. } => self.interrupted(wall_s),
+            other => other,
+        }
+    }
+
     /// Save the run on a stop request; the error to return.
     fn interrupted(&mut self, wall_s: f64) -> Error {
         self.state.wall_s = wall_s;
@@ -328,14 +388,25 @@ impl Trainer {
     }
 
     /// Collect a step at a time until the episode under way (or a new one) ends: the eq. 16
-    /// rollout of the exploring agent, storing every transition and updating after each step.
-    /// `None` when a stop request left it unfinished.
+    /// rollout of the exploring agent, storing every transition and updating after each step
+    /// (first the updates left of a step a stop interrupted). `None` when a stop request left
+    /// it unfinished.
     fn collect_episode(
         &mut self,
         scratch: &mut Scratch,
         last_stats: &mut Option<UpdateStats>,
         stop_requested: &dyn Fn() -> bool,
-    ) -> Result<Option<Step>> {
+    ) -> Result<Option<StepUnderWay>> {
+        if let Some(step) = self.state.step_under_way.take() {
+            let steps = self.env.steps();
+            let mut collector = self.collector(last_stats, stop_requested);
+            if !collector.update(step, steps)? {
+                return Ok(None);
+            }
+            if step.done {
+                return Ok(Some(step));
+            }
+        }
         if !self.state.in_episode {
             self.env.reset();
             self.agent.begin_episode();
@@ -352,15 +423,34 @@ impl Trainer {
             stop_requested,
         };
         match rollout(&mut self.env, scratch, &mut collector)? {
-            Outcome::Finished { last, .. } => Ok(Some(last)),
+            // A stop between the last step's updates leaves them (and the episode's end) to do.
+            Outcome::Finished { .. } if self.state.step_under_way.is_some() => Ok(None),
+            Outcome::Finished { last, .. } => Ok(Some(StepUnderWay::of(&last, 0))),
             Outcome::Stopped => Ok(None),
+        }
+    }
+
+    /// The step collector over the run's agent, buffer and state.
+    fn collector<'a>(
+        &'a mut self,
+        last_stats: &'a mut Option<UpdateStats>,
+        stop_requested: &'a dyn Fn() -> bool,
+    ) -> Collector<'a> {
+        Collector {
+            agent: self.agent.as_mut(),
+            buffer: &mut self.buffer,
+            batch: &mut self.batch,
+            state: &mut self.state,
+            cfg: &self.cfg.agent,
+            last_stats,
+            stop_requested,
         }
     }
 
     /// End an episode: check the networks, count it, write its row and its TensorBoard scalars.
     fn end_episode(
         &mut self,
-        last: &Step,
+        last: &StepUnderWay,
         wall_s: f64,
         logs: &mut Logs,
         stats: Option<&UpdateStats>,
@@ -379,7 +469,7 @@ impl Trainer {
             reward: self.state.episode_reward,
             steps: self.env.steps(),
             success: last.terminated,
-            final_distance_m: last.terms.distance,
+            final_distance_m: f64::from_bits(last.final_distance_m_bits),
             env_steps: self.state.env_steps,
             wall_s,
         };
@@ -402,16 +492,27 @@ impl Trainer {
         Ok(record)
     }
 
-    /// At an evaluation point: evaluate the deterministic policy on the `eval_seed` targets,
-    /// append the row to `eval.csv` and keep the agent as `best.safetensors` when it is the best
-    /// so far (success rate, then mean reward).
-    fn evaluate_and_keep_best(&mut self, tb: &mut EventWriter) -> Result<Option<EvalSummary>> {
+    /// The periodic evaluation of the episode just finished, when due (`state.eval_due`, at an
+    /// evaluation point): evaluate the deterministic policy on the `eval_seed` targets, append
+    /// the row to `eval.csv`, its TensorBoard scalars, and keep the agent as `best.safetensors`
+    /// when it is the best so far (success rate, then mean reward). A stop request ends it with
+    /// [`Error::Stopped`], `eval_due` still set.
+    fn periodic_eval(
+        &mut self,
+        tb: &mut EventWriter,
+        stop: Option<&AtomicBool>,
+    ) -> Result<Option<EvalSummary>> {
         let (train, episode) = (&self.cfg.train, self.state.episode);
-        if !train.is_eval_point(episode) {
+        if !self.state.eval_due {
             return Ok(None);
         }
-        let (summary, _) =
-            evaluate(self.agent.as_mut(), &mut self.eval_env, train.eval_trials, train.eval_seed)?;
+        let (summary, _) = evaluate_until(
+            self.agent.as_mut(),
+            &mut self.eval_env,
+            train.eval_trials,
+            train.eval_seed,
+            stop,
+        )?;
         let point = EvalPoint {
             episode,
             env_steps: self.state.env_steps,
@@ -434,14 +535,17 @@ impl Trainer {
             ck.put_json("eval_mean_reward", &summary.mean_reward);
             ck.save(&self.dir.best())?;
         }
+        self.state.eval_due = false;
         Ok(Some(summary))
     }
 
     /// Every `checkpoint_every_episodes` episodes (but the last, which [`Trainer::run`] saves
-    /// with the final agent): the full state to `latest.safetensors`.
-    fn checkpoint(&mut self, record: &EpisodeRecord) -> Result<()> {
+    /// with the final agent): the full state to `latest.safetensors`, after the event log is
+    /// flushed (what the checkpoint has seen is on disk, for the rewind of a resume).
+    fn checkpoint(&mut self, record: &EpisodeRecord, tb: &mut EventWriter) -> Result<()> {
         if self.cfg.train.is_checkpoint_point(record.episode) {
             self.state.wall_s = record.wall_s;
+            tb.flush()?;
             self.save_latest()?;
         }
         Ok(())
@@ -477,16 +581,35 @@ struct Collector<'a> {
 }
 
 impl Collector<'_> {
-    fn check_loss(&self, what: &str, v: Option<f64>, env: &ReachEnv) -> Result<()> {
+    fn check_loss(&self, what: &str, v: Option<f64>, steps: u32) -> Result<()> {
         match v {
             Some(v) if !v.is_finite() => Err(Error::NumericalFault(format!(
-                "{what} = {v} at episode {}, step {} (update {}); the last good checkpoint is left in place",
+                "{what} = {v} at episode {}, step {steps} (update {}); the last good checkpoint is left in place",
                 self.state.episode + 1,
-                env.steps(),
                 self.state.updates
             ))),
             _ => Ok(()),
         }
+    }
+
+    /// The updates left of `step` (the environment's step `steps` of the episode). A stop
+    /// request between two updates keeps the step under way in the state and returns `false`
+    /// (many `updates_per_step` do not delay a stop).
+    fn update(&mut self, mut step: StepUnderWay, steps: u32) -> Result<bool> {
+        while step.updates_left > 0 {
+            if (self.stop_requested)() {
+                self.state.step_under_way = Some(step);
+                return Ok(false);
+            }
+            self.buffer.sample_into(&mut self.state.replay_rng, self.batch);
+            let stats = self.agent.update(self.batch);
+            self.state.updates += 1;
+            step.updates_left -= 1;
+            self.check_loss("critic loss", Some(stats.critic_loss), steps)?;
+            self.check_loss("actor loss", stats.actor_loss, steps)?;
+            *self.last_stats = Some(stats);
+        }
+        Ok(true)
     }
 }
 
@@ -517,17 +640,10 @@ impl Driver for Collector<'_> {
         self.state.episode_reward += reward;
         self.buffer.push(t.obs, t.action, reward, t.env.observation(), t.step.terminated);
         self.state.env_steps += 1;
-        if self.state.env_steps >= self.cfg.learning_starts {
-            for _ in 0..self.cfg.updates_per_step {
-                self.buffer.sample_into(&mut self.state.replay_rng, self.batch);
-                let stats = self.agent.update(self.batch);
-                self.state.updates += 1;
-                self.check_loss("critic loss", Some(stats.critic_loss), t.env)?;
-                self.check_loss("actor loss", stats.actor_loss, t.env)?;
-                *self.last_stats = Some(stats);
-            }
-        }
-        Ok(if (self.stop_requested)() { Flow::Stop } else { Flow::Continue })
+        let learning = self.state.env_steps >= self.cfg.learning_starts;
+        let step = StepUnderWay::of(t.step, if learning { self.cfg.updates_per_step } else { 0 });
+        let finished = self.update(step, t.env.steps())?;
+        Ok(if !finished || (self.stop_requested)() { Flow::Stop } else { Flow::Continue })
     }
 }
 
@@ -547,12 +663,8 @@ pub fn train_with(
     cfg.validate()?;
     let dir = RunDir::new(out);
     std::fs::create_dir_all(&dir.root).map_err(|e| Error::io(&dir.root, e))?;
-    // A new run: no checkpoint of an older one may be mistaken for this run's.
-    for p in [dir.latest(), dir.final_checkpoint(), dir.best(), dir.eval()] {
-        if p.exists() {
-            std::fs::remove_file(&p).map_err(|e| Error::io(&p, e))?;
-        }
-    }
+    // A new run: nothing of an older one may be mistaken for this run's.
+    replace::remove_previous_run(&dir)?;
     crate::io::write_atomic(&dir.config(), cfg.to_toml_string().as_bytes())?;
     Trainer::new(cfg, dir)?.run(opts, on_episode)
 }

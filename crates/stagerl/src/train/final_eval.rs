@@ -1,0 +1,83 @@
+//! A run's closing evaluation (after training, by `train` and `reproduce`) as a recorded state
+//! of the run: `eval-final-seed<S>.csv` holds its trials, and `eval-final-seed<S>.json`, written
+//! atomically as the very last step, records the settings it was made with. A run is
+//! *evaluated* when that record exists; a run killed during its closing evaluation has none, and
+//! resuming it (`train --resume`, `reproduce`) runs the evaluation. A record of other settings
+//! (trials, seed, checkpoint, config) marks the evaluation stale: `reproduce` runs it again.
+//!
+//! `stagerl eval` writes elsewhere ([`RunDir::eval_command`]), so it never replaces the file a
+//! report reads.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+use super::{config_hash, evaluate_run, EvalSummary, RunDir};
+use crate::config::Config;
+use crate::{Error, Result};
+
+/// What a closing evaluation was made with.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FinalEvalRecord {
+    /// The evaluated checkpoint's file name in `checkpoints/` (best, else final, else latest).
+    pub checkpoint: String,
+    pub trials: u32,
+    /// Seed of the evaluation targets.
+    pub seed: u64,
+    /// [`config_hash`] of the run's config.
+    pub config_hash: String,
+    /// The stagerl version that evaluated.
+    pub version: String,
+}
+
+/// The recorded closing evaluation on the targets of `seed`, if the run has one (an unreadable
+/// record counts as none: the evaluation runs again).
+pub fn recorded(dir: &Path, seed: u64) -> Option<FinalEvalRecord> {
+    let run = RunDir::new(dir);
+    let text = std::fs::read_to_string(run.final_eval_record(seed)).ok()?;
+    serde_json::from_str(&text).ok().filter(|_| run.final_eval(seed).is_file())
+}
+
+/// What the closing evaluation of the run in `dir` with `trials` trials on the targets of `seed`
+/// would record now; `None` when the run has no checkpoint.
+pub fn planned(dir: &Path, cfg: &Config, trials: u32, seed: u64) -> Option<(PathBuf, FinalEvalRecord)> {
+    let checkpoint = RunDir::new(dir).best_available_checkpoint()?;
+    let record = FinalEvalRecord {
+        checkpoint: checkpoint.file_name()?.to_string_lossy().into_owned(),
+        trials,
+        seed,
+        config_hash: config_hash(cfg),
+        version: env!("CARGO_PKG_VERSION").to_string(),
+    };
+    Some((checkpoint, record))
+}
+
+/// Whether the run's recorded closing evaluation is the one [`planned`] now (the version that
+/// made it is recorded, not compared: a new version does not re-evaluate every run).
+pub fn is_current(dir: &Path, cfg: &Config, trials: u32, seed: u64) -> bool {
+    match (recorded(dir, seed), planned(dir, cfg, trials, seed)) {
+        (Some(r), Some((_, p))) => FinalEvalRecord { version: p.version.clone(), ..r } == p,
+        _ => false,
+    }
+}
+
+/// Run the closing evaluation (stopped between trials by `stop`, with [`Error::Stopped`] and
+/// nothing written): the trials' CSV, then the record. Returns the summary and the checkpoint.
+pub fn run(
+    dir: &Path,
+    cfg: &Config,
+    trials: u32,
+    seed: u64,
+    stop: Option<&AtomicBool>,
+) -> Result<(EvalSummary, PathBuf)> {
+    let (checkpoint, record) = planned(dir, cfg, trials, seed)
+        .ok_or_else(|| Error::InvalidInput(format!("{}: trained but no checkpoint", dir.display())))?;
+    let run = RunDir::new(dir);
+    let e = evaluate_run(&run, cfg, Some(&checkpoint), trials, seed, stop)?;
+    // The record goes last: without it the run is not evaluated, whatever else is on disk.
+    let _ = std::fs::remove_file(run.final_eval_record(seed));
+    super::eval::write_trials_csv(&run.final_eval(seed), &e.trials)?;
+    let json = serde_json::to_string_pretty(&record).expect("the record serialises");
+    crate::io::write_atomic(&run.final_eval_record(seed), json.as_bytes())?;
+    Ok((e.summary, e.checkpoint))
+}
