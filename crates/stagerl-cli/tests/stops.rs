@@ -138,7 +138,7 @@ fn a_run_killed_during_its_closing_evaluation_is_evaluated_on_resume() {
     // `eval` and `demo` stop between trials too; `eval` writes nothing then.
     for args in [
         vec!["eval", "--run", s(&dir), "--trials", huge],
-        vec!["demo", "--show", "0", "--trials", "100000000"],
+        vec!["demo", "--show", "0", "--trials", huge],
     ] {
         let mut child = spawn(&args);
         std::thread::sleep(Duration::from_millis(500));
