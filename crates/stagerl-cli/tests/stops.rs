@@ -136,10 +136,9 @@ fn a_run_killed_during_its_closing_evaluation_is_evaluated_on_resume() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("already finished"));
 
     // `eval` and `demo` stop between trials too; `eval` writes nothing then.
-    for args in [
-        vec!["eval", "--run", s(&dir), "--trials", huge],
-        vec!["demo", "--show", "0", "--trials", huge],
-    ] {
+    for args in
+        [vec!["eval", "--run", s(&dir), "--trials", huge], vec!["demo", "--show", "0", "--trials", huge]]
+    {
         let mut child = spawn(&args);
         std::thread::sleep(Duration::from_millis(500));
         assert!(child.try_wait().unwrap().is_none(), "{args:?} ended");
