@@ -28,16 +28,12 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let dir = RunDir::new(&args.run);
     let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.display()))?;
-    let _lock = super::train::lock_run(&args.run)?; // it writes into the run
+    let loaded = train::eval::load_run_agent(&dir, &cfg, args.checkpoint.as_deref())?;
+    // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
+    // directory untouched).
+    let _lock = super::train::lock_run(&args.run)?;
     let stop = super::train::stop_flag()?;
-    let e = match train::evaluate_run(
-        &dir,
-        &cfg,
-        args.checkpoint.as_deref(),
-        args.trials,
-        args.seed,
-        Some(&stop),
-    ) {
+    let e = match train::eval::evaluate_loaded(loaded, args.trials, args.seed, Some(&stop)) {
         Err(e @ stagerl::Error::Stopped { .. }) => {
             // Standard error may be closed too; the exit code still tells.
             let _ = errln!("stagerl: {e}");

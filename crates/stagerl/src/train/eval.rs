@@ -168,7 +168,18 @@ pub fn evaluate_run(
     seed: u64,
     stop: Option<&AtomicBool>,
 ) -> Result<RunEval> {
-    let (checkpoint, mut env, mut agent) = load_run_agent(run, cfg, checkpoint)?;
+    evaluate_loaded(load_run_agent(run, cfg, checkpoint)?, trials, seed, stop)
+}
+
+/// The evaluation of [`evaluate_run`] on an agent [`load_run_agent`] loaded (for a caller that
+/// has something to do between the two, such as taking the run's lock once the agent is known
+/// to load).
+pub fn evaluate_loaded(
+    (checkpoint, mut env, mut agent): (PathBuf, ReachEnv, Box<dyn Agent>),
+    trials: u32,
+    seed: u64,
+    stop: Option<&AtomicBool>,
+) -> Result<RunEval> {
     let (summary, trials) = evaluate_until(agent.as_mut(), &mut env, trials, seed, stop)?;
     Ok(RunEval { checkpoint, summary, trials })
 }
