@@ -42,13 +42,18 @@ pub fn spawn_piped(cmd: &mut Command) -> Child {
         .expect("spawn")
 }
 
-/// Every file and directory under `dir`, with the files' bytes.
+/// Every file and directory under `dir`, with the files' bytes; but the run directories' lock
+/// files (`.stagerl.lock`), which any process taking a run rewrites with its pid (bookkeeping of
+/// the lock, not a result of the run).
 pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
     let mut out = BTreeMap::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
         for e in std::fs::read_dir(&d).unwrap() {
             let p = e.unwrap().path();
+            if p.file_name().is_some_and(|n| n == stagerl::rundir::LOCK_FILE) {
+                continue;
+            }
             if p.is_dir() {
                 out.insert(p.clone(), None);
                 stack.push(p);
