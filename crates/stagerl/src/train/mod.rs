@@ -397,22 +397,7 @@ impl Trainer {
         last_stats: &mut Option<UpdateStats>,
         stop_requested: &dyn Fn() -> bool,
     ) -> Result<Option<StepUnderWay>> {
-        if let Some(step) = self.state.step_under_way.take() {
-            let steps = self.env.steps();
-            let mut collector = self.collector(last_stats, stop_requested);
-            if !collector.update(step, steps)? {
-                return Ok(None);
-            }
-            if step.done {
-                return Ok(Some(step));
-            }
-        }
-        if !self.state.in_episode {
-            self.env.reset();
-            self.agent.begin_episode();
-            self.state.episode_reward = 0.0;
-            self.state.in_episode = true;
-        }
+        let steps = self.env.steps();
         let mut collector = Collector {
             agent: self.agent.as_mut(),
             buffer: &mut self.buffer,
@@ -422,28 +407,25 @@ impl Trainer {
             last_stats,
             stop_requested,
         };
+        if let Some(step) = collector.state.step_under_way.take() {
+            if !collector.update(step, steps)? {
+                return Ok(None);
+            }
+            if step.done {
+                return Ok(Some(step));
+            }
+        }
+        if !collector.state.in_episode {
+            self.env.reset();
+            collector.agent.begin_episode();
+            collector.state.episode_reward = 0.0;
+            collector.state.in_episode = true;
+        }
         match rollout(&mut self.env, scratch, &mut collector)? {
             // A stop between the last step's updates leaves them (and the episode's end) to do.
-            Outcome::Finished { .. } if self.state.step_under_way.is_some() => Ok(None),
+            Outcome::Finished { .. } if collector.state.step_under_way.is_some() => Ok(None),
             Outcome::Finished { last, .. } => Ok(Some(StepUnderWay::of(&last, 0))),
             Outcome::Stopped => Ok(None),
-        }
-    }
-
-    /// The step collector over the run's agent, buffer and state.
-    fn collector<'a>(
-        &'a mut self,
-        last_stats: &'a mut Option<UpdateStats>,
-        stop_requested: &'a dyn Fn() -> bool,
-    ) -> Collector<'a> {
-        Collector {
-            agent: self.agent.as_mut(),
-            buffer: &mut self.buffer,
-            batch: &mut self.batch,
-            state: &mut self.state,
-            cfg: &self.cfg.agent,
-            last_stats,
-            stop_requested,
         }
     }
 
