@@ -15,6 +15,7 @@ pub mod aggregate;
 pub mod claims;
 pub mod paper;
 pub mod plot;
+pub mod reference;
 pub mod runs;
 pub mod table;
 pub mod trajectory;
@@ -145,6 +146,10 @@ pub struct Report {
     pub claims: Vec<Claim>,
     /// IQM, probability of improvement and performance profiles over seeds.
     pub aggregates: aggregate::Aggregates,
+    /// The study in one line: regime, seeds, episodes.
+    pub study: String,
+    /// The scripted Jacobian controller on the same targets, per reward function.
+    pub reference: Vec<reference::ReferenceRow>,
     /// E_start of the primary groups under other band widths.
     pub sensitivity: Vec<Sensitivity>,
     /// Directories that looked like runs but could not be read.
@@ -185,12 +190,17 @@ pub fn analyze(
     let claims = claims::evaluate(&summaries, &paper_rows);
     let aggregates = aggregate::compute(&summaries);
     let sensitivity = sensitivity(&groups, criterion)?;
+    let name = dir.file_name().map_or_else(|| ".".into(), |n| n.to_string_lossy().into_owned());
+    let study = reference::study_line(&groups, &name);
+    let reference = reference::evaluate(&groups, &summaries)?;
     let report = Report {
-        input: dir.to_path_buf(),
+        input: PathBuf::from(name),
         criterion: *criterion,
         groups: summaries,
         paper: paper_rows,
         aggregates,
+        study,
+        reference,
         claims,
         sensitivity,
         skipped,
@@ -265,8 +275,11 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
         files.push(p);
         Ok(())
     };
-    let input = dir.display().to_string();
+    // Outputs name the input by its directory name, not an absolute path of this machine.
+    let input = report.input.display().to_string();
     let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
+    md.insert_str(md.find('\n').map_or(0, |i| i + 1), &format!("\n{}\n", report.study));
+    md.push_str(&reference::render_markdown(&report.reference));
     if !report.sensitivity.is_empty() {
         md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));
     }
@@ -278,12 +291,27 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     }
     write("table1.md", &md)?;
     write("table1.csv", &table::render_csv(&report.groups, &report.paper))?;
-    write("claims.md", &claims::render_markdown(&report.claims))?;
+    let mut claims_md = claims::render_markdown(&report.claims);
+    claims_md.insert_str(claims_md.find('\n').map_or(0, |i| i + 1), &format!("\n{}\n", report.study));
+    claims_md.push_str(&reference::render_markdown(&report.reference));
+    write("claims.md", &claims_md)?;
     write("aggregates.md", &aggregate::render_markdown(&report.aggregates))?;
 
-    files
-        .extend(plot::save(&plot::figure7(&groups, &report.groups, opts.criterion.window), &out("figure7"))?);
-    files.extend(plot::save(&plot::figure8(&groups), &out("figure8"))?);
+    let figure7 = plot::figure7(&groups, &report.groups, opts.criterion.window, &report.study);
+    files.extend(plot::save(&figure7, &out("figure7"))?);
+    let controller = report
+        .reference
+        .iter()
+        .find(|r| r.reward == crate::reward::RewardFunction::Sar)
+        .or(report.reference.first());
+    files.extend(plot::save(
+        &plot::figure8(&groups, &report.study, controller.map(|r| &r.summary)),
+        &out("figure8"),
+    )?);
+    files.extend(plot::save(
+        &plot::profile_figure(&report.aggregates, &report.study),
+        &out("performance_profile"),
+    )?);
 
     if opts.trajectories > 0 {
         let mut sets: Vec<Rollouts> = Vec::new();
