@@ -41,6 +41,9 @@ pub struct ReportOptions {
     pub trajectories: u32,
     /// Include runs with fewer episodes than configured (still training, or stopped).
     pub include_incomplete: bool,
+    /// The command that asked for the report, recorded in `provenance.json` (the CLI's
+    /// arguments; empty: a library call).
+    pub command: Vec<String>,
 }
 
 impl ReportOptions {
@@ -51,6 +54,7 @@ impl ReportOptions {
             criterion: ConvergenceCriterion::default(),
             trajectories: 5,
             include_incomplete: false,
+            command: Vec::new(),
         }
     }
 }
@@ -211,6 +215,23 @@ pub fn analyze(
     Ok((groups, report))
 }
 
+/// Where the runs came from (the sweep's `provenance.json`, if any) and what writes this report.
+fn provenance_markdown(dir: &Path) -> Result<String> {
+    let sweep = crate::provenance::Provenance::load(dir)?;
+    let mut s = if sweep.sessions.is_empty() {
+        "\n## Provenance\n\nThe input directory has no `provenance.json` (not written by `stagerl reproduce`): \
+         the code version of its runs is unknown.\n"
+            .to_string()
+    } else {
+        sweep.render_markdown()
+    };
+    s.push_str(&format!(
+        "\nThis report: `{}`; `provenance.json` beside it lists every command with its times.\n",
+        crate::provenance::Code::current().describe()
+    ));
+    Ok(s)
+}
+
 /// Most evaluation trajectories a report draws per figure ([`ReportOptions::trajectories`]).
 pub const MAX_TRAJECTORIES: u32 = 1000;
 
@@ -261,6 +282,7 @@ pub fn pick_trajectory_runs<'a>(
 /// `table1.json`, `claims.md`, `figure7.{png,svg}`, `figure8.{png,svg}` and, when
 /// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}`.
 pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
+    let clock = crate::provenance::Clock::now();
     check_options(dir, opts)?;
     let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
     if groups.is_empty() {
@@ -289,6 +311,7 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
             md.push_str(&format!("- `{}`: {}\n", s.name, s.reason));
         }
     }
+    md.push_str(&provenance_markdown(dir)?);
     write("table1.md", &md)?;
     write("table1.csv", &table::render_csv(&report.groups, &report.paper))?;
     let mut claims_md = claims::render_markdown(&report.claims);
@@ -347,6 +370,10 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
                 .collect();
         }
     }
+    let command =
+        if opts.command.is_empty() { vec!["(library call)".to_string()] } else { opts.command.clone() };
+    crate::provenance::record_report(dir, &opts.out, command, clock)?;
+    files.push(out(crate::provenance::FILE));
     let json_path = out("table1.json");
     files.push(json_path.clone());
     report.files = files;
