@@ -215,6 +215,27 @@ pub fn analyze(
     Ok((groups, report))
 }
 
+/// `table1.md`: the table, the study line, the reference rows, the E_start sensitivity, the
+/// directories not read and the provenance.
+fn table1_markdown(dir: &Path, report: &Report, opts: &ReportOptions) -> Result<String> {
+    // Outputs name the input by its directory name, not an absolute path of this machine.
+    let input = report.input.display().to_string();
+    let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
+    md.insert_str(md.find('\n').map_or(0, |i| i + 1), &format!("\n{}\n", report.study));
+    md.push_str(&reference::render_markdown(&report.reference));
+    if !report.sensitivity.is_empty() {
+        md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));
+    }
+    if !report.skipped.is_empty() {
+        md.push_str("\n## Directories not read\n\n");
+        for s in &report.skipped {
+            md.push_str(&format!("- `{}`: {}\n", s.name, s.reason));
+        }
+    }
+    md.push_str(&provenance_markdown(dir)?);
+    Ok(md)
+}
+
 /// Where the runs came from (the sweep's `provenance.json`, if any) and what writes this report.
 fn provenance_markdown(dir: &Path) -> Result<String> {
     let sweep = crate::provenance::Provenance::load(dir)?;
@@ -297,21 +318,7 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
         files.push(p);
         Ok(())
     };
-    // Outputs name the input by its directory name, not an absolute path of this machine.
-    let input = report.input.display().to_string();
-    let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
-    md.insert_str(md.find('\n').map_or(0, |i| i + 1), &format!("\n{}\n", report.study));
-    md.push_str(&reference::render_markdown(&report.reference));
-    if !report.sensitivity.is_empty() {
-        md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));
-    }
-    if !report.skipped.is_empty() {
-        md.push_str("\n## Directories not read\n\n");
-        for s in &report.skipped {
-            md.push_str(&format!("- `{}`: {}\n", s.name, s.reason));
-        }
-    }
-    md.push_str(&provenance_markdown(dir)?);
+    let md = table1_markdown(dir, &report, opts)?;
     write("table1.md", &md)?;
     write("table1.csv", &table::render_csv(&report.groups, &report.paper))?;
     let mut claims_md = claims::render_markdown(&report.claims);
