@@ -66,6 +66,15 @@ fn report_on_trained_runs() {
     for name in ["figure7.png", "figure8.png", "trajectories.png"] {
         assert!(is_png(&out.join(name)), "{name}");
     }
+    // Provenance: the report's own command, the code it was built from (a git commit), times.
+    let prov: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("provenance.json")).unwrap()).unwrap();
+    let session = prov["sessions"].as_array().unwrap().last().unwrap().clone();
+    assert_eq!(session["command"][1], "report", "{session}");
+    assert_eq!(session["code"]["git_commit"].as_str().map(str::len), Some(40), "{session}");
+    assert!(session["start"].as_str().unwrap().ends_with('Z') && session["wall_s"].as_f64().unwrap() > 0.0);
+    let md = std::fs::read_to_string(out.join("table1.md")).unwrap();
+    assert!(md.contains("## Provenance") && md.contains("has no `provenance.json`"), "{md}");
     // 30 episodes are too few for the default criterion (W = 100): reported, not an error.
     let md = std::fs::read_to_string(out.join("table1.md")).unwrap();
     assert!(md.contains("run too short"), "{md}");

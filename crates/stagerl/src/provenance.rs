@@ -143,6 +143,81 @@ impl Provenance {
     }
 }
 
+/// The provenance of a report written from `input` (a sweep directory) into `out`: the sweep's
+/// sessions (its `provenance.json`, when it has one), then the report's own session for
+/// `command`, started at `started` (`Recorder::clock`), saved as `out/provenance.json`.
+pub fn record_report(input: &Path, out: &Path, command: Vec<String>, started: Clock) -> Result<Provenance> {
+    let mut p = Provenance::load(input)?;
+    p.sessions.push(Session {
+        command,
+        code: Code::current(),
+        machine: Machine::current(),
+        start: started.start,
+        end: Some(rfc3339(SystemTime::now())),
+        wall_s: started.instant.elapsed().as_secs_f64(),
+        cpu_s: cpu_seconds() - started.cpu0,
+        outcome: "finished".into(),
+    });
+    p.save(out)?;
+    Ok(p)
+}
+
+/// When something started: wall clock (UTC), monotonic clock and CPU time.
+#[derive(Clone, Debug)]
+pub struct Clock {
+    start: String,
+    instant: Instant,
+    cpu0: f64,
+}
+
+impl Clock {
+    pub fn now() -> Clock {
+        Clock { start: rfc3339(SystemTime::now()), instant: Instant::now(), cpu0: cpu_seconds() }
+    }
+}
+
+impl Provenance {
+    /// A Markdown section: code versions (a warning when results come from several), machines,
+    /// commands, wall time and CPU hours.
+    pub fn render_markdown(&self) -> String {
+        let mut s = String::from("\n## Provenance\n\n");
+        let versions = self.code_versions();
+        let list: Vec<String> = versions.iter().map(|c| format!("`{}`", c.describe())).collect();
+        s.push_str(&format!("Code: {}.", list.join(", ")));
+        if versions.len() > 1 {
+            s.push_str(" **These results come from more than one code version.**");
+        }
+        if versions.iter().any(|c| c.git_dirty == Some(true)) {
+            s.push_str(" Some were built from a tree with uncommitted changes (`+dirty`).");
+        }
+        let mut machines: Vec<String> = self
+            .sessions
+            .iter()
+            .map(|x| format!("{} ({} cores)", x.machine.cpu_model, x.machine.cores))
+            .collect();
+        machines.dedup();
+        s.push_str(&format!(
+            "\nMachine(s): {}. Wall time {:.0} s, CPU time {:.2} h over {} command(s):\n\n",
+            machines.join("; "),
+            self.total_wall_s,
+            self.total_cpu_hours,
+            self.sessions.len()
+        ));
+        for x in &self.sessions {
+            s.push_str(&format!(
+                "- `{}`: {} to {}, {:.0} s, {:.2} CPU h, {}\n",
+                x.command.join(" "),
+                x.start,
+                x.end.as_deref().unwrap_or("(did not finish)"),
+                x.wall_s,
+                x.cpu_s / 3600.0,
+                x.outcome
+            ));
+        }
+        s
+    }
+}
+
 /// A session being recorded: [`Recorder::start`] appends it (so an interrupted session still
 /// shows), [`Recorder::finish`] fills in its end.
 pub struct Recorder {

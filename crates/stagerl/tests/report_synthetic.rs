@@ -199,6 +199,9 @@ fn report_of_synthetic_runs() {
         "figure7.svg",
         "figure8.png",
         "figure8.svg",
+        "aggregates.md",
+        "performance_profile.png",
+        "performance_profile.svg",
     ] {
         let p = out.join(name);
         assert!(std::fs::metadata(&p).map(|m| m.len() > 0).unwrap_or(false), "{name} missing or empty");
@@ -207,9 +210,25 @@ fn report_of_synthetic_runs() {
     assert!(!out.join("trajectories.png").exists());
     assert!(r.warnings.iter().any(|w| w.contains("no trajectories")), "{:?}", r.warnings);
     let (w, h) = png_size(&out.join("figure7.png"));
-    assert_eq!((w, h), (60 + 640 * 3, 110 + 420 * 2), "three algorithms, two rows");
+    // Each panel has its legend beside it (230 px), outside the data.
+    assert_eq!((w, h), (60 + (640 + 230) * 3, 110 + 420 * 2), "three algorithms, two rows");
     let (w, h) = png_size(&out.join("figure8.png"));
-    assert_eq!((w, h), (60 + 640 * 3, 110 + 420 * 3));
+    assert_eq!((w, h), (60 + (640 + 230) * 3, 110 + 420 * 3));
+    // The study is named (regime, seeds, episodes), and the scripted controller is a reference row
+    // evaluated on the runs' targets: it reaches every target of this task.
+    let md = std::fs::read_to_string(out.join("table1.md")).unwrap();
+    assert!(md.contains("tuned regime (our defaults"), "{md}");
+    assert!(md.contains("## Reference: the scripted Jacobian controller"), "{md}");
+    assert!(!r.reference.is_empty());
+    for row in &r.reference {
+        assert!(row.summary.success_rate > 0.95, "{row:?}");
+        assert!(md.contains(&format!(
+            "| Jacobian controller | {} |",
+            stagerl::report::table::reward_title(row.reward)
+        )));
+    }
+    assert!(std::fs::read_to_string(out.join("claims.md")).unwrap().contains("Jacobian controller"));
+    assert!(!r.input.is_absolute(), "outputs name the input by its directory name: {:?}", r.input);
     assert!(std::fs::read_to_string(out.join("figure7.svg")).unwrap().starts_with("<svg"));
 
     // Values against the CSVs.

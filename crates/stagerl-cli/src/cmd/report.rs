@@ -43,6 +43,7 @@ pub fn run(args: Args) -> Result<()> {
         },
         trajectories: args.trajectories,
         include_incomplete: args.include_incomplete,
+        command: std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect(),
     };
     let r = report::generate(&args.dir, &opts)
         .with_context(|| format!("reporting on the runs in {}", args.dir.display()))?;

@@ -53,6 +53,8 @@ pub struct Improvement {
 pub struct Profile {
     pub algo: Algo,
     pub reward: RewardFunction,
+    /// Runs behind the profile.
+    pub runs: usize,
     pub taus: Vec<f64>,
     pub fraction_above: Vec<f64>,
 }
@@ -127,6 +129,7 @@ pub fn compute(groups: &[GroupSummary]) -> Aggregates {
                 out.profiles.push(Profile {
                     algo,
                     reward,
+                    runs: s.len(),
                     fraction_above: stats::performance_profile(&s, &taus),
                     taus,
                 });

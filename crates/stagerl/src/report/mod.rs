@@ -15,6 +15,7 @@ pub mod aggregate;
 pub mod claims;
 pub mod paper;
 pub mod plot;
+pub mod reference;
 pub mod runs;
 pub mod table;
 pub mod trajectory;
@@ -40,6 +41,9 @@ pub struct ReportOptions {
     pub trajectories: u32,
     /// Include runs with fewer episodes than configured (still training, or stopped).
     pub include_incomplete: bool,
+    /// The command that asked for the report, recorded in `provenance.json` (the CLI's
+    /// arguments; empty: a library call).
+    pub command: Vec<String>,
 }
 
 impl ReportOptions {
@@ -50,6 +54,7 @@ impl ReportOptions {
             criterion: ConvergenceCriterion::default(),
             trajectories: 5,
             include_incomplete: false,
+            command: Vec::new(),
         }
     }
 }
@@ -145,6 +150,10 @@ pub struct Report {
     pub claims: Vec<Claim>,
     /// IQM, probability of improvement and performance profiles over seeds.
     pub aggregates: aggregate::Aggregates,
+    /// The study in one line: regime, seeds, episodes.
+    pub study: String,
+    /// The scripted Jacobian controller on the same targets, per reward function.
+    pub reference: Vec<reference::ReferenceRow>,
     /// E_start of the primary groups under other band widths.
     pub sensitivity: Vec<Sensitivity>,
     /// Directories that looked like runs but could not be read.
@@ -185,12 +194,17 @@ pub fn analyze(
     let claims = claims::evaluate(&summaries, &paper_rows);
     let aggregates = aggregate::compute(&summaries);
     let sensitivity = sensitivity(&groups, criterion)?;
+    let name = dir.file_name().map_or_else(|| ".".into(), |n| n.to_string_lossy().into_owned());
+    let study = reference::study_line(&groups, &name);
+    let reference = reference::evaluate(&groups, &summaries)?;
     let report = Report {
-        input: dir.to_path_buf(),
+        input: PathBuf::from(name),
         criterion: *criterion,
         groups: summaries,
         paper: paper_rows,
         aggregates,
+        study,
+        reference,
         claims,
         sensitivity,
         skipped,
@@ -199,6 +213,44 @@ pub fn analyze(
         files: Vec::new(),
     };
     Ok((groups, report))
+}
+
+/// `table1.md`: the table, the study line, the reference rows, the E_start sensitivity, the
+/// directories not read and the provenance.
+fn table1_markdown(dir: &Path, report: &Report, opts: &ReportOptions) -> Result<String> {
+    // Outputs name the input by its directory name, not an absolute path of this machine.
+    let input = report.input.display().to_string();
+    let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
+    md.insert_str(md.find('\n').map_or(0, |i| i + 1), &format!("\n{}\n", report.study));
+    md.push_str(&reference::render_markdown(&report.reference));
+    if !report.sensitivity.is_empty() {
+        md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));
+    }
+    if !report.skipped.is_empty() {
+        md.push_str("\n## Directories not read\n\n");
+        for s in &report.skipped {
+            md.push_str(&format!("- `{}`: {}\n", s.name, s.reason));
+        }
+    }
+    md.push_str(&provenance_markdown(dir)?);
+    Ok(md)
+}
+
+/// Where the runs came from (the sweep's `provenance.json`, if any) and what writes this report.
+fn provenance_markdown(dir: &Path) -> Result<String> {
+    let sweep = crate::provenance::Provenance::load(dir)?;
+    let mut s = if sweep.sessions.is_empty() {
+        "\n## Provenance\n\nThe input directory has no `provenance.json` (not written by `stagerl reproduce`): \
+         the code version of its runs is unknown.\n"
+            .to_string()
+    } else {
+        sweep.render_markdown()
+    };
+    s.push_str(&format!(
+        "\nThis report: `{}`; `provenance.json` beside it lists every command with its times.\n",
+        crate::provenance::Code::current().describe()
+    ));
+    Ok(s)
 }
 
 /// Most evaluation trajectories a report draws per figure ([`ReportOptions::trajectories`]).
@@ -251,6 +303,7 @@ pub fn pick_trajectory_runs<'a>(
 /// `table1.json`, `claims.md`, `figure7.{png,svg}`, `figure8.{png,svg}` and, when
 /// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}`.
 pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
+    let clock = crate::provenance::Clock::now();
     check_options(dir, opts)?;
     let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
     if groups.is_empty() {
@@ -265,25 +318,30 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
         files.push(p);
         Ok(())
     };
-    let input = dir.display().to_string();
-    let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
-    if !report.sensitivity.is_empty() {
-        md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));
-    }
-    if !report.skipped.is_empty() {
-        md.push_str("\n## Directories not read\n\n");
-        for s in &report.skipped {
-            md.push_str(&format!("- `{}`: {}\n", s.name, s.reason));
-        }
-    }
+    let md = table1_markdown(dir, &report, opts)?;
     write("table1.md", &md)?;
     write("table1.csv", &table::render_csv(&report.groups, &report.paper))?;
-    write("claims.md", &claims::render_markdown(&report.claims))?;
+    let mut claims_md = claims::render_markdown(&report.claims);
+    claims_md.insert_str(claims_md.find('\n').map_or(0, |i| i + 1), &format!("\n{}\n", report.study));
+    claims_md.push_str(&reference::render_markdown(&report.reference));
+    write("claims.md", &claims_md)?;
     write("aggregates.md", &aggregate::render_markdown(&report.aggregates))?;
 
-    files
-        .extend(plot::save(&plot::figure7(&groups, &report.groups, opts.criterion.window), &out("figure7"))?);
-    files.extend(plot::save(&plot::figure8(&groups), &out("figure8"))?);
+    let figure7 = plot::figure7(&groups, &report.groups, opts.criterion.window, &report.study);
+    files.extend(plot::save(&figure7, &out("figure7"))?);
+    let controller = report
+        .reference
+        .iter()
+        .find(|r| r.reward == crate::reward::RewardFunction::Sar)
+        .or(report.reference.first());
+    files.extend(plot::save(
+        &plot::figure8(&groups, &report.study, controller.map(|r| &r.summary)),
+        &out("figure8"),
+    )?);
+    files.extend(plot::save(
+        &plot::profile_figure(&report.aggregates, &report.study),
+        &out("performance_profile"),
+    )?);
 
     if opts.trajectories > 0 {
         let mut sets: Vec<Rollouts> = Vec::new();
@@ -319,6 +377,10 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
                 .collect();
         }
     }
+    let command =
+        if opts.command.is_empty() { vec!["(library call)".to_string()] } else { opts.command.clone() };
+    crate::provenance::record_report(dir, &opts.out, command, clock)?;
+    files.push(out(crate::provenance::FILE));
     let json_path = out("table1.json");
     files.push(json_path.clone());
     report.files = files;

@@ -13,7 +13,7 @@ use super::runs::{EvalPoint, RunData};
 use super::table::{algo_title, reward_title, Group, GroupSummary, ALGO_ORDER};
 use super::trajectory::Rollouts;
 use crate::agent::Algo;
-use crate::metrics::trailing_moving_average;
+use crate::metrics::{trailing_moving_average, EvalSummary};
 use crate::reward::RewardFunction;
 use crate::{Error, Result};
 
@@ -117,19 +117,28 @@ pub struct Band {
 
 impl Band {
     /// Combine per-seed curves `(x, y)` point by point on x (x values matched exactly; a point
-    /// missing in some seeds uses the others).
+    /// missing in some seeds uses the others). A NaN `y` marks a point without a value (e.g. the
+    /// mean steps of an evaluation with no success): where no seed has a value the band has a
+    /// gap (NaN), and lines are not drawn across it.
     pub fn from_curves(curves: &[Vec<(f64, f64)>]) -> Band {
         let mut pts: std::collections::BTreeMap<i64, Vec<f64>> = std::collections::BTreeMap::new();
         for c in curves {
             for &(x, y) in c {
+                let ys = pts.entry((x * 1000.0).round() as i64).or_default();
                 if y.is_finite() {
-                    pts.entry((x * 1000.0).round() as i64).or_default().push(y);
+                    ys.push(y);
                 }
             }
         }
         let mut b = Band::default();
         for (x, ys) in pts {
             b.x.push(x as f64 / 1000.0);
+            if ys.is_empty() {
+                b.mean.push(f64::NAN);
+                b.lo.push(f64::NAN);
+                b.hi.push(f64::NAN);
+                continue;
+            }
             b.mean.push(ys.iter().sum::<f64>() / ys.len() as f64);
             b.lo.push(ys.iter().copied().fold(f64::INFINITY, f64::min));
             b.hi.push(ys.iter().copied().fold(f64::NEG_INFINITY, f64::max));
@@ -137,27 +146,48 @@ impl Band {
         b
     }
 
+    /// Runs of consecutive points with a value: `(x, mean, lo, hi)` per point.
+    fn segments(&self) -> Vec<Vec<(f64, f64, f64, f64)>> {
+        let mut out: Vec<Vec<(f64, f64, f64, f64)>> = vec![Vec::new()];
+        for i in 0..self.x.len() {
+            if self.mean[i].is_finite() {
+                out.last_mut().expect("one segment").push((self.x[i], self.mean[i], self.lo[i], self.hi[i]));
+            } else if !out.last().expect("one segment").is_empty() {
+                out.push(Vec::new());
+            }
+        }
+        out.retain(|seg| !seg.is_empty());
+        out
+    }
+
     fn range(&self) -> Option<(f64, f64)> {
-        let lo = self.lo.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = self.hi.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let lo = self.lo.iter().copied().filter(|v| v.is_finite()).fold(f64::INFINITY, f64::min);
+        let hi = self.hi.iter().copied().filter(|v| v.is_finite()).fold(f64::NEG_INFINITY, f64::max);
         (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
     }
 }
 
-/// One panel: a quantity against the episode for every reward function of one algorithm.
+/// One panel: a quantity against the episode (or another x) for every reward function of one
+/// algorithm.
 #[derive(Clone, Debug)]
 pub struct Panel {
     pub title: String,
+    pub x_label: String,
     pub y_label: String,
-    /// Fixed y range, else from the data.
+    /// Fixed y range, else from the data (the same for every panel of a figure row).
     pub y_range: Option<(f64, f64)>,
     pub series: Vec<(RewardFunction, String, Band)>,
     /// Draw markers (sparse evaluation points).
     pub markers: bool,
-    /// Vertical dashed lines at these episodes (E_start), in the reward function's colour.
+    /// Vertical dashed lines at these x (E_start), in the reward function's colour, named in
+    /// the legend.
     pub marks: Vec<(RewardFunction, f64)>,
-    pub legend_low: bool,
+    /// Horizontal dotted reference lines (label, y): the scripted controller.
+    pub refs: Vec<(String, f64)>,
 }
+
+/// Width of the legend beside each panel, pixels.
+const LEGEND_W: u32 = 230;
 
 /// A grid of panels (rows of quantities, columns of algorithms) under a title.
 #[derive(Clone, Debug)]
@@ -171,7 +201,7 @@ pub struct CurveFigure {
 
 impl Figure for CurveFigure {
     fn size(&self) -> (u32, u32) {
-        (60 + 640 * self.cols.max(1) as u32, 110 + 420 * self.rows.max(1) as u32)
+        (60 + (640 + LEGEND_W) * self.cols.max(1) as u32, 110 + 420 * self.rows.max(1) as u32)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult {
@@ -188,20 +218,28 @@ impl Figure for CurveFigure {
             return Ok(());
         }
         let areas = body.split_evenly((self.rows.max(1), self.cols.max(1)));
-        for (panel, area) in self.panels.iter().zip(areas.iter()) {
-            draw_panel(panel, area)?;
+        for (k, (panel, area)) in self.panels.iter().zip(areas.iter()).enumerate() {
+            let row = k / self.cols.max(1);
+            let range = panel.y_range.unwrap_or_else(|| self.row_range(row));
+            draw_panel(panel, range, area)?;
         }
         Ok(())
     }
 }
 
-fn draw_panel<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> DrawResult {
-    let xmax = p.series.iter().flat_map(|(_, _, b)| b.x.iter().copied()).fold(1.0, f64::max);
-    let (ylo, yhi) = p.y_range.unwrap_or_else(|| {
-        let (lo, hi) = p
-            .series
+impl CurveFigure {
+    /// The y range shared by the panels of figure row `row` (the union of their data, padded),
+    /// so that the algorithms' panels of one quantity compare at a glance.
+    fn row_range(&self, row: usize) -> (f64, f64) {
+        let cols = self.cols.max(1);
+        let (lo, hi) = self
+            .panels
             .iter()
-            .filter_map(|(_, _, b)| b.range())
+            .skip(row * cols)
+            .take(cols)
+            .flat_map(|p| {
+                p.series.iter().filter_map(|(_, _, b)| b.range()).chain(p.refs.iter().map(|r| (r.1, r.1)))
+            })
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (c, d)| (a.min(c), b.max(d)));
         if lo.is_finite() {
             let pad = ((hi - lo) * 0.05).max(0.5);
@@ -209,8 +247,17 @@ fn draw_panel<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> D
         } else {
             (0.0, 1.0)
         }
-    });
-    let mut chart = ChartBuilder::on(area)
+    }
+}
+
+fn draw_panel<DB: DrawingBackend>(
+    p: &Panel,
+    (ylo, yhi): (f64, f64),
+    area: &DrawingArea<DB, Shift>,
+) -> DrawResult {
+    let (plot_area, legend_area) = area.split_horizontally(area.dim_in_pixel().0.saturating_sub(LEGEND_W));
+    let xmax = p.series.iter().flat_map(|(_, _, b)| b.x.iter().copied()).fold(1.0, f64::max);
+    let mut chart = ChartBuilder::on(&plot_area)
         .caption(&p.title, (FAMILY, 20))
         .margin(12)
         .x_label_area_size(48)
@@ -219,7 +266,7 @@ fn draw_panel<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> D
         .map_err(e)?;
     chart
         .configure_mesh()
-        .x_desc("episode")
+        .x_desc(p.x_label.as_str())
         .y_desc(p.y_label.as_str())
         .label_style((FAMILY, 15))
         .axis_desc_style((FAMILY, 17))
@@ -232,57 +279,90 @@ fn draw_panel<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> D
         .draw()
         .map_err(e)?;
     if p.series.is_empty() {
-        chart
-            .draw_series(std::iter::once(Text::new(
-                "no runs",
-                (xmax * 0.4, (ylo + yhi) / 2.0),
-                (FAMILY, 20).into_font(),
-            )))
-            .map_err(e)?;
+        let text = Text::new("no data", (xmax * 0.4, (ylo + yhi) / 2.0), (FAMILY, 20).into_font());
+        chart.draw_series(std::iter::once(text)).map_err(e)?;
     }
     for &(reward, x) in &p.marks {
-        let color = reward_color(reward);
-        chart
-            .draw_series(std::iter::once(plotters::element::DashedPathElement::new(
-                vec![(x, ylo), (x, yhi)],
-                6,
-                5,
-                color.mix(0.8).stroke_width(1),
-            )))
-            .map_err(e)?;
+        let style = reward_color(reward).mix(0.8).stroke_width(1);
+        let line = plotters::element::DashedPathElement::new(vec![(x, ylo), (x, yhi)], 6, 5, style);
+        chart.draw_series(std::iter::once(line)).map_err(e)?;
     }
-    for (reward, label, band) in &p.series {
+    for (_, y) in &p.refs {
+        let line = plotters::element::DashedPathElement::new(
+            vec![(0.0, *y), (xmax * 1.01, *y)],
+            2,
+            4,
+            BLACK.stroke_width(2),
+        );
+        chart.draw_series(std::iter::once(line)).map_err(e)?;
+    }
+    for (reward, _, band) in &p.series {
         let color = reward_color(*reward);
-        if band.x.len() > 1 && band.lo != band.hi {
-            let mut poly: Vec<(f64, f64)> = band.x.iter().copied().zip(band.hi.iter().copied()).collect();
-            poly.extend(band.x.iter().copied().zip(band.lo.iter().copied()).rev());
-            chart.draw_series(std::iter::once(Polygon::new(poly, color.mix(0.15).filled()))).map_err(e)?;
-        }
-        let line: Vec<(f64, f64)> = band.x.iter().copied().zip(band.mean.iter().copied()).collect();
-        chart
-            .draw_series(std::iter::once(PathElement::new(line.clone(), color.stroke_width(2))))
-            .map_err(e)?
-            .label(label.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 22, y)], color.stroke_width(3)));
-        if p.markers {
+        for seg in band.segments() {
+            if seg.len() > 1 && seg.iter().any(|q| q.2 != q.3) {
+                let mut poly: Vec<(f64, f64)> = seg.iter().map(|q| (q.0, q.3)).collect();
+                poly.extend(seg.iter().rev().map(|q| (q.0, q.2)));
+                chart
+                    .draw_series(std::iter::once(Polygon::new(poly, color.mix(0.15).filled())))
+                    .map_err(e)?;
+            }
+            let line: Vec<(f64, f64)> = seg.iter().map(|q| (q.0, q.1)).collect();
             chart
-                .draw_series(line.iter().map(|&(x, y)| Circle::new((x, y), 3, color.filled())))
+                .draw_series(std::iter::once(PathElement::new(line.clone(), color.stroke_width(2))))
                 .map_err(e)?;
+            if p.markers {
+                chart
+                    .draw_series(line.iter().map(|&(x, y)| Circle::new((x, y), 3, color.filled())))
+                    .map_err(e)?;
+            }
         }
     }
-    if !p.series.is_empty() {
-        chart
-            .configure_series_labels()
-            .position(if p.legend_low {
-                SeriesLabelPosition::LowerRight
-            } else {
-                SeriesLabelPosition::UpperRight
-            })
-            .label_font((FAMILY, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(150, 150, 150))
-            .draw()
-            .map_err(e)?;
+    draw_legend(p, &legend_area)
+}
+
+/// The legend beside a panel, outside the data: one line per series, then the dashed E_start
+/// marks and the reference lines, each named.
+fn draw_legend<DB: DrawingBackend>(p: &Panel, area: &DrawingArea<DB, Shift>) -> DrawResult {
+    let font = TextStyle::from((FAMILY, 14).into_font());
+    let mut y = 50;
+    let mut entry =
+        |sample: &dyn Fn(&DrawingArea<DB, Shift>, i32) -> DrawResult, label: String| -> DrawResult {
+            sample(area, y)?;
+            area.draw(&Text::new(label, (36, y - 8), font.clone())).map_err(e)?;
+            y += 22;
+            Ok(())
+        };
+    for (reward, label, _) in &p.series {
+        let color = reward_color(*reward);
+        entry(
+            &|a, y| a.draw(&PathElement::new(vec![(4, y), (28, y)], color.stroke_width(3))).map_err(e),
+            label.clone(),
+        )?;
+    }
+    for &(reward, x) in &p.marks {
+        let style = reward_color(reward).stroke_width(1);
+        let label = format!("E_start {}: {x:.0}", reward_title(reward));
+        entry(
+            &|a, y| {
+                a.draw(&plotters::element::DashedPathElement::new(vec![(4, y), (28, y)], 5, 3, style))
+                    .map_err(e)
+            },
+            label,
+        )?;
+    }
+    for (label, _) in &p.refs {
+        entry(
+            &|a, y| {
+                a.draw(&plotters::element::DashedPathElement::new(
+                    vec![(4, y), (28, y)],
+                    2,
+                    3,
+                    BLACK.stroke_width(2),
+                ))
+                .map_err(e)
+            },
+            label.clone(),
+        )?;
     }
     Ok(())
 }
@@ -350,7 +430,7 @@ fn algo_series(
 /// `window` episodes, mean over seeds with the min-max band; one column per algorithm, one
 /// colour per reward function (primary configurations only), a dashed line at the mean E_start
 /// (from `summaries`, the groups' indicators).
-pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize) -> CurveFigure {
+pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize, study: &str) -> CurveFigure {
     let algos = algos(groups);
     let mut panels = Vec::new();
     let max_steps =
@@ -379,19 +459,20 @@ pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize) -> C
                 .collect();
             panels.push(Panel {
                 title: format!("{} — {what}", algo_title(a)),
+                x_label: "episode".into(),
                 y_label: unit.to_string(),
                 y_range: (row == 1).then_some((0.0, f64::from(max_steps) + 2.0)),
                 series,
                 markers: false,
                 marks,
-                legend_low: row == 0,
+                refs: Vec::new(),
             });
         }
     }
     CurveFigure {
         title: "Figure 7: training".into(),
         subtitle: format!(
-            "Moving average over {window} episodes. Line: mean over seeds; band: min-max over seeds; dashed: mean E_start of the converged seeds.\nSteps: {max_steps} = episode limit (target not reached)."
+            "{study}\nMoving average over {window} episodes. Line: mean over seeds; band: min-max over seeds; dashed: mean E_start of the converged seeds. Steps: {max_steps} = episode limit (target not reached)."
         ),
         rows: 2,
         cols: algos.len(),
@@ -402,7 +483,7 @@ pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize) -> C
 /// Figure 8: the periodic evaluations of `eval.csv` (deterministic policy) against the training
 /// episode: success rate, mean episode reward and mean steps of the successful trials; mean over
 /// seeds with the min-max band.
-pub fn figure8(groups: &[Group]) -> CurveFigure {
+pub fn figure8(groups: &[Group], study: &str, reference: Option<&EvalSummary>) -> CurveFigure {
     let algos = algos(groups);
     let trials =
         groups.iter().flat_map(|g| g.runs.iter()).map(|r| r.config.train.eval_trials).max().unwrap_or(0);
@@ -415,43 +496,84 @@ pub fn figure8(groups: &[Group]) -> CurveFigure {
     for (row, (what, unit)) in rows.into_iter().enumerate() {
         for &a in &algos {
             let mut series = algo_series(groups, a, |r| {
+                // Steps are undefined (NaN: no line through it) at an evaluation with no success.
                 let y = |p: &EvalPoint| match row {
-                    0 => Some(100.0 * p.success_rate),
-                    1 => Some(p.mean_reward),
-                    _ => p.mean_steps,
+                    0 => 100.0 * p.success_rate,
+                    1 => p.mean_reward,
+                    _ => p.mean_steps.unwrap_or(f64::NAN),
                 };
-                r.eval_points.iter().filter_map(|p| y(p).map(|y| (p.episode as f64, y))).collect()
+                r.eval_points.iter().map(|p| (p.episode as f64, y(p))).collect()
             });
-            series.retain(|(_, _, band)| !band.x.is_empty());
-            let range = match row {
-                0 => Some((0.0, 102.0)),
-                1 => None,
-                _ => {
-                    let top = series.iter().flat_map(|(_, _, b)| b.hi.iter().copied()).fold(1.0, f64::max);
-                    Some((0.0, (top * 1.1).ceil()))
-                }
+            series.retain(|(_, _, band)| band.mean.iter().any(|m| m.is_finite()));
+            // The scripted controller's success rate and steps do not depend on the reward.
+            let refs = match (row, reference) {
+                (0, Some(r)) => vec![(REFERENCE_LABEL.to_string(), 100.0 * r.success_rate)],
+                (2, Some(r)) => r.mean_steps.map(|s| (REFERENCE_LABEL.to_string(), s)).into_iter().collect(),
+                _ => Vec::new(),
             };
             panels.push(Panel {
                 title: format!("{} — {what}", algo_title(a)),
+                x_label: "episode".into(),
                 y_label: unit.to_string(),
-                y_range: range,
+                y_range: (row == 0).then_some((0.0, 102.0)),
                 series,
                 markers: true,
                 marks: Vec::new(),
-                legend_low: row != 2,
+                refs,
             });
         }
     }
     CurveFigure {
         title: "Figure 8: evaluation during training".into(),
         subtitle: format!(
-            "Deterministic policy on {trials} fixed random targets at each evaluation point (eval.csv); line: mean over seeds, band: min-max over seeds."
+            "{study}\nDeterministic policy on {trials} fixed random targets at each evaluation point (eval.csv); line: mean over seeds, band: min-max over seeds; no line through an evaluation without success (steps undefined)."
         ),
         rows: 3,
         cols: algos.len(),
         panels,
     }
 }
+
+/// Performance profiles of the evaluation success rate (Agarwal et al. 2021): for each threshold
+/// tau, the share of runs whose success rate exceeds it; one panel per algorithm, one line per
+/// reward function. A curve further up and to the right is better throughout.
+pub fn profile_figure(a: &super::aggregate::Aggregates, study: &str) -> CurveFigure {
+    let algos: Vec<Algo> =
+        ALGO_ORDER.into_iter().filter(|al| a.profiles.iter().any(|p| p.algo == *al)).collect();
+    let panels = algos
+        .iter()
+        .map(|&al| Panel {
+            title: format!("{} — success-rate profile", algo_title(al)),
+            x_label: "success-rate threshold tau (%)".into(),
+            y_label: "runs with success rate > tau (%)".into(),
+            y_range: Some((0.0, 102.0)),
+            series: a
+                .profiles
+                .iter()
+                .filter(|p| p.algo == al)
+                .map(|p| {
+                    let x: Vec<f64> = p.taus.iter().map(|t| 100.0 * t).collect();
+                    let y: Vec<f64> = p.fraction_above.iter().map(|f| 100.0 * f).collect();
+                    let label = format!("{} ({} runs)", reward_title(p.reward), p.runs);
+                    (p.reward, label, Band { x, mean: y.clone(), lo: y.clone(), hi: y })
+                })
+                .collect(),
+            markers: false,
+            marks: Vec::new(),
+            refs: Vec::new(),
+        })
+        .collect();
+    CurveFigure {
+        title: "Performance profiles: evaluation success rate".into(),
+        subtitle: format!("{study}\nEach run's closing evaluation; the share of runs above each threshold (Agarwal et al., NeurIPS 2021)."),
+        rows: 1,
+        cols: algos.len(),
+        panels,
+    }
+}
+
+/// The legend name of the scripted controller's reference lines.
+pub const REFERENCE_LABEL: &str = "Jacobian controller";
 
 /// End-effector paths towards their targets in three projections, one row per rollout set.
 pub struct TrajectoryFigure {
