@@ -112,6 +112,16 @@ pub struct BatchRecord<'a> {
     pub ee_pos: &'a [[f64; 3]],
 }
 
+/// A plan that serialises as its [`BatchRecord`] (one line of batch output).
+#[derive(Clone, Debug)]
+pub struct BatchLine(pub Plan);
+
+impl Serialize for BatchLine {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        self.0.batch_record().serialize(s)
+    }
+}
+
 impl Plan {
     fn start(env: &ReachEnv, capacity: usize) -> Plan {
         let n = env.act_dim();
