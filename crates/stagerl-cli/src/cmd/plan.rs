@@ -56,10 +56,11 @@ pub fn run(args: Args) -> Result<()> {
         }
         let out = crate::out::stdout()?;
         if path.as_os_str() == "-" {
-            return batch(&mut planner, std::io::stdin().lock(), out);
+            return batch(&mut planner, std::io::stdin().lock(), out).map(drop);
         }
         let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
         return batch(&mut planner, std::io::BufReader::new(file), out)
+            .map(drop)
             .with_context(|| format!("planning the targets of {}", path.display()));
     }
     let target = numbers("--target", args.target.as_deref().unwrap_or_default())?;
@@ -114,17 +115,19 @@ fn planner(args: &Args) -> Result<Planner> {
 }
 
 /// Plan every JSON line of `input` ([`PlanRequest`]), one [`BatchLine`] out per line; warnings
-/// on standard error.
-pub fn batch(planner: &mut Planner, input: impl BufRead, output: impl Write) -> Result<()> {
-    let mut k = 0u64;
+/// on standard error. Returns the number of control steps planned.
+pub fn batch(planner: &mut Planner, input: impl BufRead, output: impl Write) -> Result<u64> {
+    let (mut k, mut steps) = (0u64, 0u64);
     crate::jsonl::process(input, output, |req: PlanRequest| {
         k += 1;
         let plan = planner.plan_request(&req)?;
         if let Some(w) = &plan.warning {
             errln!("stagerl: warning: plan {k}: {w}")?;
         }
+        steps += u64::from(plan.summary.steps);
         Ok(BatchLine(plan))
-    })
+    })?;
+    Ok(steps)
 }
 
 /// Comma-separated numbers of flag `flag`.
