@@ -109,6 +109,10 @@ fn a_trained_policy_plans_consistent_trajectories() {
         }
         reached += usize::from(summary["reached"].as_bool().unwrap());
     }
+    // --max-steps bounds a plan.
+    let out = run(&["plan", "--run", run_dir, "--target", "-0.5,0.15,0.3", "--max-steps", "3"]);
+    let (rows, summary) = check_jsonl(&stdout_of(&out));
+    assert!(rows.len() <= 4 && summary["steps"].as_u64().unwrap() <= 3, "{summary}");
     // Plans that end at the target and plans that run out of steps both keep the invariants;
     // this run reaches some targets.
     eprintln!("reached {reached} of 4");

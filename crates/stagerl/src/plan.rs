@@ -280,13 +280,17 @@ pub struct Planner {
     env: ReachEnv,
     policy: PlanPolicy,
     scratch: Scratch,
-    region: TargetRegion,
+    /// Where the policy was trained (for agents; the controller needs no training).
+    region: Option<TargetRegion>,
 }
 
 impl Planner {
     /// A planner for `policy` on `env` (its task's `max_steps` bounds a plan).
     pub fn new(env: ReachEnv, policy: PlanPolicy) -> Planner {
-        let region = TargetRegion::of(env.task(), env.chain());
+        let region = match policy {
+            PlanPolicy::Agent(_) => Some(TargetRegion::of(env.task(), env.chain())),
+            PlanPolicy::Jacobian(_) => None,
+        };
         Planner { scratch: Scratch::new(&env), env, policy, region }
     }
 
@@ -364,10 +368,7 @@ impl Planner {
             }
         };
         self.env.reset_to(start, t)?;
-        let warning = match self.policy {
-            PlanPolicy::Agent(_) => self.region.outside(&t),
-            PlanPolicy::Jacobian(_) => None,
-        };
+        let warning = self.region.as_ref().and_then(|r| r.outside(&t));
         let mut plan = Plan::start(&self.env, self.env.task().max_steps as usize + 1);
         let outcome = {
             let record = |tr: &crate::env::Transition<'_>| {
