@@ -31,6 +31,9 @@ enum Command {
     /// Run the scripted Jacobian controller on the reaching task, printing every reward term
     /// step by step, then its success rate over many random targets.
     Demo(cmd::demo::Args),
+    /// Plan a joint trajectory from a start pose to a target with a trained run's deterministic
+    /// policy (or the Jacobian controller): one JSON line (or CSV row) per state, then a summary.
+    Plan(cmd::plan::Args),
     /// Forward kinematics: JSON lines {"joints":[...]} on stdin (radians), one
     /// {"position":[x,y,z],"quaternion":[x,y,z,w]} line out per input (metres, base frame).
     Fk(cmd::fk::Args),
@@ -57,6 +60,7 @@ fn main() -> ExitCode {
         Command::Eval(a) => cmd::eval::run(a),
         Command::Reproduce(a) => cmd::reproduce::run(a),
         Command::Demo(a) => cmd::demo::run(a),
+        Command::Plan(a) => cmd::plan::run(a),
         Command::Fk(a) => cmd::fk::run(a),
         Command::Reward(a) => cmd::reward::run(a),
         Command::Report(a) => cmd::report::run(a),

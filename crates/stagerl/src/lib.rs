@@ -15,6 +15,8 @@
 //!   [`validate`]: the value checks every section shares.
 //! - [`controller`]: a scripted Jacobian controller, the reference the learned policies are
 //!   measured against.
+//! - [`plan`]: a trajectory from a start pose to a target with a trained policy or the
+//!   controller; [`policy`]: the portable description of a checkpoint's policy.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
@@ -36,6 +38,8 @@ pub mod lock;
 pub mod log;
 pub mod metrics;
 pub mod nn;
+pub mod plan;
+pub mod policy;
 pub mod provenance;
 pub mod replay;
 pub mod report;

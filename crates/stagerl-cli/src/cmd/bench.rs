@@ -13,6 +13,26 @@ pub enum Bench {
     Update(UpdateArgs),
     /// End-to-end training throughput: environment steps per second at one update per step.
     Train(TrainArgs),
+    /// Plans per second in batch mode (`stagerl plan --targets`: parsing, planning and JSON
+    /// output included), one thread, on targets of the task's distribution.
+    Plan(PlanArgs),
+}
+
+#[derive(clap::Args)]
+pub struct PlanArgs {
+    /// A trained run to plan with; unset: an untrained agent of --algo and --hidden (whose plans
+    /// rarely reach the target, so each runs the full max_steps: the slowest case).
+    #[arg(long)]
+    run: Option<std::path::PathBuf>,
+    #[arg(long, default_value = "sac")]
+    algo: stagerl::agent::Algo,
+    /// Width of both hidden layers of the untrained agent.
+    #[arg(long, default_value_t = 64)]
+    hidden: usize,
+    /// Plans to time (after a tenth as many for warm-up; the fastest of three passes), 1 to
+    /// 10 000 000.
+    #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
+    plans: u32,
 }
 
 #[derive(clap::Args)]
@@ -59,6 +79,7 @@ pub fn run(b: Bench) -> Result<()> {
         Bench::Env(a) => env(a),
         Bench::Update(a) => update(a),
         Bench::Train(a) => train(a),
+        Bench::Plan(a) => plan(a),
     }
 }
 
@@ -164,5 +185,59 @@ fn train(a: TrainArgs) -> Result<()> {
         a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps
     )?;
     outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
+    Ok(())
+}
+
+fn plan(a: PlanArgs) -> Result<()> {
+    use stagerl::plan::{PlanPolicy, Planner};
+    let (mut planner, what) = match &a.run {
+        Some(dir) => {
+            let run = stagerl::rundir::RunDir::new(dir);
+            let (ck, planner) = Planner::from_run(&run, None, None)?;
+            (planner, format!("checkpoint {}", ck.display()))
+        }
+        None => {
+            let mut cfg = Config::default();
+            cfg.agent.algo = a.algo;
+            cfg.agent.hidden = vec![a.hidden, a.hidden];
+            cfg.validate()?;
+            let env = ReachEnv::from_config(&cfg, 0).context("building the environment")?;
+            let agent = stagerl::train::build_agent(&cfg, &env)?;
+            (
+                Planner::new(env, PlanPolicy::Agent(agent)),
+                format!("untrained {} hidden {}x{}", a.algo, a.hidden, a.hidden),
+            )
+        }
+    };
+    let input = |n: u32, seed: u64| -> String {
+        let env = planner.env();
+        let mut rng = Rng::new(seed);
+        let mut q = vec![0.0; env.act_dim()];
+        let mut text = String::new();
+        for _ in 0..n {
+            let t = env.task().sample_target(env.chain(), &mut rng, &mut q);
+            text.push_str(&format!("{{\"target\":[{},{},{}]}}\n", t.x, t.y, t.z));
+        }
+        text
+    };
+    let (warm, timed) = (input((a.plans / 10).max(1), 1), input(a.plans, 2));
+    super::plan::batch(&mut planner, warm.as_bytes(), std::io::sink())?;
+    // The fastest of three timed passes (the machine's other load only slows a pass down);
+    // the output is formatted in full and discarded.
+    let (mut secs, mut steps) = (f64::INFINITY, 0);
+    for _ in 0..3 {
+        let start = Instant::now();
+        steps = super::plan::batch(&mut planner, timed.as_bytes(), std::io::sink())?;
+        secs = secs.min(start.elapsed().as_secs_f64());
+    }
+    let pps = f64::from(a.plans) / secs;
+    outln!(
+        "plan: {} plans in {:.3} s, {:.0} plans/s, {:.1} steps per plan ({what}, batch mode with JSON in and out, one thread)",
+        a.plans,
+        secs,
+        pps,
+        steps as f64 / f64::from(a.plans)
+    )?;
+    outln!("{}", serde_json::json!({ "plans_per_sec": pps }))?;
     Ok(())
 }

@@ -2,6 +2,7 @@ pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod fk;
+pub mod plan;
 pub mod report;
 pub mod reproduce;
 pub mod reward;

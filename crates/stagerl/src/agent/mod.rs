@@ -43,6 +43,9 @@ pub trait Agent: Send + Learned {
     fn obs_dim(&self) -> usize;
     /// Action length.
     fn act_dim(&self) -> usize;
+    /// The actor network (its output is turned into the deterministic action by the
+    /// algorithm's rule: see [`crate::policy`]).
+    fn actor(&self) -> &Mlp<f32>;
     /// Exploration action for one observation (training), in [-1, 1].
     fn act(&mut self, obs: &[f32], action: &mut [f32]);
     /// Deterministic action for one observation (evaluation, deployment), in [-1, 1].

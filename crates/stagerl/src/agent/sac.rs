@@ -114,6 +114,9 @@ impl Agent for Sac {
     fn algo(&self) -> Algo {
         Algo::Sac
     }
+    fn actor(&self) -> &Mlp<f32> {
+        &self.actor
+    }
     fn obs_dim(&self) -> usize {
         self.obs_dim
     }

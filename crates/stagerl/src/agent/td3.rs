@@ -124,6 +124,9 @@ impl Agent for Td3 {
     fn algo(&self) -> Algo {
         self.family.algo
     }
+    fn actor(&self) -> &Mlp<f32> {
+        &self.actor
+    }
     fn obs_dim(&self) -> usize {
         self.obs_dim
     }

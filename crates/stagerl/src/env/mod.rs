@@ -55,6 +55,26 @@ pub fn observation_dim(kind: ObservationKind, dof: usize) -> usize {
     }
 }
 
+/// Check joint positions for `chain`: one finite value per joint, each within its joint's limits.
+pub fn check_joint_positions(chain: &Chain, q: &[f64]) -> Result<()> {
+    let n = chain.dof();
+    if q.len() != n {
+        return Err(Error::InvalidInput(format!(
+            "start pose has {} values, expected {n} (one per joint of the arm, radians)",
+            q.len()
+        )));
+    }
+    for (i, (j, &v)) in chain.joints().iter().zip(q).enumerate() {
+        if !(v.is_finite() && v >= j.lower && v <= j.upper) {
+            return Err(Error::InvalidInput(format!(
+                "start pose: joint {i} `{}` = {v} is outside its limits [{}, {}]",
+                j.name, j.lower, j.upper
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Everything that changes as a [`ReachEnv`] runs, for exact checkpoints: the random stream and,
 /// mid-episode, the joint positions, the target and the step count. The end-effector pose and the
 /// observation follow from these.
@@ -136,6 +156,25 @@ impl ReachEnv {
             return Err(Error::InvalidInput(format!("target {target:?} is not finite")));
         }
         self.q.copy_from_slice(&self.task.home_pose);
+        self.target = target;
+        Ok(self.begin_episode())
+    }
+
+    /// Start a new episode at joint positions `start` (radians, metres for prismatic joints)
+    /// with a given target (metres, base frame); the random stream is untouched.
+    ///
+    /// Errors: `start` without one value per joint (the expected count given), a value that is
+    /// not finite or outside its joint's limits (the joint, the value and the limits named), a
+    /// target that is not finite.
+    pub fn reset_to(&mut self, start: &[f64], target: Vector3<f64>) -> Result<&[f32]> {
+        check_joint_positions(&self.chain, start)?;
+        if !target.iter().all(|x| x.is_finite()) {
+            return Err(Error::InvalidInput(format!(
+                "target {:?} is not finite",
+                [target.x, target.y, target.z]
+            )));
+        }
+        self.q.copy_from_slice(start);
         self.target = target;
         Ok(self.begin_episode())
     }

@@ -291,6 +291,20 @@ impl Kinematics {
         Kinematics { base: to_cols(base), steps }
     }
 
+    /// The first joint's origin in the root frame, metres.
+    pub fn first_joint_origin(&self) -> [f64; 3] {
+        let t = self.base[3];
+        [t[0][0], t[0][1], t[1][0]]
+    }
+
+    /// The lengths of the constant links after each joint (to the next joint or the tip), metres.
+    pub fn link_lengths(&self) -> impl Iterator<Item = f64> + '_ {
+        self.steps.iter().map(|s| {
+            let (x, y, z) = (s.after[3][0], s.after[7][0], s.after[11][0]);
+            (x * x + y * y + z * z).sqrt()
+        })
+    }
+
     /// The tip transform in the root frame. Joint values past `steps.len()` are ignored; missing
     /// ones leave the remaining joints out (callers check the length).
     #[inline]

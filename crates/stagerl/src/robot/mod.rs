@@ -178,6 +178,22 @@ impl Chain {
     pub fn velocity_limits(&self) -> &[f64] {
         &self.velocity
     }
+    /// The first joint's origin in the base frame, metres: the centre of the arm's reach.
+    pub fn first_joint_origin(&self) -> Vector3<f64> {
+        Vector3::from(self.kin.first_joint_origin())
+    }
+    /// How far the tip can be from [`Chain::first_joint_origin`], metres: the sum of the link
+    /// lengths after each joint plus each prismatic joint's largest extension (an upper bound; no
+    /// pose puts the tip farther away).
+    pub fn reach_m(&self) -> f64 {
+        let travel: f64 = self
+            .joints
+            .iter()
+            .filter(|j| j.kind == JointKind::Prismatic)
+            .map(|j| j.lower.abs().max(j.upper.abs()))
+            .sum();
+        self.kin.link_lengths().sum::<f64>() + travel
+    }
     /// The root link: the frame poses are expressed in.
     pub fn base_link(&self) -> &str {
         &self.base_link

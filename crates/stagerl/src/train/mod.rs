@@ -233,6 +233,10 @@ impl Trainer {
         let mut ck = Checkpoint::new();
         self.agent.save(&mut ck);
         ck.put_meta("algorithm", self.agent.algo().name());
+        ck.put_json(
+            crate::policy::POLICY_KEY,
+            &crate::policy::PolicySpec::new(&self.cfg, &self.env, self.agent.as_ref()),
+        );
         ck.put_json("obs_dim", &self.env.obs_dim());
         ck.put_json("act_dim", &self.env.act_dim());
         ck.put_json("hidden", &self.cfg.agent.hidden);

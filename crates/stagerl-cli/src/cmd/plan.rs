@@ -1,0 +1,142 @@
+use anyhow::{bail, Context, Result};
+use stagerl::plan::{BatchLine, PlanRequest, Planner};
+use stagerl::rundir::RunDir;
+use std::io::{BufRead, IsTerminal, Write};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The run directory whose policy plans (holds config.toml and checkpoints/).
+    #[arg(long, required_unless_present = "controller")]
+    run: Option<PathBuf>,
+    /// Checkpoint to plan with (default: the run's best, else final, else latest).
+    #[arg(long, conflicts_with = "controller")]
+    checkpoint: Option<PathBuf>,
+    /// Plan with a scripted controller instead of a trained policy (on the arm and task of
+    /// --run if given, else the default UR5 task).
+    #[arg(long, value_enum)]
+    controller: Option<Controller>,
+    /// Target X,Y,Z, metres, base frame.
+    #[arg(long, allow_hyphen_values = true, required_unless_present = "targets", conflicts_with = "targets")]
+    target: Option<String>,
+    /// Start pose Q1,...,QN, radians (default: the task's home pose).
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "targets")]
+    start: Option<String>,
+    /// Batch mode: JSON lines {"target":[x,y,z]} or {"target":[..],"start":[..]} from FILE, or
+    /// from standard input with `-`; one JSON line out per input.
+    #[arg(long)]
+    targets: Option<PathBuf>,
+    /// Step limit of a plan (default: the task's max_steps), 1 to 1 000 000.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    max_steps: Option<u32>,
+    /// Output of a single plan: `jsonl` (one line per state, then the summary; the default
+    /// when standard output is not a terminal) or `csv` (one joint per column; the summary on
+    /// standard error).
+    #[arg(long, value_enum)]
+    format: Option<Format>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Controller {
+    /// The damped-least-squares Jacobian controller.
+    Jacobian,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    Csv,
+    Jsonl,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let mut planner = planner(&args)?;
+    if let Some(path) = &args.targets {
+        if args.format == Some(Format::Csv) {
+            bail!("--format csv is for a single plan; batch mode (--targets) writes JSON lines");
+        }
+        let out = crate::out::stdout()?;
+        if path.as_os_str() == "-" {
+            return batch(&mut planner, std::io::stdin().lock(), out).map(drop);
+        }
+        let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+        return batch(&mut planner, std::io::BufReader::new(file), out)
+            .map(drop)
+            .with_context(|| format!("planning the targets of {}", path.display()));
+    }
+    let target = numbers("--target", args.target.as_deref().unwrap_or_default())?;
+    let start = args.start.as_deref().map(|s| numbers("--start", s)).transpose()?;
+    let plan = planner.plan(&target, start.as_deref())?;
+    if let Some(w) = &plan.warning {
+        errln!("stagerl: warning: {w}")?;
+    }
+    let format =
+        args.format.unwrap_or(if std::io::stdout().is_terminal() { Format::Csv } else { Format::Jsonl });
+    let summary =
+        serde_json::to_string(&SummaryLine { summary: &plan.summary }).context("writing the summary")?;
+    let mut out = crate::out::stdout()?;
+    match format {
+        Format::Csv => out.write_all(plan.to_csv().as_bytes()).context("writing to standard output")?,
+        Format::Jsonl => {
+            for k in 0..plan.rows() {
+                serde_json::to_writer(&mut out, &plan.row(k)).context("writing to standard output")?;
+                out.write_all(b"\n").context("writing to standard output")?;
+            }
+            writeln!(out, "{summary}").context("writing to standard output")?;
+        }
+    }
+    out.flush().context("writing to standard output")?;
+    if format == Format::Csv {
+        errln!("{summary}")?;
+    }
+    Ok(())
+}
+
+/// The last line of a plan's output: `{"summary":{...}}`, fields in the summary's order.
+#[derive(serde::Serialize)]
+struct SummaryLine<'a> {
+    summary: &'a stagerl::plan::PlanSummary,
+}
+
+/// The planner the flags ask for.
+fn planner(args: &Args) -> Result<Planner> {
+    let run = args.run.as_deref().map(RunDir::new);
+    let cfg = match &run {
+        Some(r) => Some(r.load_config().with_context(|| format!("reading the run in {}", r.root.display()))?),
+        None => None,
+    };
+    match (args.controller, &run) {
+        (Some(Controller::Jacobian), _) => Ok(Planner::jacobian(&cfg.unwrap_or_default(), args.max_steps)?),
+        (None, Some(run)) => {
+            let (_, planner) = Planner::from_run(run, args.checkpoint.as_deref(), args.max_steps)?;
+            Ok(planner)
+        }
+        (None, None) => bail!("give --run DIR (a trained run) or --controller jacobian"),
+    }
+}
+
+/// Plan every JSON line of `input` ([`PlanRequest`]), one [`BatchLine`] out per line; warnings
+/// on standard error. Returns the number of control steps planned.
+pub fn batch(planner: &mut Planner, input: impl BufRead, output: impl Write) -> Result<u64> {
+    let (mut k, mut steps) = (0u64, 0u64);
+    crate::jsonl::process(input, output, |req: PlanRequest| {
+        k += 1;
+        let plan = planner.plan_request(&req)?;
+        if let Some(w) = &plan.warning {
+            errln!("stagerl: warning: plan {k}: {w}")?;
+        }
+        steps += u64::from(plan.summary.steps);
+        Ok(BatchLine(plan))
+    })?;
+    Ok(steps)
+}
+
+/// Comma-separated numbers of flag `flag`.
+fn numbers(flag: &str, text: &str) -> Result<Vec<f64>> {
+    text.split(',')
+        .map(|x| {
+            x.trim().parse::<f64>().with_context(|| {
+                format!("{flag} {}: `{}` is not a number (comma-separated numbers expected)", text, x.trim())
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,188 @@
+use super::*;
+use crate::agent::{build, AgentConfig, Algo};
+use crate::env::Policy;
+use std::f64::consts::PI;
+
+fn jacobian() -> Planner {
+    Planner::jacobian(&Config::default(), None).unwrap()
+}
+
+/// An untrained SAC agent at hidden 32 on the default task.
+fn agent_planner(max_steps: Option<u32>) -> Planner {
+    let mut cfg = Config::default();
+    if let Some(n) = max_steps {
+        cfg.task.max_steps = n;
+    }
+    let env = ReachEnv::from_config(&cfg, 0).unwrap();
+    let acfg = AgentConfig { algo: Algo::Sac, hidden: vec![32, 32], ..AgentConfig::default() };
+    let agent = build(&acfg, env.obs_dim(), env.act_dim(), 5).unwrap();
+    Planner::new(env, PlanPolicy::Agent(agent))
+}
+
+/// Targets of the task's distribution.
+fn targets(n: usize, seed: u64) -> Vec<[f64; 3]> {
+    let chain = Chain::ur5();
+    let task = crate::env::TaskConfig::default().resolve(&chain).unwrap();
+    let mut rng = Rng::new(seed);
+    let mut q = vec![0.0; 6];
+    (0..n).map(|_| task.sample_target(&chain, &mut rng, &mut q).into()).collect()
+}
+
+/// The invariants every plan keeps.
+fn check_plan(p: &Plan, planner: &Planner, target: &[f64; 3]) {
+    let chain = planner.env().chain();
+    let (lo, hi, dt) = (chain.lower_limits(), chain.upper_limits(), p.dt_s);
+    let beta = planner.env().reward_config().beta_m;
+    let rows = p.rows();
+    assert_eq!(rows, p.summary.steps as usize + 1);
+    assert!(p.row(0).joint_vel.iter().all(|&v| v == 0.0));
+    assert_eq!(p.row(0).reward, 0.0);
+    let (mut path, mut travel, mut reward) = (0.0, 0.0, 0.0);
+    for k in 0..rows {
+        let r = p.row(k);
+        assert_eq!(r.t_s, k as f64 * dt);
+        let pose = chain.fk(r.q);
+        for i in 0..3 {
+            assert!((pose.position[i] - r.ee_pos[i]).abs() <= 1e-9, "row {k}");
+        }
+        let d = (Vector3::from(*target) - pose.position).norm();
+        assert!((d - r.distance).abs() <= 1e-12, "row {k}");
+        reward += r.reward;
+        if k > 0 {
+            let prev = p.row(k - 1);
+            for i in 0..p.dof {
+                let free = r.q[i] > lo[i] && r.q[i] < hi[i];
+                if free {
+                    let expect = prev.q[i] + r.joint_vel[i] * dt;
+                    assert!((r.q[i] - expect).abs() <= 1e-12, "row {k} joint {i}");
+                }
+                travel += (r.q[i] - prev.q[i]).abs();
+            }
+            path += (Vector3::from(r.ee_pos) - Vector3::from(prev.ee_pos)).norm();
+        }
+    }
+    let s = p.summary;
+    assert_eq!(s.reached, s.final_distance < beta, "{s:?}");
+    assert_eq!(s.final_distance, p.distance[rows - 1]);
+    assert!((s.path_length_m - path).abs() <= 1e-12);
+    assert!((s.joint_travel_rad - travel).abs() <= 1e-12);
+    assert!((s.episode_reward - reward).abs() <= 1e-9);
+    assert!(s.reached || s.steps == planner.env().task().max_steps);
+}
+
+#[test]
+fn jacobian_plans_keep_the_invariants_and_reach() {
+    let mut planner = jacobian();
+    let mut reached = 0;
+    for t in targets(100, 1) {
+        let p = planner.plan(&t, None).unwrap();
+        assert_eq!(p.row(0).q, &crate::env::task::UR5_HOME_POSE_RAD);
+        assert!(p.warning.is_none());
+        check_plan(&p, &planner, &t);
+        reached += usize::from(p.summary.reached);
+    }
+    assert_eq!(reached, 100);
+}
+
+#[test]
+fn agent_plans_follow_the_evaluation_rollout_and_start_anywhere() {
+    let mut planner = agent_planner(Some(20));
+    let mut cfg = Config::default();
+    cfg.task.max_steps = 20;
+    let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
+    let acfg = AgentConfig { algo: Algo::Sac, hidden: vec![32, 32], ..AgentConfig::default() };
+    let mut agent = build(&acfg, env.obs_dim(), env.act_dim(), 5).unwrap();
+    let start = [0.3, -1.2, 1.0, -1.0, -1.5, 0.2];
+    for (k, t) in targets(20, 2).into_iter().enumerate() {
+        let s = (k % 2 == 1).then_some(&start[..]);
+        let p = planner.plan(&t, s).unwrap();
+        check_plan(&p, &planner, &t);
+        assert_eq!(p.row(0).q, s.unwrap_or(&crate::env::task::UR5_HOME_POSE_RAD));
+        // The same rollout as evaluation's, from the same state.
+        env.reset_to(s.unwrap_or(&env.task().home_pose.clone()), Vector3::from(t)).unwrap();
+        let mut scratch = Scratch::new(&env);
+        let policy = crate::train::eval::deterministic(agent.as_mut());
+        let Outcome::Finished { reward, .. } = rollout(&mut env, &mut scratch, &mut Policy(policy)).unwrap()
+        else {
+            panic!("stopped")
+        };
+        assert_eq!(reward.to_bits(), p.summary.episode_reward.to_bits());
+        assert_eq!(env.joint_positions(), p.row(p.rows() - 1).q);
+    }
+}
+
+#[test]
+fn bad_targets_and_starts_are_errors_naming_them() {
+    let mut planner = jacobian();
+    let reach = planner.env().chain().reach_m();
+    let e = planner.plan(&[0.3, 0.2], None).unwrap_err().to_string();
+    assert!(e.contains("2 values") && e.contains("expected 3"), "{e}");
+    let e = planner.plan(&[0.3, 0.2, -0.1], None).unwrap_err().to_string();
+    assert!(
+        e.contains("[0.3, 0.2, -0.1]") && e.contains("below the floor") && e.contains("reaches at most"),
+        "{e}"
+    );
+    let e = planner.plan(&[3.0, 0.0, 0.5], None).unwrap_err().to_string();
+    assert!(e.contains("[3, 0, 0.5]") && e.contains(&format!("{reach:.4} m")), "{e}");
+    let e = planner.plan(&[f64::NAN, 0.0, 0.5], None).unwrap_err().to_string();
+    assert!(e.contains("not finite"), "{e}");
+    let t = targets(1, 3)[0];
+    let e = planner.plan(&t, Some(&[0.0; 5])).unwrap_err().to_string();
+    assert!(e.contains("5 values") && e.contains("expected 6"), "{e}");
+    let e = planner.plan(&t, Some(&[0.0, 0.0, 4.0, 0.0, 0.0, 0.0])).unwrap_err().to_string();
+    assert!(e.contains("elbow_joint") && e.contains("= 4") && e.contains("[-3.14159"), "{e}");
+    // The planner still works after refusals.
+    assert!(planner.plan(&t, None).unwrap().summary.reached);
+}
+
+#[test]
+fn reach_bounds_every_pose() {
+    let chain = Chain::ur5();
+    let (o, reach) = (chain.first_joint_origin(), chain.reach_m());
+    assert_eq!(o, Vector3::zeros());
+    let mut rng = Rng::new(9);
+    let mut far: f64 = 0.0;
+    for _ in 0..20_000 {
+        let q: Vec<f64> = (0..6).map(|_| rng.uniform_range(-PI, PI)).collect();
+        far = far.max((chain.fk(&q).position - o).norm());
+    }
+    assert!(far <= reach && far > 0.8 * reach, "farthest {far}, reach {reach}");
+}
+
+#[test]
+fn a_target_outside_the_training_distribution_warns_and_still_plans() {
+    let mut planner = agent_planner(None);
+    let o = planner.env().chain().first_joint_origin();
+    for t in targets(200, 4) {
+        assert!(planner.plan(&t, None).unwrap().warning.is_none(), "{t:?}");
+    }
+    // Behind the arm: the training targets' mirror image through the first joint's axis.
+    let t = targets(1, 5)[0];
+    let behind = [2.0 * o.x - t[0], 2.0 * o.y - t[1], t[2]];
+    let p = planner.plan(&behind, None).unwrap();
+    let w = p.warning.clone().unwrap_or_else(|| panic!("no warning for {behind:?}"));
+    assert!(
+        w.contains("outside the training target distribution") && w.contains(&format!("{:?}", behind[0])),
+        "{w}"
+    );
+    check_plan(&p, &planner, &behind);
+}
+
+#[test]
+fn csv_and_rows_carry_the_same_numbers() {
+    let mut planner = jacobian();
+    let t = targets(1, 6)[0];
+    let p = planner.plan(&t, None).unwrap();
+    let csv = p.to_csv();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next().unwrap(), Plan::csv_header(6));
+    for (k, line) in lines.enumerate() {
+        let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+        let r = p.row(k);
+        let mut expect = vec![k as f64, r.t_s];
+        expect.extend(r.q.iter().chain(r.joint_vel).chain(&r.ee_pos).chain(&r.ee_quat));
+        expect.extend([r.distance, r.reward]);
+        assert_eq!(v.len(), expect.len());
+        assert!(v.iter().zip(&expect).all(|(a, b)| a.to_bits() == b.to_bits()), "row {k}");
+    }
+}

@@ -1,0 +1,192 @@
+//! The portable description of a checkpoint's policy: everything needed to run the trained actor
+//! without stagerl's source, written as the JSON metadata entry [`POLICY_KEY`] (`policy`) of
+//! every checkpoint (latest, final, best).
+//!
+//! Running the policy from the safetensors file alone:
+//! 1. observation (f32, `observation.dim` values, in the order of `observation.layout`):
+//!    `q / pi` (one per joint, q in radians), the end-effector position (3, metres, base frame),
+//!    the target (3, metres), `obs_delta_scale * (target - end effector)` (3) and
+//!    `obs_delta_scale * |target - end effector|` (1);
+//! 2. the actor: for each entry of `actor.layers` in order, `x <- f(W x + b)` with `W` the tensor
+//!    named `weight` (shape `[out, in]`), `b` the tensor named `bias` and `f` its `activation`
+//!    (`relu`: max(z, 0); `tanh`; `identity`);
+//! 3. the deterministic action `a` (in [-1, 1]) by `action.rule`: `actor_output` (DDPG, TD3: the
+//!    actor's tanh output itself) or `tanh_of_mean` (SAC: the actor outputs `[mean | log-std
+//!    parameter]`, `2 * action.dim` values; `a = tanh(mean)`);
+//! 4. the joint-velocity command, rad/s (m/s for prismatic joints): `clip(a, -1, 1) *
+//!    action.speed_limits`, held for `action.dt_s` seconds; joint positions are clamped to
+//!    `action.lower_limits` and `action.upper_limits`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::agent::{Agent, Algo};
+use crate::config::Config;
+use crate::env::{ObservationKind, ReachEnv};
+use crate::nn::Activation;
+
+/// The checkpoint metadata key of the [`PolicySpec`].
+pub const POLICY_KEY: &str = "policy";
+
+/// The version of the [`PolicySpec`] format.
+pub const POLICY_FORMAT_VERSION: u32 = 1;
+
+/// A checkpoint's policy, described for running it anywhere (see the module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicySpec {
+    /// [`POLICY_FORMAT_VERSION`].
+    pub format_version: u32,
+    /// `ddpg`, `td3` or `sac`.
+    pub algorithm: String,
+    /// The arm: `ur5` or the URDF's path, its tip link and its joints, root to tip.
+    pub robot: String,
+    pub tip_link: String,
+    pub joint_names: Vec<String>,
+    pub observation: ObservationSpec,
+    pub actor: ActorSpec,
+    pub action: ActionSpec,
+}
+
+/// The observation vector.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObservationSpec {
+    /// Number of values (f32).
+    pub dim: usize,
+    /// The factor `k` of the scaled entries.
+    pub obs_delta_scale: f64,
+    /// The entries in order.
+    pub layout: Vec<ObsEntry>,
+}
+
+/// One block of the observation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObsEntry {
+    /// `q_over_pi`, `ee_pos`, `target`, `scaled_delta` or `scaled_distance`.
+    pub name: String,
+    /// Index of its first value.
+    pub start: usize,
+    pub size: usize,
+    /// What it holds, in words.
+    pub value: String,
+}
+
+/// The actor network: `x <- activation(W x + b)` per layer.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ActorSpec {
+    pub layers: Vec<LayerSpec>,
+}
+
+/// One layer of the actor.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayerSpec {
+    /// Name of the weight tensor, shape `[out, in]`.
+    pub weight: String,
+    /// Name of the bias tensor, shape `[out]`.
+    pub bias: String,
+    pub inputs: usize,
+    pub outputs: usize,
+    /// `relu`, `tanh` or `identity`.
+    pub activation: String,
+}
+
+/// From the actor's output to joint velocities.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ActionSpec {
+    /// Number of actions (one per joint).
+    pub dim: usize,
+    /// `actor_output` or `tanh_of_mean` (see the module docs).
+    pub rule: String,
+    /// The rule in words.
+    pub rule_text: String,
+    /// Joint speed limits: an action of 1 commands this velocity, rad/s (m/s for prismatic).
+    pub speed_limits: Vec<f64>,
+    /// How long a command is held, seconds.
+    pub dt_s: f64,
+    /// Joint position limits, radians (metres for prismatic joints).
+    pub lower_limits: Vec<f64>,
+    pub upper_limits: Vec<f64>,
+}
+
+/// Activation names as [`LayerSpec::activation`] writes them.
+pub fn activation_name(a: Activation) -> &'static str {
+    match a {
+        Activation::Identity => "identity",
+        Activation::Relu => "relu",
+        Activation::Tanh => "tanh",
+    }
+}
+
+impl PolicySpec {
+    /// The description of `agent`'s policy on `env`, trained with `cfg`.
+    pub fn new(cfg: &Config, env: &ReachEnv, agent: &dyn Agent) -> PolicySpec {
+        let chain = env.chain();
+        let n = env.act_dim();
+        let actor = agent.actor();
+        let layers = actor.sizes().len() - 1;
+        let layers = (0..layers)
+            .map(|i| LayerSpec {
+                weight: format!("actor.layer{i}.weight"),
+                bias: format!("actor.layer{i}.bias"),
+                inputs: actor.sizes()[i],
+                outputs: actor.sizes()[i + 1],
+                activation: activation_name(if i + 1 == layers {
+                    actor.output_activation()
+                } else {
+                    actor.hidden_activation()
+                })
+                .into(),
+            })
+            .collect();
+        let (rule, rule_text) = match agent.algo() {
+            Algo::Sac => (
+                "tanh_of_mean",
+                format!(
+                    "a[i] = tanh(y[i]) for i < {n}: the actor's output y holds the Gaussian's mean \
+                     (first {n} values) and its log-std parameter (last {n}, unused)"
+                ),
+            ),
+            Algo::Ddpg | Algo::Td3 => ("actor_output", "a = y: the actor's output (tanh) itself".into()),
+        };
+        PolicySpec {
+            format_version: POLICY_FORMAT_VERSION,
+            algorithm: agent.algo().name().into(),
+            robot: cfg.robot.urdf.clone(),
+            tip_link: chain.tip_link().into(),
+            joint_names: chain.joints().iter().map(|j| j.name.clone()).collect(),
+            observation: observation_spec(env),
+            actor: ActorSpec { layers },
+            action: ActionSpec {
+                dim: n,
+                rule: rule.into(),
+                rule_text,
+                speed_limits: chain.velocity_limits().to_vec(),
+                dt_s: env.task().dt_s,
+                lower_limits: chain.lower_limits().to_vec(),
+                upper_limits: chain.upper_limits().to_vec(),
+            },
+        }
+    }
+}
+
+fn observation_spec(env: &ReachEnv) -> ObservationSpec {
+    let n = env.act_dim();
+    let k = env.task().obs_delta_scale;
+    let entries: [(&str, usize, String); 5] = match env.task().observation {
+        ObservationKind::Standard => [
+            ("q_over_pi", n, "joint positions (radians) divided by pi".into()),
+            ("ee_pos", 3, "end-effector position x, y, z, metres, base frame".into()),
+            ("target", 3, "target position x, y, z, metres, base frame".into()),
+            ("scaled_delta", 3, format!("{k} * (target - ee_pos), per axis")),
+            ("scaled_distance", 1, format!("{k} * |target - ee_pos| (Euclidean norm)")),
+        ],
+    };
+    let mut start = 0;
+    let layout = entries
+        .into_iter()
+        .map(|(name, size, value)| {
+            let e = ObsEntry { name: name.into(), start, size, value };
+            start += size;
+            e
+        })
+        .collect();
+    ObservationSpec { dim: env.obs_dim(), obs_delta_scale: k, layout }
+}
