@@ -72,6 +72,18 @@ fn killed_sweep_loses_and_repeats_nothing() {
         assert_eq!(&std::fs::read(cut.join(r).join("eval-final-seed0.csv")).unwrap(), bytes, "{r} changed");
     }
     assert_eq!(finished(&cut), finished(&full));
+    // provenance.json records both sessions of the cut sweep: the killed one as such (it never
+    // finished), the second with its outcome, each with the code's git commit.
+    let prov: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cut.join("provenance.json")).unwrap()).unwrap();
+    let sessions = prov["sessions"].as_array().unwrap();
+    assert_eq!(sessions.len(), 2, "{prov}");
+    assert_eq!(sessions[0]["end"], serde_json::Value::Null, "{prov}");
+    assert!(sessions[1]["outcome"].as_str().unwrap().starts_with("finished"), "{prov}");
+    assert!(sessions
+        .iter()
+        .all(|s| s["command"][1] == "reproduce" && s["code"]["git_commit"].as_str().is_some()));
+    assert!(prov["total_wall_s"].as_f64().unwrap() > 0.0);
     for r in finished(&full) {
         assert_eq!(episodes_without_wall(&full.join(&r)), episodes_without_wall(&cut.join(&r)), "{r}");
         assert_eq!(

@@ -227,8 +227,10 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Append a session for `command` to `dir`'s record.
+    /// Append a session for `command` to `dir`'s record (under the directory's sweep lock: several
+    /// processes may share a sweep).
     pub fn start(dir: &Path, command: Vec<String>) -> Result<Recorder> {
+        let _lock = crate::lock::DirLock::sweep(dir)?;
         let mut p = Provenance::load(dir)?;
         p.sessions.push(Session {
             command,
@@ -246,6 +248,7 @@ impl Recorder {
 
     /// Record the session's end and how it ended.
     pub fn finish(self, dir: &Path, outcome: &str) -> Result<()> {
+        let _lock = crate::lock::DirLock::sweep(dir)?;
         let mut p = Provenance::load(dir)?;
         if let Some(s) = p.sessions.get_mut(self.index) {
             s.end = Some(rfc3339(SystemTime::now()));

@@ -35,6 +35,9 @@ pub fn run(args: Args) -> Result<()> {
     // lock, once (left as is when it already holds this text).
     experiment::check_all_existing(&runs, &args.out)?;
     experiment::write_preset(&args.out, &text)?;
+    // provenance.json: this session's command, code version, machine and times.
+    let argv: Vec<String> = std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect();
+    let recorder = stagerl::provenance::Recorder::start(&args.out, argv)?;
     let total = runs.len();
     outln!(
         "reproduce `{}`: {} runs in this shard ({} of {}), {} at once -> {}",
@@ -50,6 +53,16 @@ pub fn run(args: Args) -> Result<()> {
     let output = crate::out::RunOutput::new(Arc::clone(&stop));
     let outcome =
         experiment::run_sweep(&runs, &args.out, &preset.sweep, args.jobs, &stop, &|r| print_run(&output, r));
+    let ended = if output.failed().is_some() {
+        "stopped: standard output failed".to_string()
+    } else if outcome.interrupted || stop.load(std::sync::atomic::Ordering::SeqCst) {
+        "interrupted".to_string()
+    } else if !outcome.failures.is_empty() {
+        format!("{} of {total} runs failed", outcome.failures.len())
+    } else {
+        format!("finished ({} runs taken by other processes)", outcome.taken)
+    };
+    recorder.finish(&args.out, &ended)?;
     if let Some(e) = output.failed() {
         bail!("{e}: the sweep stopped; finished runs are kept and interrupted ones saved. Run the same command again to continue.");
     }
