@@ -232,5 +232,12 @@ fn smoke_preset_then_report_writes_every_file() {
     for row in ["SAC", "DDPG", "SAR", "HAR", "Posture", "Stride", "Basic"] {
         assert!(table.contains(row), "table1.md lacks {row}");
     }
+    // The closing evaluation covers the final checkpoint too (the paper's protocol), on the same
+    // targets, and the table shows it beside the best checkpoint's.
+    let run = out.join("sac-sar-seed1");
+    let (best, last) = (run.join("eval-final-seed0.csv"), run.join("eval-final-seed0-final-checkpoint.csv"));
+    let rows = |p: &std::path::Path| std::fs::read_to_string(p).unwrap().lines().count();
+    assert_eq!(rows(&best), rows(&last), "the same trials for both checkpoints");
+    assert!(table.contains("## Best and final checkpoint") && table.contains("| SAC | SAR | 1 |"), "{table}");
     std::fs::remove_dir_all(&root).ok();
 }

@@ -88,6 +88,11 @@ impl RunDir {
     pub fn final_eval(&self, seed: u64) -> PathBuf {
         self.root.join(format!("{}{seed}{}", FINAL_EVAL.0, FINAL_EVAL.1))
     }
+    /// The closing evaluation of the final checkpoint (the paper's protocol: the trained model),
+    /// beside the selected checkpoint's: `eval-final-seed<N>-final-checkpoint.csv`.
+    pub fn final_checkpoint_eval(&self, seed: u64) -> PathBuf {
+        self.root.join(format!("{}{seed}-final-checkpoint{}", FINAL_EVAL.0, FINAL_EVAL.1))
+    }
     /// The record of the closing evaluation on the targets of `seed` (its settings, written
     /// last): `eval-final-seed<N>.json`.
     pub fn final_eval_record(&self, seed: u64) -> PathBuf {
@@ -186,6 +191,12 @@ mod tests {
         assert_eq!(d.trial_eval(1_000_003), Path::new("/r/eval-seed1000003.csv"));
         assert_eq!(d.final_eval(7), Path::new("/r/eval-final-seed7.csv"));
         assert_eq!(d.final_eval_record(7), Path::new("/r/eval-final-seed7.json"));
+        assert_eq!(d.final_checkpoint_eval(7), Path::new("/r/eval-final-seed7-final-checkpoint.csv"));
+        assert_eq!(
+            trial_eval_kind("eval-final-seed7-final-checkpoint.csv"),
+            None,
+            "not a main evaluation file"
+        );
         let best = d.best();
         assert_eq!(d.eval_command(&best, 5, 3), Path::new("/r/eval-best-trials5-seed3.csv"));
         assert_eq!(trial_eval_kind("eval-final-seed1000003.csv"), Some((0, 1_000_003)));

@@ -955,6 +955,7 @@ mod tests {
                     median_final_distance_m: 0.005,
                     mean_final_distance_m: 0.006,
                 }),
+                eval_final_checkpoint: None,
                 eval_file: None,
                 notes: Vec::new(),
             })

@@ -222,6 +222,7 @@ fn table1_markdown(dir: &Path, report: &Report, opts: &ReportOptions) -> Result<
     let input = report.input.display().to_string();
     let mut md = table::render_markdown(&report.groups, &report.paper, &opts.criterion, &input);
     md.insert_str(md.find('\n').map_or(0, |i| i + 1), &format!("\n{}\n", report.study));
+    md.push_str(&table::checkpoints_markdown(&report.groups));
     md.push_str(&reference::render_markdown(&report.reference));
     if !report.sensitivity.is_empty() {
         md.push_str(&render_sensitivity(&report.sensitivity, &opts.criterion));

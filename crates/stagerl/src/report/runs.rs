@@ -34,6 +34,8 @@ pub struct RunData {
     /// Empty when there is no `eval.csv`.
     pub eval_points: Vec<EvalPoint>,
     pub final_eval: Option<FinalEval>,
+    /// The final checkpoint's closing evaluation on the same targets, when the run has one.
+    pub final_checkpoint_eval: Option<FinalEval>,
     /// All configured episodes are in `episodes.csv`.
     pub complete: bool,
     /// Problems met while reading, for the report.
@@ -119,7 +121,22 @@ pub fn load_run(dir: &Path, root: &Path) -> Result<RunData> {
             Err(e) => notes.push(format!("not read: {e}")),
         }
     }
+    let final_checkpoint_eval = final_eval.as_ref().and_then(|f| {
+        let path = rd.final_checkpoint_eval(f.seed);
+        let trials = read_trials_csv(&path).ok().filter(|t| !t.is_empty())?;
+        Some(FinalEval { path, seed: f.seed, trials })
+    });
     let complete = episodes.len() as u64 >= config.train.episodes
         && episodes.last().is_some_and(|r| r.episode >= config.train.episodes);
-    Ok(RunData { dir: dir.to_path_buf(), name, config, episodes, eval_points, final_eval, complete, notes })
+    Ok(RunData {
+        dir: dir.to_path_buf(),
+        name,
+        config,
+        episodes,
+        eval_points,
+        final_eval,
+        final_checkpoint_eval,
+        complete,
+        notes,
+    })
 }

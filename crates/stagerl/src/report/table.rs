@@ -176,6 +176,9 @@ pub struct RunSummary {
     pub tail_mean_reward: f64,
     /// From the per-trial evaluation CSV, when there is one.
     pub eval: Option<EvalSummary>,
+    /// The final checkpoint's closing evaluation on the same targets (the paper's protocol),
+    /// when the run has one.
+    pub eval_final_checkpoint: Option<EvalSummary>,
     pub eval_file: Option<String>,
     pub notes: Vec<String>,
 }
@@ -246,6 +249,7 @@ fn summarize_run(run: &RunData, criterion: &ConvergenceCriterion) -> RunSummary 
         train,
         tail_mean_reward: metrics::mean(tail).unwrap_or(f64::NAN),
         eval,
+        eval_final_checkpoint: run.final_checkpoint_eval.as_ref().and_then(|f| EvalSummary::of(&f.trials)),
         eval_file,
         notes,
     }
@@ -478,7 +482,10 @@ fn intro_markdown(s: &mut String, groups: &[GroupSummary], criterion: &Convergen
         "Runs read from `{input}`: {total_runs} in {} configuration group(s). Ours: mean ± sample std over seeds \
          (paper: over {} runs of {} episodes, {} evaluation trials). E_start and the training columns are over the \
          converged seeds only; train/eval steps are the mean steps of successful episodes; success rate and \
-         evaluation reward come from each run's per-trial evaluation CSV.\n",
+         evaluation reward come from each run's per-trial evaluation CSV. Checkpoint: the evaluation columns \
+         evaluate the checkpoint each run's closing evaluation selected, the best periodic evaluation (our \
+         addition; else the final one); the final checkpoint, the paper's protocol (\"the trained model\"), \
+         is evaluated on the same targets in \"Best and final checkpoint\" below.\n",
         groups.len(),
         paper::PAPER_RUNS,
         paper::PAPER_EPISODES,
@@ -494,6 +501,54 @@ fn intro_markdown(s: &mut String, groups: &[GroupSummary], criterion: &Convergen
         f = criterion.band_floor,
         t = 100.0 * criterion.tail_fraction,
     );
+}
+
+/// The selected (best) and the final checkpoint of each primary group side by side, on the same
+/// targets: mean ± std over the seeds that have both evaluations.
+pub fn checkpoints_markdown(groups: &[GroupSummary]) -> String {
+    let rows: Vec<&GroupSummary> = groups
+        .iter()
+        .filter(|g| g.primary && g.runs.iter().any(|r| r.eval_final_checkpoint.is_some()))
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\n## Best and final checkpoint\n\nThe closing evaluation's targets for both: \"best\" is the checkpoint of \
+         the best periodic evaluation (our addition, used by the table above and the claims), \"final\" the \
+         trained model at the last episode (the paper's protocol).\n\n\
+         | Method | Reward | Seeds | Success best | Success final | Eval reward best | Eval reward final | Eval steps best | Eval steps final |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    let ms = |m: Option<MeanStd>, pct: bool| match m {
+        None => "—".to_string(),
+        Some(m) if pct => format!("{:.1} ± {:.1} %", 100.0 * m.mean, 100.0 * m.std.unwrap_or(0.0)),
+        Some(m) => format!("{:.3} ± {:.3}", m.mean, m.std.unwrap_or(0.0)),
+    };
+    for g in rows {
+        let both: Vec<(&EvalSummary, &EvalSummary)> = g
+            .runs
+            .iter()
+            .filter_map(|r| Some((r.eval.as_ref()?, r.eval_final_checkpoint.as_ref()?)))
+            .collect();
+        let col = |f: &dyn Fn(&EvalSummary) -> Option<f64>, which: usize| {
+            MeanStd::of_present(both.iter().map(|(b, l)| f(if which == 0 { b } else { l })))
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            algo_title(g.algo),
+            reward_title(g.reward),
+            both.len(),
+            ms(col(&|e| Some(e.success_rate), 0), true),
+            ms(col(&|e| Some(e.success_rate), 1), true),
+            ms(col(&|e| Some(e.mean_reward), 0), false),
+            ms(col(&|e| Some(e.mean_reward), 1), false),
+            ms(col(&|e| e.mean_steps, 0), false),
+            ms(col(&|e| e.mean_steps, 1), false),
+        );
+    }
+    s
 }
 
 /// Our row above the paper's, for every algorithm and reward function.

@@ -1,5 +1,7 @@
 //! A run's closing evaluation (after training, by `train` and `reproduce`) as a recorded state
-//! of the run: `eval-final-seed<S>.csv` holds its trials, and `eval-final-seed<S>.json`, written
+//! of the run: `eval-final-seed<S>.csv` holds the trials of the selected checkpoint (best, else
+//! final), `eval-final-seed<S>-final-checkpoint.csv` those of the final checkpoint on the same
+//! targets (the paper's protocol), and `eval-final-seed<S>.json`, written
 //! atomically as the very last step, records the settings it was made with. A run is
 //! *evaluated* when that record exists; a run killed during its closing evaluation has none, and
 //! resuming it (`train --resume`, `reproduce`) runs the evaluation. A record of other settings
@@ -28,6 +30,10 @@ pub struct FinalEvalRecord {
     pub config_hash: String,
     /// The stagerl version that evaluated.
     pub version: String,
+    /// The final checkpoint was evaluated too (`eval-final-seed<S>-final-checkpoint.csv`): the
+    /// paper's protocol evaluates the trained model, the selected (best) checkpoint is ours.
+    #[serde(default)]
+    pub final_checkpoint: bool,
 }
 
 /// The recorded closing evaluation on the targets of `seed`, if the run has one (an unreadable
@@ -48,6 +54,7 @@ pub fn planned(dir: &Path, cfg: &Config, trials: u32, seed: u64) -> Option<(Path
         seed,
         config_hash: config_hash(cfg),
         version: env!("CARGO_PKG_VERSION").to_string(),
+        final_checkpoint: RunDir::new(dir).final_checkpoint().is_file(),
     };
     Some((checkpoint, record))
 }
@@ -74,9 +81,20 @@ pub fn run(
         .ok_or_else(|| Error::InvalidInput(format!("{}: trained but no checkpoint", dir.display())))?;
     let run = RunDir::new(dir);
     let e = evaluate_run(&run, cfg, Some(&checkpoint), trials, seed, stop)?;
+    // The final checkpoint on the same targets (the same trials when it is the one selected).
+    let final_trials = if !record.final_checkpoint {
+        None
+    } else if checkpoint == run.final_checkpoint() {
+        Some(e.trials.clone())
+    } else {
+        Some(evaluate_run(&run, cfg, Some(&run.final_checkpoint()), trials, seed, stop)?.trials)
+    };
     // The record goes last: without it the run is not evaluated, whatever else is on disk.
     let _ = std::fs::remove_file(run.final_eval_record(seed));
     super::eval::write_trials_csv(&run.final_eval(seed), &e.trials)?;
+    if let Some(t) = &final_trials {
+        super::eval::write_trials_csv(&run.final_checkpoint_eval(seed), t)?;
+    }
     let json = serde_json::to_string_pretty(&record).expect("the record serialises");
     crate::io::write_atomic(&run.final_eval_record(seed), json.as_bytes())?;
     Ok((e.summary, e.checkpoint))
