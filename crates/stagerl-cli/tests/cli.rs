@@ -251,3 +251,26 @@ fn unwritable_output_directory_is_refused_before_training() {
     }
     std::fs::remove_file(&file).ok();
 }
+
+#[test]
+fn help_lists_the_allowed_values_of_every_enumerated_option() {
+    let algos = "[possible values: ddpg, td3, sac]";
+    let rewards = "[possible values: basic, posture, stride, har, sar]";
+    for (args, wanted) in [
+        (&["train", "--help"][..], &[algos, rewards][..]),
+        (&["reward", "--help"], &[rewards]),
+        (&["bench", "update", "--help"], &[algos]),
+        (&["bench", "env", "--help"], &[rewards]),
+        (
+            &["plan", "--help"],
+            &["[possible values: csv, jsonl]", "- jacobian: The damped-least-squares Jacobian controller"],
+        ),
+    ] {
+        let out = stagerl(args, "");
+        let text = String::from_utf8_lossy(&out.stdout).split_whitespace().collect::<Vec<_>>().join(" ");
+        assert!(out.status.success(), "{args:?}");
+        for w in wanted {
+            assert!(text.contains(w), "{args:?} --help lacks {w}: {text}");
+        }
+    }
+}

@@ -24,7 +24,7 @@ pub struct PlanArgs {
     /// rarely reach the target, so each runs the full max_steps: the slowest case).
     #[arg(long)]
     run: Option<std::path::PathBuf>,
-    #[arg(long, default_value = "sac")]
+    #[arg(long, value_parser = super::algo_parser(), default_value = "sac")]
     algo: stagerl::agent::Algo,
     /// Width of both hidden layers of the untrained agent.
     #[arg(long, default_value_t = 64)]
@@ -37,7 +37,7 @@ pub struct PlanArgs {
 
 #[derive(clap::Args)]
 pub struct UpdateArgs {
-    #[arg(long, default_value = "sac")]
+    #[arg(long, value_parser = super::algo_parser(), default_value = "sac")]
     algo: stagerl::agent::Algo,
     /// Width of both hidden layers.
     #[arg(long, default_value_t = 256)]
@@ -51,7 +51,7 @@ pub struct UpdateArgs {
 
 #[derive(clap::Args)]
 pub struct TrainArgs {
-    #[arg(long, default_value = "sac")]
+    #[arg(long, value_parser = super::algo_parser(), default_value = "sac")]
     algo: stagerl::agent::Algo,
     #[arg(long, default_value_t = 64)]
     hidden: usize,
@@ -67,7 +67,7 @@ pub struct EnvArgs {
     #[arg(long, default_value_t = 5_000_000, value_parser = clap::value_parser!(u64).range(1..=10_000_000_000))]
     steps: u64,
     /// Reward function.
-    #[arg(long, default_value = "sar")]
+    #[arg(long, value_parser = super::reward_parser(), default_value = "sar")]
     reward: RewardFunction,
     /// Seed of targets and actions.
     #[arg(long, default_value_t = 0)]

@@ -12,6 +12,20 @@ use anyhow::{Context, Result};
 use stagerl::config::Config;
 use std::path::Path;
 
+/// The `--algo` parser: `--help` lists the algorithms.
+pub fn algo_parser() -> impl clap::builder::TypedValueParser<Value = stagerl::agent::Algo> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(stagerl::agent::Algo::ALL.map(|a| a.name()))
+        .try_map(|s| s.parse::<stagerl::agent::Algo>())
+}
+
+/// The reward-function parser: `--help` lists the five functions.
+pub fn reward_parser() -> impl clap::builder::TypedValueParser<Value = stagerl::reward::RewardFunction> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(stagerl::reward::RewardFunction::ALL.map(|r| r.name()))
+        .try_map(|s| s.parse::<stagerl::reward::RewardFunction>())
+}
+
 /// The config in `path`, or the defaults.
 pub fn load_config(path: Option<&Path>) -> Result<Config> {
     match path {

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// The reward whose value goes in `reward` (overrides the config's reward.function).
-    #[arg(long)]
+    #[arg(long, value_parser = super::reward_parser())]
     function: RewardFunction,
     /// A TOML config for the constants (beta, dt, boundary, sigmas, bonus); defaults otherwise.
     #[arg(long)]

@@ -15,10 +15,10 @@ use crate::out::RunOutput;
 #[derive(clap::Args)]
 pub struct Args {
     /// Algorithm (overrides agent.algo).
-    #[arg(long)]
+    #[arg(long, value_parser = super::algo_parser())]
     algo: Option<Algo>,
     /// Reward function (overrides reward.function).
-    #[arg(long)]
+    #[arg(long, value_parser = super::reward_parser())]
     reward: Option<RewardFunction>,
     /// Seed (overrides train.seed).
     #[arg(long)]
