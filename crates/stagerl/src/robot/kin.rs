@@ -130,6 +130,8 @@ pub(crate) struct Kinematics {
     /// From the root link to the first joint's z-aligned frame.
     base: Cols,
     steps: Vec<LaneStep>,
+    /// Sum of the constant transforms' translation lengths, metres (see [`Kinematics::reach_m`]).
+    reach_m: f64,
 }
 
 // fdlibm's minimax kernels for sin and cos on [-pi/4, pi/4] (Sun Microsystems, freely usable;
@@ -286,9 +288,18 @@ fn from_cols(c: &Cols) -> Tf {
 impl Kinematics {
     /// The chain `base * Z(q_1) * steps[0].after * ... * Z(q_n) * steps[n-1].after`.
     pub fn new(base: &Tf, steps: &[Step]) -> Self {
+        let norm = |t: &Tf| (t[3] * t[3] + t[7] * t[7] + t[11] * t[11]).sqrt();
+        let reach_m = norm(base) + steps.iter().map(|s| norm(&s.after)).sum::<f64>();
         let steps =
             steps.iter().map(|s| LaneStep { prismatic: s.prismatic, after: s.after.map(splat) }).collect();
-        Kinematics { base: to_cols(base), steps }
+        Kinematics { base: to_cols(base), steps, reach_m }
+    }
+
+    /// The sum of the lengths of the chain's constant translations, metres: with the prismatic
+    /// joints' travel added, a bound on the tip's distance from the root for any joint values
+    /// (rotations preserve lengths).
+    pub fn reach_m(&self) -> f64 {
+        self.reach_m
     }
 
     /// The tip transform in the root frame. Joint values past `steps.len()` are ignored; missing

@@ -178,6 +178,20 @@ impl Chain {
     pub fn velocity_limits(&self) -> &[f64] {
         &self.velocity
     }
+    /// A bound on the tip's distance from the root link's origin for any joint values within
+    /// the limits, metres: the sum of the chain's constant link offsets plus each prismatic
+    /// joint's largest travel. Finite (origins and prismatic limits are bounded by
+    /// [`MAX_LENGTH_M`]). For observation-space bounds.
+    pub fn reach_bound_m(&self) -> f64 {
+        let travel: f64 = self
+            .joints
+            .iter()
+            .zip(self.lower.iter().zip(&self.upper))
+            .filter(|(j, _)| j.kind == JointKind::Prismatic)
+            .map(|(_, (lo, hi))| lo.abs().max(hi.abs()))
+            .sum();
+        self.kin.reach_m() + travel
+    }
     /// The root link: the frame poses are expressed in.
     pub fn base_link(&self) -> &str {
         &self.base_link
