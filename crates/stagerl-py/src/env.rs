@@ -96,6 +96,9 @@ fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
     Ok(d)
 }
 
+/// An observation (or a bound of one) as a numpy float32 array.
+type Obs<'py> = Bound<'py, PyArray1<f32>>;
+
 /// One reaching environment (see `stagerl::env::ReachEnv`).
 #[pyclass(module = "stagerl._core")]
 pub struct ReachCore {
@@ -144,27 +147,23 @@ impl ReachCore {
     }
 
     /// Finite (low, high) bounds of every observation value (float32), see `obs_bounds`.
-    fn observation_bounds<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>)> {
+    fn observation_bounds<'py>(&self, py: Python<'py>) -> PyResult<(Obs<'py>, Obs<'py>)> {
         let (lo, hi) = guard("observation_bounds", || Ok(obs_bounds(&self.env)))?;
         Ok((PyArray1::from_vec(py, lo), PyArray1::from_vec(py, hi)))
     }
 
     /// Reseed the environment's random stream and start an episode; returns (obs, distance_m).
-    fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Bound<'py, PyArray1<f32>>, f64)> {
+    fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Obs<'py>, f64)> {
         let obs = guard("reset", || Ok(self.env.reset_with_seed(seed).to_vec()))?;
         Ok((PyArray1::from_vec(py, obs), self.env.distance()))
     }
 
     /// One step: (obs, reward, terminated, truncated, info).
-    #[allow(clippy::type_complexity)]
     fn step<'py>(
         &mut self,
         py: Python<'py>,
         action: PyReadonlyArray1<'py, f32>,
-    ) -> PyResult<(Bound<'py, PyArray1<f32>>, f64, bool, bool, Bound<'py, PyDict>)> {
+    ) -> PyResult<(Obs<'py>, f64, bool, bool, Bound<'py, PyDict>)> {
         let a = action.as_array();
         let s = guard("step", || {
             let s = match a.as_slice() {
