@@ -25,6 +25,6 @@ fi
 "$venv/bin/python" -m pip install --quiet ./python pytest
 install_s=$((SECONDS - start - rust_s))
 cd "$root"  # not python/: its stagerl/ (without _core) would shadow the installed package
-STAGERL_BIN="$root/target/release/stagerl" "$venv/bin/python" -m pytest -q python/tests
+STAGERL_BIN="$root/target/release/stagerl" "$venv/bin/python" -m pytest -q -p no:cacheprovider python/tests
 echo "scripts/test.sh: Rust tests ${rust_s} s, Python venv + build + install ${install_s} s," \
     "pytest $((SECONDS - start - rust_s - install_s)) s"

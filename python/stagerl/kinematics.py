@@ -15,6 +15,7 @@ import os
 import numpy as np
 
 from . import _core
+from ._arrays import rows as _rows
 
 
 class Chain:
@@ -38,21 +39,10 @@ class Chain:
         self.upper_limits = np.array(self._core.upper_limits)
         self.velocity_limits = np.array(self._core.velocity_limits)
 
-    def _q(self, q) -> np.ndarray:
-        try:
-            arr = np.ascontiguousarray(q, dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"`q` is invalid: an array of joint values ({e})") from None
-        if arr.ndim == 1:
-            arr = arr[None, :]
-        if arr.ndim != 2:
-            raise ValueError(f"`q.shape` = {np.shape(q)} is invalid: expected (N, {self.dof}) or ({self.dof},)")
-        return arr
-
     def fk(self, q):
         """Tip positions (N, 3), metres, and quaternions (N, 4), (x, y, z, w)."""
-        return self._core.fk(self._q(q))
+        return self._core.fk(_rows("q", q, self.dof))
 
     def jacobian(self, q):
         """Jacobians (N, 6, dof), positions (N, 3) and quaternions (N, 4)."""
-        return self._core.jacobian(self._q(q))
+        return self._core.jacobian(_rows("q", q, self.dof))

@@ -18,25 +18,12 @@ from __future__ import annotations
 import json
 import math
 
-import numpy as np
 
 from . import _core
+from ._arrays import rows as _rows
 
 KEYS = tuple(_core.keys())
 FUNCTIONS = ("basic", "posture", "stride", "har", "sar")
-
-
-def _rows(name: str, a, cols) -> np.ndarray:
-    try:
-        arr = np.ascontiguousarray(a, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"`{name}` is invalid: an array of numbers ({e})") from None
-    if arr.ndim == 1:
-        arr = arr[None, :]
-    if arr.ndim != 2 or (cols is not None and arr.shape[1] != cols):
-        want = f"(N, {cols}) or ({cols},)" if cols else "(N, J) or (J,)"
-        raise ValueError(f"`{name}.shape` = {np.shape(a)} is invalid: expected {want}")
-    return arr
 
 
 def compute(ee_pos, ee_quat, target, joint_vel, function: str = "sar", **constants) -> dict:
