@@ -21,6 +21,8 @@ venv="$root/target/py-venv"
 if [ ! -x "$venv/bin/python" ]; then
     "$python" -m venv "$venv"
 fi
+# pip >= 21.3 builds a local directory in place (older pips copy python/ away from crates/).
+"$venv/bin/python" -m pip install --quiet "pip>=21.3"
 # pip rebuilds and reinstalls a local directory on every call (maturin reuses target/).
 "$venv/bin/python" -m pip install --quiet ./python pytest
 install_s=$((SECONDS - start - rust_s))
