@@ -194,6 +194,12 @@ impl Chain {
             .sum();
         self.kin.link_lengths().sum::<f64>() + travel
     }
+    /// A bound on the tip's distance from the root link's origin for any joint values within the
+    /// limits, metres: [`Chain::first_joint_origin`]'s distance plus [`Chain::reach_m`] (finite:
+    /// origins and prismatic limits are bounded by [`MAX_LENGTH_M`]). For observation bounds.
+    pub fn reach_bound_m(&self) -> f64 {
+        self.first_joint_origin().norm() + self.reach_m()
+    }
     /// The root link: the frame poses are expressed in.
     pub fn base_link(&self) -> &str {
         &self.base_link

@@ -636,3 +636,21 @@ fn sin_cos_chunk_matches_scalar() {
         }
     }
 }
+
+#[test]
+fn reach_bound_holds_and_is_tight_enough() {
+    let mut rng = Rng::new(17);
+    for chain in [Chain::ur5(), test_arm()] {
+        let bound = chain.reach_bound_m();
+        assert!(bound.is_finite() && bound > 0.0);
+        let mut farthest: f64 = 0.0;
+        for _ in 0..20_000 {
+            let q = random_q(&chain, &mut rng);
+            let r = chain.fk(&q).position.norm();
+            assert!(r <= bound + 1e-12, "{} > bound {bound}", r);
+            farthest = farthest.max(r);
+        }
+        // A bound, not a guess: within a factor 2 of the farthest sampled tip.
+        assert!(bound < 2.0 * farthest, "bound {bound}, farthest {farthest}");
+    }
+}

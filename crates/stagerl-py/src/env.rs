@@ -1,0 +1,215 @@
+//! The reaching environment for `stagerl.envs.ReachEnv` (the Gymnasium wrapper lives in Python).
+
+use numpy::{PyArray1, PyReadonlyArray1};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::Path;
+
+use stagerl::config::Config;
+use stagerl::env::{ReachEnv, Step};
+use stagerl::reward::RewardFunction;
+
+use crate::{bad_arg, guard, to_py};
+
+/// A whole config from a TOML file, or from a JSON text of the TOML's fields (a Python dict),
+/// or the defaults; then `reward` and `robot` override `reward.function` and `robot.urdf`.
+pub(crate) fn build_config(
+    config_path: Option<&str>,
+    config_json: Option<&str>,
+    reward: Option<&str>,
+    robot: Option<&str>,
+) -> PyResult<Config> {
+    let mut cfg = match (config_path, config_json) {
+        (Some(p), _) => Config::load(Path::new(p)).map_err(to_py)?,
+        (None, Some(json)) => {
+            let value: serde_json::Value =
+                serde_json::from_str(json).map_err(|e| bad_arg("config", json, &e.to_string()))?;
+            let text = toml::to_string(&value).map_err(|e| {
+                bad_arg("config", json, &format!("a dict of the TOML's sections and fields ({e})"))
+            })?;
+            Config::from_toml_str(&text, Path::new("<config dict>")).map_err(to_py)?
+        }
+        (None, None) => Config::default(),
+    };
+    if let Some(r) = reward {
+        cfg.reward.function = r.parse::<RewardFunction>().map_err(|_| {
+            let names: Vec<&str> = RewardFunction::ALL.iter().map(|f| f.name()).collect();
+            bad_arg("reward", format!("{r:?}"), &format!("one of {names:?}"))
+        })?;
+    }
+    if let Some(r) = robot {
+        if r.trim().is_empty() {
+            return Err(bad_arg("robot", "\"\"", "\"ur5\" or a path to a URDF file"));
+        }
+        cfg.robot.urdf = r.to_string();
+    }
+    Ok(cfg)
+}
+
+/// The info keys of a step, in order: every reward term, then `is_success`.
+pub(crate) const STEP_KEYS: [&str; 17] = [
+    "distance",
+    "reached",
+    "position",
+    "phi",
+    "direction",
+    "posture",
+    "move",
+    "stride",
+    "gamma_posture",
+    "har",
+    "alpha1",
+    "alpha2",
+    "sar",
+    "basic",
+    "reward",
+    "bonus",
+    "total",
+];
+
+fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
+    let t = &s.terms;
+    let values = [
+        t.distance,
+        f64::from(u8::from(t.reached)),
+        t.position,
+        t.phi,
+        t.direction,
+        t.posture,
+        t.movement,
+        t.stride,
+        t.gamma_posture,
+        t.har,
+        t.alpha1,
+        t.alpha2,
+        t.sar,
+        t.basic,
+        t.reward,
+        t.bonus,
+        t.total,
+    ];
+    let d = PyDict::new(py);
+    for (k, v) in STEP_KEYS.iter().zip(values) {
+        d.set_item(k, v)?;
+    }
+    d.set_item("is_success", t.reached)?;
+    Ok(d)
+}
+
+/// An observation (or a bound of one) as a numpy float32 array.
+type Obs<'py> = Bound<'py, PyArray1<f32>>;
+
+/// One reaching environment (see `stagerl::env::ReachEnv`).
+#[pyclass(module = "stagerl._core")]
+pub struct ReachCore {
+    env: ReachEnv,
+}
+
+#[pymethods]
+impl ReachCore {
+    #[new]
+    #[pyo3(signature = (config_path=None, config_json=None, reward=None, robot=None))]
+    fn new(
+        config_path: Option<&str>,
+        config_json: Option<&str>,
+        reward: Option<&str>,
+        robot: Option<&str>,
+    ) -> PyResult<Self> {
+        guard("ReachEnv", || {
+            let cfg = build_config(config_path, config_json, reward, robot)?;
+            Ok(ReachCore { env: ReachEnv::from_config(&cfg, 0).map_err(to_py)? })
+        })
+    }
+
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        self.env.obs_dim()
+    }
+    #[getter]
+    fn act_dim(&self) -> usize {
+        self.env.act_dim()
+    }
+    #[getter]
+    fn max_steps(&self) -> u32 {
+        self.env.task().max_steps
+    }
+    #[getter]
+    fn dt_s(&self) -> f64 {
+        self.env.task().dt_s
+    }
+    #[getter]
+    fn beta_m(&self) -> f64 {
+        self.env.reward_config().beta_m
+    }
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.env.chain().joints().iter().map(|j| j.name.clone()).collect()
+    }
+
+    /// Finite (low, high) bounds of every observation value (float32), see `obs_bounds`.
+    fn observation_bounds<'py>(&self, py: Python<'py>) -> PyResult<(Obs<'py>, Obs<'py>)> {
+        let (lo, hi) = guard("observation_bounds", || Ok(obs_bounds(&self.env)))?;
+        Ok((PyArray1::from_vec(py, lo), PyArray1::from_vec(py, hi)))
+    }
+
+    /// Reseed the environment's random stream and start an episode; returns (obs, distance_m).
+    fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Obs<'py>, f64)> {
+        let obs = guard("reset", || Ok(self.env.reset_with_seed(seed).to_vec()))?;
+        Ok((PyArray1::from_vec(py, obs), self.env.distance()))
+    }
+
+    /// One step: (obs, reward, terminated, truncated, info).
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        action: PyReadonlyArray1<'py, f32>,
+    ) -> PyResult<(Obs<'py>, f64, bool, bool, Bound<'py, PyDict>)> {
+        let a = action.as_array();
+        let s = guard("step", || {
+            let s = match a.as_slice() {
+                Some(a) => self.env.step(a),
+                None => self.env.step(&a.to_vec()),
+            };
+            s.map_err(to_py)
+        })?;
+        let obs = PyArray1::from_slice(py, self.env.observation());
+        Ok((obs, s.total(), s.terminated, s.truncated, step_info(py, &s)?))
+    }
+
+    /// End-effector position (m) and the target (m).
+    fn positions(&self) -> ([f64; 3], [f64; 3]) {
+        let (p, t) = (self.env.ee_pose().position, self.env.target());
+        ([p.x, p.y, p.z], [t.x, t.y, t.z])
+    }
+}
+
+/// Bounds that hold for every observation an episode can produce (f32, as the observation is):
+/// joints within their limits and within `max_steps` full-speed steps of the home pose
+/// (continuous joints have no limits), positions within the arm's reach, deltas within twice it.
+fn obs_bounds(env: &ReachEnv) -> (Vec<f32>, Vec<f32>) {
+    let chain = env.chain();
+    let task = env.task();
+    let travel = f64::from(task.max_steps) * task.dt_s;
+    let (mut lo, mut hi) = (Vec::new(), Vec::new());
+    for i in 0..chain.dof() {
+        let (home, v) = (task.home_pose[i], chain.velocity_limits()[i]);
+        let l = chain.lower_limits()[i].max(home - travel * v);
+        let h = chain.upper_limits()[i].min(home + travel * v);
+        lo.push((l / std::f64::consts::PI) as f32);
+        hi.push((h / std::f64::consts::PI) as f32);
+    }
+    // Widened a little so that rounding to f32 never puts a value outside.
+    let reach = chain.reach_bound_m() * 1.001 + 1e-6;
+    let delta = 2.0 * reach * task.obs_delta_scale;
+    for _ in 0..6 {
+        lo.push(-reach as f32);
+        hi.push(reach as f32);
+    }
+    for _ in 0..3 {
+        lo.push(-delta as f32);
+        hi.push(delta as f32);
+    }
+    lo.push(0.0);
+    hi.push(delta as f32);
+    (lo, hi)
+}

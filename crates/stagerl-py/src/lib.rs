@@ -1,0 +1,62 @@
+//! `stagerl._core`: the native half of the Python package `stagerl` (python/).
+//!
+//! Thin bindings over the library: the reaching environment ([`env`]), the rewards over batches
+//! of rows ([`reward`]) and the kinematics of any URDF chain ([`kin`]). The Python modules in
+//! `python/stagerl/` hold the Gymnasium API, argument defaults and documentation; this crate
+//! holds no logic of its own beyond shapes, conversions and error mapping.
+//!
+//! Errors: every library error becomes a `ValueError` (a missing file a `FileNotFoundError`,
+//! other I/O failures an `OSError`) carrying the library's message, which names the field, the
+//! value and what is allowed. Every call into the library runs inside [`guard`], so a Rust panic
+//! surfaces as a `RuntimeError` instead of PyO3's `PanicException`.
+
+use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+mod env;
+mod kin;
+mod reward;
+
+/// The Python exception for a library error.
+pub(crate) fn to_py(e: stagerl::Error) -> PyErr {
+    match &e {
+        stagerl::Error::Io { error, .. } if error.kind() == std::io::ErrorKind::NotFound => {
+            PyFileNotFoundError::new_err(e.to_string())
+        }
+        stagerl::Error::Io { .. } => PyOSError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
+}
+
+/// A `ValueError` naming an argument, its value and what is allowed.
+pub(crate) fn bad_arg(field: &str, value: impl std::fmt::Display, allowed: &str) -> PyErr {
+    PyValueError::new_err(format!("`{field}` = {value} is invalid: {allowed}"))
+}
+
+/// Run `f`, turning a panic into a `RuntimeError` (a bug in stagerl, never the caller's fault).
+pub(crate) fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(payload) => {
+            let msg = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(PyRuntimeError::new_err(format!(
+                "internal error in stagerl ({what}): {msg}; please report it"
+            )))
+        }
+    }
+}
+
+/// The package's native module.
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<env::ReachCore>()?;
+    m.add_class::<kin::Chain>()?;
+    m.add_function(wrap_pyfunction!(reward::compute, m)?)?;
+    m.add_function(wrap_pyfunction!(reward::keys, m)?)?;
+    Ok(())
+}

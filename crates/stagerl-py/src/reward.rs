@@ -1,0 +1,104 @@
+//! The paper's rewards over rows of numpy arrays (`stagerl.rewards.compute`).
+
+use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use stagerl::nalgebra::Vector3;
+use stagerl::reward::{RewardConfig, RewardInput, RewardTerms};
+
+use crate::{bad_arg, guard, to_py};
+
+/// The keys of the result, in the order `stagerl reward` writes them.
+#[pyfunction]
+pub fn keys() -> Vec<&'static str> {
+    RewardTerms::default().reported().iter().map(|(k, _)| *k).collect()
+}
+
+/// `array` as a contiguous slice of `rows x cols`, or a ValueError naming `field`.
+fn rows<'a>(
+    field: &str,
+    array: &'a PyReadonlyArray2<'_, f64>,
+    n: Option<usize>,
+    cols: Option<usize>,
+) -> PyResult<&'a [f64]> {
+    let shape = array.shape();
+    let (r, c) = (shape[0], shape[1]);
+    if n.is_some_and(|n| n != r) || cols.is_some_and(|k| k != c) {
+        let want_r = n.map_or("N".to_string(), |n| n.to_string());
+        let want_c = cols.map_or("J >= 1".to_string(), |c| c.to_string());
+        return Err(bad_arg(
+            &format!("{field}.shape"),
+            format!("({r}, {c})"),
+            &format!("({want_r}, {want_c})"),
+        ));
+    }
+    array.as_slice().map_err(|_| bad_arg(field, "a non-contiguous array", "a C-contiguous float64 array"))
+}
+
+/// Every reported term for every row; `config_json` holds the reward section's fields.
+#[pyfunction]
+#[pyo3(signature = (ee_pos, ee_quat, target, joint_vel, config_json, dt_s, prev_ee_pos=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn compute<'py>(
+    py: Python<'py>,
+    ee_pos: PyReadonlyArray2<'py, f64>,
+    ee_quat: PyReadonlyArray2<'py, f64>,
+    target: PyReadonlyArray2<'py, f64>,
+    joint_vel: PyReadonlyArray2<'py, f64>,
+    config_json: &str,
+    dt_s: f64,
+    prev_ee_pos: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let cfg: RewardConfig = serde_json::from_str(config_json)
+        .map_err(|e| bad_arg("constants", config_json, &format!("fields of the [reward] section ({e})")))?;
+    cfg.validate().map_err(to_py)?;
+    if !(dt_s.is_finite() && dt_s > 0.0) {
+        return Err(bad_arg("dt_s", dt_s, "a finite number of seconds > 0"));
+    }
+    let n = ee_pos.shape()[0];
+    let p = rows("ee_pos", &ee_pos, Some(n), Some(3))?;
+    let q = rows("ee_quat", &ee_quat, Some(n), Some(4))?;
+    let t = rows("target", &target, Some(n), Some(3))?;
+    let v = rows("joint_vel", &joint_vel, Some(n), None)?;
+    let j = joint_vel.shape()[1];
+    if j == 0 {
+        return Err(bad_arg("joint_vel.shape", format!("({n}, 0)"), "(N, J) with J >= 1 joints"));
+    }
+    let prev = match &prev_ee_pos {
+        Some(a) => Some(rows("prev_ee_pos", a, Some(n), Some(3))?),
+        None => None,
+    };
+    if cfg.direction == stagerl::reward::DirectionSource::Displacement && prev.is_none() {
+        return Err(bad_arg("prev_ee_pos", "None", "an (N, 3) array when direction = \"displacement\""));
+    }
+    let columns = guard("rewards.compute", || {
+        let mut out = vec![vec![0.0f64; n]; 12];
+        let v3 = |a: &[f64], i: usize| Vector3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+        for i in 0..n {
+            let input = RewardInput {
+                ee_pos: v3(p, i),
+                ee_quat: [q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]],
+                target: v3(t, i),
+                joint_vel: &v[j * i..j * (i + 1)],
+                prev_ee_pos: prev.map(|a| v3(a, i)),
+            };
+            let terms = RewardTerms::try_compute(&cfg, dt_s, &input)
+                .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("row {i}: {e}")))?;
+            for (col, (_, x)) in out.iter_mut().zip(terms.reported()) {
+                col[i] = x;
+            }
+        }
+        Ok(out)
+    })?;
+    let d = PyDict::new(py);
+    for (key, col) in keys().into_iter().zip(columns) {
+        if key == "reached" {
+            let b: Vec<bool> = col.iter().map(|&x| x != 0.0).collect();
+            d.set_item(key, PyArray1::from_vec(py, b))?;
+        } else {
+            d.set_item(key, PyArray1::from_vec(py, col))?;
+        }
+    }
+    Ok(d)
+}

@@ -1,0 +1,24 @@
+"""stagerl: the stage-incentive dense rewards and the UR5 reaching task of the stagerl Rust
+workspace, for Gymnasium and numpy.
+
+Importing the package registers the Gymnasium environment ``stagerl/Reach-v0``::
+
+    import gymnasium as gym
+    import stagerl
+
+    env = gym.make("stagerl/Reach-v0", reward="sar")
+
+Modules: :mod:`stagerl.envs` (the environment), :mod:`stagerl.rewards` (the rewards over numpy
+arrays), :mod:`stagerl.kinematics` (batched forward kinematics and Jacobians of URDF chains).
+Units: metres, radians, seconds; quaternions are (x, y, z, w).
+"""
+
+from . import _core
+from . import envs, kinematics, rewards
+from .envs import ReachEnv, register_envs
+from .kinematics import Chain
+
+__version__ = _core.__version__
+__all__ = ["ReachEnv", "Chain", "envs", "kinematics", "rewards", "register_envs", "__version__"]
+
+register_envs()

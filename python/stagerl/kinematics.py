@@ -1,0 +1,48 @@
+"""Batched forward kinematics and geometric Jacobians of any URDF serial chain.
+
+``Chain(robot="ur5", tip=None)``: the bundled UR5 or a URDF file (tip: the tip link; default the
+URDF's only leaf). ``chain.fk(q)`` takes ``q`` of shape (N, dof) or (dof,) (radians, metres for
+prismatic joints) and returns positions (N, 3) in metres and quaternions (N, 4) as (x, y, z, w)
+with w >= 0, in the root link's frame. ``chain.jacobian(q)`` returns the geometric Jacobians
+(N, 6, dof) (rows vx, vy, vz, wx, wy, wz in the base frame), with the same positions and
+quaternions.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from . import _core
+from ._arrays import rows as _rows
+
+
+class Chain:
+    """A serial chain from a URDF (see the module documentation)."""
+
+    def __init__(self, robot="ur5", tip=None):
+        if isinstance(robot, os.PathLike):
+            robot = os.fspath(robot)
+        if not isinstance(robot, str):
+            raise ValueError(f"`robot` = {robot!r} is invalid: 'ur5' or a path to a URDF file")
+        if robot != "ur5" and not os.path.isfile(robot):
+            raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5' or a path to a URDF file)")
+        if tip is not None and not isinstance(tip, str):
+            raise ValueError(f"`tip` = {tip!r} is invalid: a link name or None")
+        self._core = _core.Chain(robot, tip)
+        self.dof = self._core.dof
+        self.joint_names = self._core.joint_names
+        self.base_link = self._core.base_link
+        self.tip_link = self._core.tip_link
+        self.lower_limits = np.array(self._core.lower_limits)
+        self.upper_limits = np.array(self._core.upper_limits)
+        self.velocity_limits = np.array(self._core.velocity_limits)
+
+    def fk(self, q):
+        """Tip positions (N, 3), metres, and quaternions (N, 4), (x, y, z, w)."""
+        return self._core.fk(_rows("q", q, self.dof))
+
+    def jacobian(self, q):
+        """Jacobians (N, 6, dof), positions (N, 3) and quaternions (N, 4)."""
+        return self._core.jacobian(_rows("q", q, self.dof))

@@ -1,0 +1,156 @@
+"""stagerl/Reach-v0 through Gymnasium."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import stagerl  # noqa: F401  (registers the environment)
+from stagerl.envs import ReachEnv
+
+TERMS = ["distance", "reached", "position", "phi", "direction", "posture", "move", "stride",
+         "gamma_posture", "har", "alpha1", "alpha2", "sar", "basic", "reward", "bonus", "total"]
+
+
+@pytest.mark.parametrize("reward", ["basic", "posture", "stride", "har", "sar"])
+def test_check_env_passes(reward):
+    env = gym.make("stagerl/Reach-v0", reward=reward)
+    check_env(env.unwrapped, skip_render_check=True)
+
+
+def test_spaces_are_float32_with_finite_bounds():
+    env = gym.make("stagerl/Reach-v0")
+    for space in (env.observation_space, env.action_space):
+        assert space.dtype == np.float32
+        assert np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high))
+    assert env.observation_space.shape == (16,) and env.action_space.shape == (6,)
+    np.testing.assert_array_equal(env.action_space.low, -1.0)
+
+
+def episodes(seed, n=4, reward="sar"):
+    env = gym.make("stagerl/Reach-v0", reward=reward)
+    rng = np.random.default_rng(0)
+    out = []
+    obs, _ = env.reset(seed=seed)
+    for _ in range(n):
+        out.append(obs.copy())
+        while True:
+            obs, r, term, trunc, info = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
+            out.append(np.array([r, term, trunc, info["distance"]]))
+            if term or trunc:
+                break
+        obs, _ = env.reset()
+    return out
+
+
+def test_same_seed_same_episodes_and_observations_in_bounds():
+    a, b, c = episodes(11), episodes(11), episodes(12)
+    assert len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert not (len(a) == len(c) and all(np.array_equal(x, y) for x, y in zip(a, c)))
+
+
+def test_observations_stay_within_the_space():
+    env = gym.make("stagerl/Reach-v0")
+    space = env.observation_space
+    rng = np.random.default_rng(1)
+    obs, _ = env.reset(seed=1)
+    for _ in range(3000):
+        assert space.contains(obs), obs
+        # Full-speed pushes drive joints to their limits.
+        obs, _, term, trunc, _ = env.step(np.sign(rng.uniform(-1, 1, 6)).astype(np.float32))
+        if term or trunc:
+            obs, _ = env.reset()
+
+
+def test_info_holds_every_term_and_the_reward_is_the_chosen_one():
+    for reward in ["posture", "stride", "har", "sar", "basic"]:
+        env = gym.make("stagerl/Reach-v0", reward=reward)
+        _, info = env.reset(seed=3)
+        assert set(info) == {"distance", "is_success"} and info["is_success"] is False
+        _, r, term, trunc, info = env.step(np.full(6, 0.1, np.float32))
+        assert list(info) == TERMS + ["is_success"]
+        assert r == info["total"] == info[reward] + info["bonus"]
+        assert info["reward"] == info[reward]
+        assert info["is_success"] == bool(info["reached"]) == term
+
+
+def test_truncated_at_the_step_limit_and_step_after_the_end_is_an_error():
+    env = gym.make("stagerl/Reach-v0", config={"task": {"max_steps": 5}})
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(6, np.float32))[2:4] for _ in range(5)]
+    assert flags == [(False, False)] * 4 + [(False, True)]
+    with pytest.raises(ValueError, match="reset"):
+        env.unwrapped.step(np.zeros(6, np.float32))
+
+
+def test_terminated_on_success_with_the_bonus():
+    # A success radius of 3 m: every target is reached at the first step.
+    env = gym.make("stagerl/Reach-v0", config={"reward": {"beta_m": 3.0, "success_bonus": 7.0}})
+    env.reset(seed=0)
+    _, r, term, trunc, info = env.step(np.zeros(6, np.float32))
+    assert term and not trunc and info["is_success"] is True
+    assert info["bonus"] == 7.0 and r == info["sar"] + 7.0
+
+
+def test_config_from_a_toml_file_and_robot_from_a_urdf_path(tmp_path, root):
+    path = tmp_path / "c.toml"
+    path.write_text("[task]\nmax_steps = 3\n[reward]\nfunction = \"har\"\n")
+    env = gym.make("stagerl/Reach-v0", config=str(path), robot=str(root / "assets" / "robots" / "ur5.urdf"))
+    env.reset(seed=0)
+    steps = 0
+    while True:
+        _, r, term, trunc, info = env.step(np.zeros(6, np.float32))
+        steps += 1
+        if term or trunc:
+            break
+    assert steps == 3 and r == info["har"]
+    # The reward argument overrides the file's reward.function.
+    env = gym.make("stagerl/Reach-v0", config=path, reward="stride")
+    env.reset(seed=0)
+    _, r, _, _, info = env.step(np.zeros(6, np.float32))
+    assert r == info["stride"]
+
+
+def test_the_ur5_urdf_file_equals_the_bundled_arm(root):
+    a = episodes(5)
+    env = gym.make("stagerl/Reach-v0", robot=str(root / "assets" / "robots" / "ur5.urdf"))
+    obs, _ = env.reset(seed=5)
+    np.testing.assert_array_equal(obs, a[0])
+
+
+@pytest.mark.parametrize(
+    "kwargs, exc, words",
+    [
+        (dict(reward="fancy"), ValueError, ["reward", "fancy", "sar"]),
+        (dict(reward=3), ValueError, ["reward", "3"]),
+        (dict(config="/nonexistent/c.toml"), FileNotFoundError, ["config", "/nonexistent/c.toml"]),
+        (dict(config={"task": {"max_steps": 0}}), ValueError, ["task.max_steps", "0", ">= 1"]),
+        (dict(config={"task": {"dt": 0.1}}), ValueError, ["dt", "dt_s"]),
+        (dict(config={"reward": {"beta_m": float("nan")}}), ValueError, ["config"]),
+        (dict(config=42), ValueError, ["config", "42"]),
+        (dict(robot="/nonexistent/arm.urdf"), FileNotFoundError, ["robot", "/nonexistent/arm.urdf"]),
+        (dict(render_mode="human"), ValueError, ["render_mode", "human"]),
+    ],
+)
+def test_bad_arguments(kwargs, exc, words):
+    with pytest.raises(exc) as e:
+        ReachEnv(**kwargs)
+    for w in words:
+        assert w in str(e.value), (w, str(e.value))
+
+
+def test_bad_urdf_is_a_value_error(tmp_path):
+    path = tmp_path / "bad.urdf"
+    path.write_text("<robot name='x'><link name='a'/></robot>")
+    with pytest.raises(ValueError, match="URDF"):
+        ReachEnv(robot=str(path))
+
+
+def test_bad_actions():
+    env = ReachEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action.shape.*\(5,\)"):
+        env.step(np.zeros(5, np.float32))
+    with pytest.raises(ValueError, match=r"action\[2\]"):
+        env.step(np.array([0, 0, np.nan, 0, 0, 0], np.float32))
+    assert env.step(np.zeros(6))[3] is False  # float64 actions are converted
