@@ -1,15 +1,10 @@
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::{Deserialize, Serialize};
-use stagerl::robot::Chain;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// `ur5` for the bundled arm, or a path to a URDF file.
-    #[arg(long, default_value = "ur5")]
-    robot: String,
-    /// Tip link (default: the URDF's only leaf link).
-    #[arg(long)]
-    tip: Option<String>,
+    #[command(flatten)]
+    robot: super::RobotArgs,
 }
 
 #[derive(Deserialize)]
@@ -25,8 +20,7 @@ struct Output {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let chain = Chain::load(&args.robot, args.tip.as_deref())
-        .with_context(|| format!("loading robot `{}`", args.robot))?;
+    let chain = args.robot.load()?;
     let stdin = std::io::stdin().lock();
     let stdout = crate::out::stdout()?;
     crate::jsonl::process(stdin, stdout, |input: Input| {

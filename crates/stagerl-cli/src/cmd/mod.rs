@@ -12,6 +12,25 @@ use anyhow::{Context, Result};
 use stagerl::config::Config;
 use std::path::Path;
 
+/// The arm of `fk` and `reward`: `--robot` and `--tip`.
+#[derive(clap::Args)]
+pub struct RobotArgs {
+    /// `ur5` for the bundled arm (6 joints), or a path to a URDF file.
+    #[arg(long, default_value = "ur5")]
+    pub robot: String,
+    /// Tip link of the URDF (default: its only leaf link).
+    #[arg(long)]
+    pub tip: Option<String>,
+}
+
+impl RobotArgs {
+    /// Load the chain.
+    pub fn load(&self) -> Result<stagerl::robot::Chain> {
+        stagerl::robot::Chain::load(&self.robot, self.tip.as_deref())
+            .with_context(|| format!("loading robot `{}`", self.robot))
+    }
+}
+
 /// The `--algo` parser: `--help` lists the algorithms.
 pub fn algo_parser() -> impl clap::builder::TypedValueParser<Value = stagerl::agent::Algo> {
     use clap::builder::TypedValueParser;

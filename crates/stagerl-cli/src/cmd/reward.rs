@@ -1,4 +1,4 @@
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Deserialize;
 use stagerl::nalgebra::Vector3 as Vec3;
 use stagerl::reward::{Reported, RewardFunction, RewardInput, RewardTerms};
@@ -12,13 +12,9 @@ pub struct Args {
     /// A TOML config for the constants (beta, dt, boundary, sigmas, bonus); defaults otherwise.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// The arm whose joints `joint_vel` lists, one value per joint (rad/s or m/s): `ur5` for the
-    /// bundled arm (6 joints), or a path to a URDF file.
-    #[arg(long, default_value = "ur5")]
-    robot: String,
-    /// Tip link of the URDF given by --robot (default: its only leaf link).
-    #[arg(long)]
-    tip: Option<String>,
+    /// The arm whose joints `joint_vel` lists, one value per joint (rad/s or m/s).
+    #[command(flatten)]
+    robot: super::RobotArgs,
 }
 
 /// The fixed-length fields are read as lists and checked here, so a wrong length is reported
@@ -44,8 +40,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut cfg = super::load_config(args.config.as_deref())?;
     cfg.reward.function = args.function;
     let dt = cfg.task.dt_s;
-    let chain = stagerl::robot::Chain::load(&args.robot, args.tip.as_deref())
-        .with_context(|| format!("loading robot `{}`", args.robot))?;
+    let chain = args.robot.load()?;
     let dof = chain.dof();
     let stdin = std::io::stdin().lock();
     let stdout = crate::out::stdout()?;
@@ -66,7 +61,7 @@ pub fn run(args: Args) -> Result<()> {
             anyhow::bail!(
                 "malformed input: `joint_vel` has {} values, expected {dof} (one per joint of `{}`; see --robot)",
                 i.joint_vel.len(),
-                args.robot
+                args.robot.robot
             );
         }
         if cfg.reward.direction == stagerl::reward::DirectionSource::Displacement

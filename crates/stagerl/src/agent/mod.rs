@@ -40,7 +40,9 @@ pub trait Agent: Send + Learned {
     /// Which algorithm.
     fn algo(&self) -> Algo;
     /// Observation length.
-    fn obs_dim(&self) -> usize;
+    fn obs_dim(&self) -> usize {
+        self.actor().in_features()
+    }
     /// Action length.
     fn act_dim(&self) -> usize;
     /// The actor network (its output is turned into the deterministic action by the

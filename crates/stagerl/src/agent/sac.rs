@@ -117,9 +117,6 @@ impl Agent for Sac {
     fn actor(&self) -> &Mlp<f32> {
         &self.actor
     }
-    fn obs_dim(&self) -> usize {
-        self.obs_dim
-    }
     fn act_dim(&self) -> usize {
         self.act_dim
     }

@@ -127,9 +127,6 @@ impl Agent for Td3 {
     fn actor(&self) -> &Mlp<f32> {
         &self.actor
     }
-    fn obs_dim(&self) -> usize {
-        self.obs_dim
-    }
     fn act_dim(&self) -> usize {
         self.act_dim
     }
