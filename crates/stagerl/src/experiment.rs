@@ -91,14 +91,15 @@ pub enum RunStatus {
 }
 
 /// The presets bundled with the library (the files in `configs/`), by name.
-pub const BUNDLED_PRESETS: [(&str, &str); 3] = [
+pub const BUNDLED_PRESETS: [(&str, &str); 4] = [
     ("smoke", include_str!("../../../configs/smoke.toml")),
     ("quick", include_str!("../../../configs/quick.toml")),
+    ("tuned", include_str!("../../../configs/tuned.toml")),
     ("paper", include_str!("../../../configs/paper.toml")),
 ];
 
 impl Preset {
-    /// A bundled preset by name (`smoke`, `quick`, `paper`), else the preset file at that path;
+    /// A bundled preset by name (`smoke`, `quick`, `tuned`, `paper`), else the preset file at that path;
     /// with the preset's text (written to the sweep directory as `preset.toml`).
     pub fn resolve(name_or_path: &str) -> Result<(Preset, String)> {
         if let Some((_, text)) = BUNDLED_PRESETS.iter().find(|(n, _)| *n == name_or_path) {
@@ -509,7 +510,7 @@ mod tests {
         let (q, from_file) = Preset::resolve(path.to_str().unwrap()).unwrap();
         assert_eq!((p, text), (q, from_file));
         let e = Preset::resolve("nope").unwrap_err().to_string();
-        assert!(e.contains("nope") && e.contains("smoke, quick, paper"), "{e}");
+        assert!(e.contains("nope") && e.contains("smoke, quick, tuned, paper"), "{e}");
     }
 
     #[test]
@@ -590,5 +591,13 @@ mod tests {
             (20, 10000, 500)
         );
         assert_eq!(paper.base.task.max_steps, 50);
+        // The tuned regime: the library's defaults at 10 seeds x 5000 episodes.
+        let (tuned, _) = Preset::resolve("tuned").unwrap();
+        assert_eq!((tuned.sweep.seeds.len(), tuned.base.train.episodes), (10, 5000));
+        let d = Config::default();
+        assert_eq!(
+            (tuned.base.agent.gamma, tuned.base.task.obs_delta_scale),
+            (d.agent.gamma, d.task.obs_delta_scale)
+        );
     }
 }
