@@ -195,6 +195,7 @@ impl Provenance {
             .iter()
             .map(|x| format!("{} ({} cores)", x.machine.cpu_model, x.machine.cores))
             .collect();
+        machines.sort();
         machines.dedup();
         s.push_str(&format!(
             "\nMachine(s): {}. Wall time {:.0} s, CPU time {:.2} h over {} command(s):\n\n",
@@ -260,8 +261,8 @@ impl Recorder {
     }
 }
 
-/// User + system CPU seconds of this process and its waited-for children (`/proc/self/stat`,
-/// clock ticks of 1/100 s as Linux reports them); 0 where unavailable.
+/// User + system CPU seconds of this process and its waited-for children (`/proc/self/stat`, in
+/// the kernel's clock ticks, `sysconf(_SC_CLK_TCK)` per second); 0 where unavailable.
 pub fn cpu_seconds() -> f64 {
     let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else { return 0.0 };
     // Fields after the command name (which may hold spaces) start at ") ".
@@ -269,7 +270,13 @@ pub fn cpu_seconds() -> f64 {
     let f: Vec<&str> = rest.split_whitespace().collect();
     // utime, stime, cutime, cstime are fields 14-17 of the line: 11-14 after the name.
     let ticks: f64 = (11..15).filter_map(|i| f.get(i).and_then(|v| v.parse::<f64>().ok())).sum();
-    ticks / 100.0
+    // SAFETY: sysconf only reads a system constant.
+    let per_s = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if per_s > 0 {
+        ticks / per_s as f64
+    } else {
+        0.0
+    }
 }
 
 /// `t` as `YYYY-MM-DDTHH:MM:SSZ` (UTC).
