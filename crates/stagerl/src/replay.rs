@@ -1,6 +1,7 @@
 //! The replay buffer shared by the off-policy agents: flat arrays preallocated at full capacity,
 //! a ring once full, uniform sampling with replacement into a reusable [`Batch`].
 
+use crate::nn::copy_row;
 use crate::rng::Rng;
 use crate::{Error, Result};
 
@@ -97,10 +98,10 @@ impl ReplayBuffer {
         let (od, ad) = (self.obs_dim, self.act_dim);
         for b in 0..batch.size {
             let i = rng.below(self.len as u64) as usize;
-            batch.obs[b * od..(b + 1) * od].copy_from_slice(&self.obs[i * od..(i + 1) * od]);
-            batch.act[b * ad..(b + 1) * ad].copy_from_slice(&self.act[i * ad..(i + 1) * ad]);
+            copy_row(&mut batch.obs[b * od..(b + 1) * od], &self.obs[i * od..(i + 1) * od]);
+            copy_row(&mut batch.act[b * ad..(b + 1) * ad], &self.act[i * ad..(i + 1) * ad]);
             batch.reward[b] = self.reward[i];
-            batch.next_obs[b * od..(b + 1) * od].copy_from_slice(&self.next_obs[i * od..(i + 1) * od]);
+            copy_row(&mut batch.next_obs[b * od..(b + 1) * od], &self.next_obs[i * od..(i + 1) * od]);
             batch.terminal[b] = self.terminal[i];
         }
     }

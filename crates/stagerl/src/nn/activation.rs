@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::simd::multiversion;
 use super::Scalar;
 
 /// An element-wise activation y = f(z).
@@ -34,12 +35,32 @@ impl Activation {
     /// in one pass: `y[r][j] = f(y[r][j] + bias[j])`.
     #[inline]
     pub fn add_bias_apply<T: Scalar>(self, y: &mut [T], bias: &[T]) {
+        bias_apply_kernel(self, y, bias);
+    }
+
+    /// [`Activation::backward`] fused with the bias gradient: turns `g` = dL/dy into dL/dz in
+    /// place and adds its column sums to `bias_grad` (`g` is `rows x bias_grad.len()`).
+    #[inline]
+    pub fn backward_sum<T: Scalar>(self, y: &[T], g: &mut [T], bias_grad: &mut [T]) {
+        backward_sum_kernel(self, y, g, bias_grad);
+    }
+
+    /// Turns dL/dy into dL/dz in place, given the outputs y: `g[i] *= f'(z[i])`.
+    #[inline]
+    pub fn backward<T: Scalar>(self, y: &[T], g: &mut [T]) {
+        backward_kernel(self, y, g);
+    }
+}
+
+multiversion! {
+    /// The loop of [`Activation::add_bias_apply`].
+    fn bias_apply_kernel / bias_apply_kernel_at<T: Scalar>(act: Activation, y: &mut [T], bias: &[T]) {
         let cols = bias.len();
         if cols == 0 {
             return;
         }
         let rows = y.chunks_exact_mut(cols);
-        match self {
+        match act {
             Activation::Identity => rows.for_each(|r| {
                 r.iter_mut().zip(bias).for_each(|(v, &b)| *v += b);
             }),
@@ -51,18 +72,18 @@ impl Activation {
             }),
         }
     }
+}
 
-    /// [`Activation::backward`] fused with the bias gradient: turns `g` = dL/dy into dL/dz in
-    /// place and adds its column sums to `bias_grad` (`g` is `rows x bias_grad.len()`).
-    #[inline]
-    pub fn backward_sum<T: Scalar>(self, y: &[T], g: &mut [T], bias_grad: &mut [T]) {
+multiversion! {
+    /// The loop of [`Activation::backward_sum`].
+    fn backward_sum_kernel / backward_sum_kernel_at<T: Scalar>(act: Activation, y: &[T], g: &mut [T], bias_grad: &mut [T]) {
         debug_assert_eq!(y.len(), g.len());
         let cols = bias_grad.len();
         if cols == 0 {
             return;
         }
         let rows = g.chunks_exact_mut(cols).zip(y.chunks_exact(cols));
-        match self {
+        match act {
             Activation::Identity => rows.for_each(|(g, _)| {
                 bias_grad.iter_mut().zip(g.iter()).for_each(|(s, &g)| *s += g);
             }),
@@ -80,12 +101,13 @@ impl Activation {
             }),
         }
     }
+}
 
-    /// Turns dL/dy into dL/dz in place, given the outputs y: `g[i] *= f'(z[i])`.
-    #[inline]
-    pub fn backward<T: Scalar>(self, y: &[T], g: &mut [T]) {
+multiversion! {
+    /// The loop of [`Activation::backward`].
+    fn backward_kernel / backward_kernel_at<T: Scalar>(act: Activation, y: &[T], g: &mut [T]) {
         debug_assert_eq!(y.len(), g.len());
-        match self {
+        match act {
             Activation::Identity => {}
             Activation::Relu => {
                 g.iter_mut().zip(y).for_each(|(g, &y)| *g = if y > T::ZERO { *g } else { T::ZERO })

@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::simd::multiversion;
 use super::Scalar;
 
 /// Adam over one flat parameter slice.
@@ -67,11 +68,8 @@ impl<T: Scalar> Adam<T> {
         let (b1, b2) = (T::from_f64(self.beta1), T::from_f64(self.beta2));
         let (c1, c2) = (T::from_f64(1.0 - self.beta1), T::from_f64(1.0 - self.beta2));
         let eps = T::from_f64(self.eps);
-        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(self.m.iter_mut()).zip(self.v.iter_mut()) {
-            *m = b1 * *m + c1 * g;
-            *v = b2 * *v + c2 * g * g;
-            *p -= step_size * *m / (v.sqrt() * inv_sqrt_bias2 + eps);
-        }
+        let coefs = Coefs { b1, b2, c1, c2, step_size, inv_sqrt_bias2, eps };
+        adam_kernel(params, grads, &mut self.m, &mut self.v, coefs);
     }
 
     /// Forgets the moments and the step count.
@@ -79,6 +77,29 @@ impl<T: Scalar> Adam<T> {
         self.step = 0;
         self.m.iter_mut().for_each(|x| *x = T::ZERO);
         self.v.iter_mut().for_each(|x| *x = T::ZERO);
+    }
+}
+
+/// The constants of one Adam step (see [`Adam::step`]).
+#[derive(Clone, Copy)]
+pub(crate) struct Coefs<T> {
+    pub b1: T,
+    pub b2: T,
+    pub c1: T,
+    pub c2: T,
+    pub step_size: T,
+    pub inv_sqrt_bias2: T,
+    pub eps: T,
+}
+
+multiversion! {
+    /// The element loop of [`Adam::step`].
+    fn adam_kernel / adam_kernel_at<T: Scalar>(params: &mut [T], grads: &[T], m: &mut [T], v: &mut [T], c: Coefs<T>) {
+        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m.iter_mut()).zip(v.iter_mut()) {
+            *m = c.b1 * *m + c.c1 * g;
+            *v = c.b2 * *v + c.c2 * g * g;
+            *p -= c.step_size * *m / (v.sqrt() * c.inv_sqrt_bias2 + c.eps);
+        }
     }
 }
 

@@ -62,6 +62,7 @@ mod matmul;
 mod mlp;
 mod ops;
 mod scalar;
+mod simd;
 
 #[cfg(test)]
 mod tests;
@@ -73,7 +74,8 @@ pub use linear::Linear;
 pub use loss::{mse, mse_loss};
 pub use mlp::{Mlp, TensorInfo, Workspace};
 pub use ops::{
-    add_assign, axpy, clip_grad_norm, concat_cols, copy_cols, first_non_finite, l2_norm, polyak_update,
-    scale, sum_of_squares,
+    add_assign, axpy, clip_grad_norm, concat_cols, copy_cols, copy_row, first_non_finite, l2_norm,
+    polyak_update, scale, sum_of_squares,
 };
 pub use scalar::{tanh_f32, Scalar};
+pub use simd::{simd_level, SimdLevel};

@@ -3,6 +3,7 @@
 //!
 //! All of them are single passes over slices and allocate nothing.
 
+use super::simd::multiversion;
 use super::Scalar;
 
 /// Lanes of the independent partial sums in reductions, so that the loops vectorise.
@@ -22,8 +23,14 @@ pub(crate) fn grow<T: Scalar>(buf: &mut Vec<T>, n: usize) {
 /// If the lengths differ.
 pub fn polyak_update<T: Scalar>(target: &mut [T], source: &[T], tau: T) {
     assert_eq!(target.len(), source.len(), "polyak_update: lengths differ");
-    let keep = T::ONE - tau;
-    target.iter_mut().zip(source).for_each(|(t, &s)| *t = keep * *t + tau * s);
+    polyak_kernel(target, source, T::ONE - tau, tau);
+}
+
+multiversion! {
+    /// `target[i] = keep * target[i] + tau * source[i]`.
+    fn polyak_kernel / polyak_kernel_at<T: Scalar>(target: &mut [T], source: &[T], keep: T, tau: T) {
+        target.iter_mut().zip(source).for_each(|(t, &s)| *t = keep * *t + tau * s);
+    }
 }
 
 /// Index of the first NaN or infinite value, if any.
@@ -39,8 +46,9 @@ pub fn first_non_finite<T: Scalar>(x: &[T]) -> Option<usize> {
     None
 }
 
-/// Sum of squares `sum_i x[i]^2` (in a fixed order, so deterministic).
-pub fn sum_of_squares<T: Scalar>(x: &[T]) -> T {
+multiversion! {
+    /// Sum of squares `sum_i x[i]^2` (in a fixed order, so deterministic).
+    pub fn sum_of_squares / sum_of_squares_at<T: Scalar>(x: &[T]) -> T {
     let mut acc = [T::ZERO; LANES];
     let mut chunks = x.chunks_exact(LANES);
     for c in &mut chunks {
@@ -52,6 +60,7 @@ pub fn sum_of_squares<T: Scalar>(x: &[T]) -> T {
         *a += v * v;
     }
     acc.iter().copied().sum()
+}
 }
 
 /// Euclidean norm of `x`.
@@ -71,9 +80,11 @@ pub fn clip_grad_norm<T: Scalar>(grads: &mut [T], max_norm: T) -> T {
     norm
 }
 
-/// `x[i] *= alpha`.
-pub fn scale<T: Scalar>(x: &mut [T], alpha: T) {
-    x.iter_mut().for_each(|v| *v *= alpha);
+multiversion! {
+    /// `x[i] *= alpha`.
+    pub fn scale / scale_at<T: Scalar>(x: &mut [T], alpha: T) {
+        x.iter_mut().for_each(|v| *v *= alpha);
+    }
 }
 
 /// `y[i] += x[i]`.
@@ -94,6 +105,38 @@ pub fn axpy<T: Scalar>(alpha: T, x: &[T], y: &mut [T]) {
     y.iter_mut().zip(x).for_each(|(y, &x)| *y += alpha * x);
 }
 
+/// `dst.copy_from_slice(src)` for the short rows of replay samples and critic inputs (a few
+/// dozen bytes): fixed-size blocks copied inline, where a call into the C library's `memcpy`
+/// would cost more than the copy.
+///
+/// # Panics
+/// If the lengths differ.
+#[inline]
+pub fn copy_row<T: Copy>(dst: &mut [T], src: &[T]) {
+    #[inline(always)]
+    fn block<T: Copy, const N: usize>(dst: &mut [T], src: &[T], at: usize) {
+        let s: &[T; N] = src[at..at + N].try_into().expect("block inside the row");
+        let d: &mut [T; N] = (&mut dst[at..at + N]).try_into().expect("block inside the row");
+        *d = *s;
+    }
+    let n = src.len();
+    assert_eq!(dst.len(), n, "copy_row: lengths differ");
+    if n >= 8 {
+        // Whole blocks of 8, then one block of 8 ending at the row's end (overlapping).
+        for at in (0..n - 7).step_by(8) {
+            block::<T, 8>(dst, src, at);
+        }
+        block::<T, 8>(dst, src, n - 8);
+    } else if n >= 4 {
+        block::<T, 4>(dst, src, 0);
+        block::<T, 4>(dst, src, n - 4);
+    } else {
+        for (d, &s) in dst.iter_mut().zip(src) {
+            *d = s;
+        }
+    }
+}
+
 /// Row-wise concatenation `out = [a | b]`: `a` is `batch x a_cols`, `b` is `batch x b_cols`,
 /// `out` is `batch x (a_cols + b_cols)` (e.g. a critic input concat(obs, action)).
 ///
@@ -108,8 +151,9 @@ pub fn concat_cols<T: Scalar>(a: &[T], a_cols: usize, b: &[T], b_cols: usize, ba
         return;
     }
     for (r, row) in out.chunks_exact_mut(cols).enumerate() {
-        row[..a_cols].copy_from_slice(&a[r * a_cols..(r + 1) * a_cols]);
-        row[a_cols..].copy_from_slice(&b[r * b_cols..(r + 1) * b_cols]);
+        let (ra, rb) = row.split_at_mut(a_cols);
+        copy_row(ra, &a[r * a_cols..(r + 1) * a_cols]);
+        copy_row(rb, &b[r * b_cols..(r + 1) * b_cols]);
     }
 }
 
@@ -133,7 +177,7 @@ pub fn copy_cols<T: Scalar>(
         return;
     }
     for (row, o) in src.chunks_exact(src_cols).zip(out.chunks_exact_mut(len)) {
-        o.copy_from_slice(&row[start..start + len]);
+        copy_row(o, &row[start..start + len]);
     }
 }
 
@@ -193,6 +237,16 @@ mod tests {
         axpy(2.0, &[1.0, 0.0, -1.0], &mut y);
         scale(&mut y, 0.5);
         assert_eq!(y, vec![2.0, 1.5, 1.0]);
+    }
+
+    #[test]
+    fn copy_row_every_length() {
+        for n in 0..40 {
+            let src: Vec<u32> = (0..n as u32).map(|i| i * 7 + 1).collect();
+            let mut dst = vec![0u32; n];
+            copy_row(&mut dst, &src);
+            assert_eq!(dst, src, "length {n}");
+        }
     }
 
     #[test]
