@@ -36,6 +36,7 @@ pub mod experiment;
 pub mod io;
 pub mod lock;
 pub mod log;
+pub mod math;
 pub mod metrics;
 pub mod nn;
 pub mod plan;

@@ -100,13 +100,11 @@ impl Sac {
 
     /// The entropy coefficient alpha.
     pub fn alpha(&self) -> f32 {
-        self.log_alpha[0].exp()
+        crate::math::exp_f32(self.log_alpha[0])
     }
 
     fn fill_normal(rng: &mut Rng, out: &mut [f32]) {
-        for e in out.iter_mut() {
-            *e = rng.normal() as f32;
-        }
+        rng.fill_normal_f32(out);
     }
 }
 

@@ -72,6 +72,8 @@ pub struct Td3 {
     updates: u64,
     critic_in: Vec<f32>,
     a_next: Vec<f32>,
+    /// Standard normal draws of the target policy smoothing (`batch x act`).
+    smoothing_noise: Vec<f64>,
     y: Vec<f32>,
     dq: Vec<f32>,
 }
@@ -103,6 +105,7 @@ impl Td3 {
             updates: 0,
             critic_in: vec![0.0; b * (obs_dim + act_dim)],
             a_next: vec![0.0; b * act_dim],
+            smoothing_noise: vec![0.0; b * act_dim],
             y: vec![0.0; b],
             dq: vec![0.0; b],
             family,
@@ -153,8 +156,10 @@ impl Agent for Td3 {
         let mu_next = self.actor_target.predict(&batch.next_obs, b);
         let a_next = match self.family.target_smoothing {
             Some((sigma, c)) => {
-                for (out, &m) in self.a_next[..b * ad].iter_mut().zip(mu_next) {
-                    let n = (sigma * self.rng.normal()).clamp(-c, c);
+                let z = &mut self.smoothing_noise[..b * ad];
+                self.rng.fill_normal(z);
+                for ((out, &m), &z) in self.a_next[..b * ad].iter_mut().zip(mu_next).zip(z.iter()) {
+                    let n = (sigma * z).clamp(-c, c);
                     *out = (f64::from(m) + n).clamp(-1.0, 1.0) as f32;
                 }
                 &self.a_next[..b * ad]

@@ -23,7 +23,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::ops::grow;
+use super::ops::{copy_row, grow};
+use super::simd::multiversion;
 use super::Scalar;
 
 /// How the raw network output `s` becomes the log standard deviation `l`.
@@ -100,6 +101,11 @@ pub struct SquashedGaussian<T> {
     log_prob: Vec<T>,
     /// dL/d(raw), `batch x 2 act`.
     grad_raw: Vec<T>,
+    /// Scratch of the forward pass, `batch x act` each: the means, the raw log-std values and
+    /// each element's term of log p(a).
+    mean: Vec<T>,
+    s: Vec<T>,
+    term: Vec<T>,
 }
 
 impl<T: Scalar> SquashedGaussian<T> {
@@ -116,6 +122,9 @@ impl<T: Scalar> SquashedGaussian<T> {
             action: Vec::new(),
             log_prob: Vec::new(),
             grad_raw: Vec::new(),
+            mean: Vec::new(),
+            s: Vec::new(),
+            term: Vec::new(),
         }
     }
 
@@ -145,28 +154,28 @@ impl<T: Scalar> SquashedGaussian<T> {
         }
         grow(&mut self.log_prob, batch);
         self.eps[..n].copy_from_slice(eps);
-        let half_ln_2pi = T::from_f64(0.5 * (2.0 * std::f64::consts::PI).ln());
-        let ln2 = T::from_f64(std::f64::consts::LN_2);
-        let two = T::from_f64(2.0);
-        let half = T::from_f64(0.5);
-        for r in 0..batch {
-            let (mean, s) = raw[r * 2 * act..(r + 1) * 2 * act].split_at(act);
-            let row = r * act..(r + 1) * act;
-            let mut lp = T::ZERO;
-            for (j, i) in row.enumerate() {
-                let (l, dl) = self.bound.apply(s[j]);
-                let std = l.exp();
-                let e = eps[i];
-                let u = mean[j] + std * e;
-                let abs_u = u.abs();
-                let softplus = ((-two * abs_u).exp() + T::ONE).ln(); // softplus(-2|u|)
-                let log_one_minus_tanh2 = two * (ln2 - abs_u - softplus);
-                lp += -half * e * e - l - half_ln_2pi - log_one_minus_tanh2;
-                self.std[i] = std;
-                self.dlog_std[i] = dl;
-                self.action[i] = u.tanh();
+        // Rows [mean | s] split into two contiguous arrays, so that the element-wise pass below
+        // runs over the whole batch at once (and vectorises).
+        for buf in [&mut self.mean, &mut self.s, &mut self.term] {
+            grow(buf, n);
+        }
+        for (r, row) in raw.chunks_exact(2 * act).enumerate() {
+            copy_row(&mut self.mean[r * act..(r + 1) * act], &row[..act]);
+            copy_row(&mut self.s[r * act..(r + 1) * act], &row[act..]);
+        }
+        let out = Sample {
+            std: &mut self.std[..n],
+            dlog_std: &mut self.dlog_std[..n],
+            action: &mut self.action[..n],
+            term: &mut self.term[..n],
+        };
+        sample_kernel(self.bound, &self.mean[..n], &self.s[..n], &eps[..n], out);
+        // log p(a) of each row: its terms summed in order.
+        for (lp, terms) in self.log_prob[..batch].iter_mut().zip(self.term[..n].chunks_exact(act)) {
+            *lp = T::ZERO;
+            for &t in terms {
+                *lp += t;
             }
-            self.log_prob[r] = lp;
         }
         self.batch = batch;
         self.ready = true;
@@ -222,6 +231,39 @@ impl<T: Scalar> SquashedGaussian<T> {
         }
         for (row, o) in raw.chunks_exact(2 * act).zip(out.chunks_exact_mut(act)) {
             o.iter_mut().zip(&row[..act]).for_each(|(o, &m)| *o = m.tanh());
+        }
+    }
+}
+
+/// The per-element outputs of [`sample_kernel`] (`batch x act` each).
+pub(crate) struct Sample<'a, T> {
+    pub std: &'a mut [T],
+    pub dlog_std: &'a mut [T],
+    pub action: &'a mut [T],
+    /// The element's term of log p(a): `-eps^2 / 2 - l - ln(2 pi) / 2 - log(1 - tanh(u)^2)`.
+    pub term: &'a mut [T],
+}
+
+multiversion! {
+    /// The element-wise part of [`SquashedGaussian::forward`] (see the module docs).
+    fn sample_kernel / sample_kernel_at<T: Scalar>(bound: LogStdBound, mean: &[T], s: &[T], eps: &[T], out: Sample<'_, T>) {
+        let half_ln_2pi = T::from_f64(0.5 * (2.0 * std::f64::consts::PI).ln());
+        let ln2 = T::from_f64(std::f64::consts::LN_2);
+        let two = T::from_f64(2.0);
+        let half = T::from_f64(0.5);
+        let Sample { std, dlog_std, action, term } = out;
+        let outs = std.iter_mut().zip(dlog_std.iter_mut()).zip(action.iter_mut()).zip(term.iter_mut());
+        for (((&m, &s), &e), (((std, dl), a), t)) in mean.iter().zip(s).zip(eps).zip(outs) {
+            let (l, dl_ds) = bound.apply(s);
+            let sd = l.exp();
+            let u = m + sd * e;
+            let abs_u = u.abs();
+            let softplus = ((-two * abs_u).exp() + T::ONE).ln(); // softplus(-2|u|)
+            let log_one_minus_tanh2 = two * (ln2 - abs_u - softplus);
+            *t = -half * e * e - l - half_ln_2pi - log_one_minus_tanh2;
+            *std = sd;
+            *dl = dl_ds;
+            *a = u.tanh();
         }
     }
 }

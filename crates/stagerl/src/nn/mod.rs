@@ -62,7 +62,7 @@ mod matmul;
 mod mlp;
 mod ops;
 mod scalar;
-mod simd;
+pub(crate) mod simd;
 
 #[cfg(test)]
 mod tests;

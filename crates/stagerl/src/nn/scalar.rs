@@ -57,11 +57,13 @@ pub trait Scalar:
     fn from_usize(n: usize) -> Self {
         Self::from_f64(n as f64)
     }
-    /// e^self.
+    /// e^self (for `f32` the vectorisable [`crate::math::exp_f32`], for `f64` the standard
+    /// library's).
     fn exp(self) -> Self;
     /// e^self - 1, accurate near 0.
     fn exp_m1(self) -> Self;
-    /// Natural logarithm.
+    /// Natural logarithm (for `f32` the vectorisable [`crate::math::ln_f32`], for `f64` the
+    /// standard library's).
     fn ln(self) -> Self;
     /// ln(1 + self), accurate near 0.
     fn ln_1p(self) -> Self;
@@ -99,7 +101,7 @@ pub trait Scalar:
 }
 
 macro_rules! impl_scalar {
-    ($t:ty, $tanh:expr) => {
+    ($t:ty, $tanh:expr, $exp:expr, $ln:expr) => {
         impl Scalar for $t {
             #[inline]
             fn tanh(self) -> Self {
@@ -119,7 +121,7 @@ macro_rules! impl_scalar {
             }
             #[inline]
             fn exp(self) -> Self {
-                <$t>::exp(self)
+                $exp(self)
             }
             #[inline]
             fn exp_m1(self) -> Self {
@@ -127,7 +129,7 @@ macro_rules! impl_scalar {
             }
             #[inline]
             fn ln(self) -> Self {
-                <$t>::ln(self)
+                $ln(self)
             }
             #[inline]
             fn ln_1p(self) -> Self {
@@ -157,8 +159,8 @@ macro_rules! impl_scalar {
     };
 }
 
-impl_scalar!(f32, tanh_f32);
-impl_scalar!(f64, f64::tanh);
+impl_scalar!(f32, tanh_f32, crate::math::exp_f32, crate::math::ln_f32);
+impl_scalar!(f64, f64::tanh, f64::exp, f64::ln);
 
 /// tanh for `f32` as a [13/6] odd/even rational function on [-7.905, 7.905] (the approximation of
 /// Eigen's `generic_fast_tanh_float`), `x` itself below 4e-4 and +-1 beyond the clamp.

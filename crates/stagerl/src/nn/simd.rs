@@ -39,7 +39,7 @@ pub fn simd_level() -> SimdLevel {
     SimdLevel::Baseline
 }
 
-/// Defines `fn name<T: Scalar>(args) body` so that `body` is compiled for AVX-512F, for AVX2 +
+/// Defines `fn name<T: Scalar>(args) body` (or a function without a type parameter) so that `body` is compiled for AVX-512F, for AVX2 +
 /// FMA and for the baseline, and the widest version the CPU supports runs (see the module docs).
 ///
 /// Written `fn name / name_at<T: Bound>(args) -> Ret { body }`: `name_at(level, args)` is the
@@ -48,46 +48,46 @@ pub fn simd_level() -> SimdLevel {
 macro_rules! multiversion {
     (
         $(#[$meta:meta])*
-        $vis:vis fn $name:ident / $name_at:ident <$T:ident : $bound:path> ($($arg:ident : $ty:ty),* $(,)?) $(-> $ret:ty)?
+        $vis:vis fn $name:ident / $name_at:ident $(<$T:ident : $bound:path>)? ($($arg:ident : $ty:ty),* $(,)?) $(-> $ret:ty)?
         $body:block
     ) => {
         $(#[$meta])*
         #[inline]
-        $vis fn $name<$T: $bound>($($arg: $ty),*) $(-> $ret)? {
-            $name_at::<$T>($crate::nn::simd::simd_level(), $($arg),*)
+        $vis fn $name $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? {
+            $name_at $(::<$T>)? ($crate::nn::simd::simd_level(), $($arg),*)
         }
 
         /// The same function at a given SIMD level (the baseline where the CPU lacks it).
         #[allow(dead_code)]
         #[inline]
-        pub(crate) fn $name_at<$T: $bound>(level: $crate::nn::simd::SimdLevel, $($arg: $ty),*) $(-> $ret)? {
+        pub(crate) fn $name_at $(<$T: $bound>)? (level: $crate::nn::simd::SimdLevel, $($arg: $ty),*) $(-> $ret)? {
             #[inline(always)]
-            fn body<$T: $bound>($($arg: $ty),*) $(-> $ret)? $body
+            fn body $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? $body
 
             #[cfg(target_arch = "x86_64")]
             {
                 #[target_feature(enable = "avx512f")]
-                unsafe fn avx512<$T: $bound>($($arg: $ty),*) $(-> $ret)? {
-                    body::<$T>($($arg),*)
+                unsafe fn avx512 $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? {
+                    body $(::<$T>)? ($($arg),*)
                 }
                 #[target_feature(enable = "avx2,fma")]
-                unsafe fn avx2<$T: $bound>($($arg: $ty),*) $(-> $ret)? {
-                    body::<$T>($($arg),*)
+                unsafe fn avx2 $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? {
+                    body $(::<$T>)? ($($arg),*)
                 }
                 let detected = $crate::nn::simd::simd_level();
                 match level {
                     // SAFETY: the CPU supports AVX-512F (detected at run time).
                     $crate::nn::simd::SimdLevel::Avx512 if detected == $crate::nn::simd::SimdLevel::Avx512 => {
-                        return unsafe { avx512::<$T>($($arg),*) }
+                        return unsafe { avx512 $(::<$T>)? ($($arg),*) }
                     }
                     // SAFETY: the CPU supports AVX2 and FMA (the Avx512 level implies both).
                     $crate::nn::simd::SimdLevel::Avx2 if detected != $crate::nn::simd::SimdLevel::Baseline => {
-                        return unsafe { avx2::<$T>($($arg),*) }
+                        return unsafe { avx2 $(::<$T>)? ($($arg),*) }
                     }
                     _ => {}
                 }
             }
-            body::<$T>($($arg),*)
+            body $(::<$T>)? ($($arg),*)
         }
     };
 }
