@@ -68,6 +68,23 @@ fn main() {
         println!("nn_gemm: timings only, run with `cargo bench -p stagerl --bench nn_gemm`");
         return;
     }
+    // The CPU's f32 peak as gemm reaches it on one core: large square products, where packing
+    // and call overhead vanish. The FLOP floor of an update is its FLOPs over this rate.
+    for size in [512, 1024] {
+        let a = vec![0.5f32; size * size];
+        let mut c = vec![0.0f32; size * size];
+        let t = Instant::now();
+        let reps = 8;
+        for _ in 0..reps {
+            mm(size, size, size, &mut c, (size, 1), true, &a, (size, 1), &a, (size, 1));
+        }
+        let secs = t.elapsed().as_secs_f64() / reps as f64;
+        println!(
+            "peak: {size}^3 product {:.1} GFLOP/s (one thread)",
+            2.0 * (size as f64).powi(3) / secs * 1e-9
+        );
+        black_box(&c);
+    }
     let b = 256;
     println!("batch {b}, f32, best of 7 means (us) and GFLOP/s");
     for (n_in, n_out) in [(24, 64), (64, 64), (64, 1), (24, 256), (256, 256), (256, 12)] {

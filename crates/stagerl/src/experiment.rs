@@ -591,6 +591,11 @@ mod tests {
             (20, 10000, 500)
         );
         assert_eq!(paper.base.task.max_steps, 50);
+        // The paper regime: gamma 0.99 and unscaled observations.
+        assert_eq!(
+            crate::report::reference::Regime::of(paper.base.agent.gamma, paper.base.task.obs_delta_scale),
+            crate::report::reference::Regime::Paper
+        );
         // The tuned regime: the library's defaults at 10 seeds x 5000 episodes.
         let (tuned, _) = Preset::resolve("tuned").unwrap();
         assert_eq!((tuned.sweep.seeds.len(), tuned.base.train.episodes), (10, 5000));
