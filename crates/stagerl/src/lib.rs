@@ -17,6 +17,8 @@
 //!   measured against.
 //! - [`plan`]: a trajectory from a start pose to a target with a trained policy or the
 //!   controller; [`policy`]: the portable description of a checkpoint's policy.
+//! - [`export`]: the policy as an ONNX model ([`proto`]: the protobuf encoder it and the
+//!   TensorBoard writer share).
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
@@ -33,6 +35,7 @@ pub mod controller;
 pub mod env;
 pub mod error;
 pub mod experiment;
+pub mod export;
 pub mod io;
 pub mod lock;
 pub mod log;
@@ -40,6 +43,7 @@ pub mod metrics;
 pub mod nn;
 pub mod plan;
 pub mod policy;
+pub mod proto;
 pub mod provenance;
 pub mod replay;
 pub mod report;

@@ -1,6 +1,7 @@
 pub mod bench;
 pub mod demo;
 pub mod eval;
+pub mod export;
 pub mod fk;
 pub mod plan;
 pub mod report;
