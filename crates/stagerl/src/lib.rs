@@ -19,6 +19,7 @@
 //!   controller; [`policy`]: the portable description of a checkpoint's policy.
 //! - [`export`]: the policy as an ONNX model ([`proto`]: the protobuf encoder it and the
 //!   TensorBoard writer share).
+//! - [`view`]: planned trajectories as a self-contained, animated HTML 3D view.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
@@ -56,6 +57,7 @@ pub mod stats;
 pub mod text;
 pub mod train;
 pub mod validate;
+pub mod view;
 
 pub use error::{Error, Result};
 /// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).

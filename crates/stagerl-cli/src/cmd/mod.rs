@@ -8,6 +8,7 @@ pub mod report;
 pub mod reproduce;
 pub mod reward;
 pub mod train;
+pub mod view;
 
 use anyhow::{Context, Result};
 use stagerl::config::Config;
