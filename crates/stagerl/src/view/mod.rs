@@ -79,6 +79,12 @@ impl View {
         }
     }
 
+    /// An empty view of the plans of `planner` (its arm, control period and success radius).
+    pub fn for_planner(title: &str, planner: &Planner) -> View {
+        let env = planner.env();
+        View::new(title, env.chain(), env.task().dt_s, env.reward_config().beta_m)
+    }
+
     /// Add `plan` (to `target`, metres) under `label`; at most [`MAX_TRAJECTORIES`].
     pub fn push(&mut self, chain: &Chain, label: &str, target: [f64; 3], plan: &Plan) -> Result<()> {
         if self.trajectories.len() >= MAX_TRAJECTORIES {
@@ -146,9 +152,13 @@ pub fn parse_requests(text: &str, origin: &str) -> Result<Vec<(usize, PlanReques
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let r: PlanRequest = serde_json::from_str(line).map_err(|e| {
+            let text = e.to_string();
+            let what = text.rsplit_once(" at line ").map_or(text.as_str(), |(w, _)| w);
             Error::InvalidInput(format!(
-                "{origin} line {}: {e} (expected {{\"target\":[x,y,z]}} or {{\"target\":[x,y,z],\"start\":[q1,..]}})",
-                i + 1
+                "{origin} line {}, column {}: {what} (expected {{\"target\":[x,y,z]}} or \
+                 {{\"target\":[x,y,z],\"start\":[q1,..]}})",
+                i + 1,
+                e.column()
             ))
         })?;
         out.push((i + 1, r));
@@ -187,14 +197,15 @@ pub fn view_of_run(run: &RunDir, checkpoint: Option<&Path>, source: &ViewSource)
     let (path, mut planner) = Planner::from_run(run, checkpoint, None)?;
     let title = format!("{} {} ({})", cfg.agent.algo.name(), cfg.reward.function.name(), path.display());
     let chain = planner.env().chain().clone();
-    let mut view = View::new(&title, &chain, planner.env().task().dt_s, cfg.reward.beta_m);
+    let mut view = View::for_planner(&title, &planner);
     for (line, r) in &requests {
         let (label, plan) = match source {
             ViewSource::Requests { origin, .. } => (
                 format!("line {line}"),
-                planner
-                    .plan_request(r)
-                    .map_err(|e| Error::InvalidInput(format!("{origin} line {line}: {e}")))?,
+                planner.plan_request(r).map_err(|e| match e {
+                    Error::InvalidInput(m) => Error::InvalidInput(format!("{origin} line {line}: {m}")),
+                    other => other,
+                })?,
             ),
             ViewSource::Targets { .. } => (format!("target {line}"), planner.plan_request(r)?),
         };
