@@ -23,6 +23,7 @@ pub fn run(args: Args) -> Result<()> {
     let run = RunDir::new(&args.run);
     let (checkpoint, bytes) = stagerl::export::onnx_of_run(&run, args.checkpoint.as_deref())
         .with_context(|| format!("exporting the policy of the run in {}", args.run.display()))?;
-    let written = stagerl::io::write_new(&args.out, &bytes, args.force)?;
+    let written = stagerl::io::write_new(&args.out, &bytes, args.force)
+        .with_context(|| format!("writing the ONNX model to {}", args.out.display()))?;
     outln!("{} ({} bytes, from {}): {written}", args.out.display(), bytes.len(), checkpoint.display())
 }

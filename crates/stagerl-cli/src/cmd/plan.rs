@@ -115,7 +115,8 @@ fn view_title(args: &Args) -> String {
 /// Write `view` to `--view`, if asked for; a line on standard error says what was written.
 fn write_view(args: &Args, view: Option<&View>) -> Result<()> {
     let (Some(path), Some(view)) = (&args.view, view) else { return Ok(()) };
-    let written = stagerl::io::write_new(path, view.to_html()?.as_bytes(), args.force)?;
+    let written = stagerl::io::write_new(path, view.to_html()?.as_bytes(), args.force)
+        .with_context(|| format!("writing the view to {}", path.display()))?;
     errln!("stagerl: view of {} plan(s) in {}: {written}", view.trajectories.len(), path.display())
 }
 

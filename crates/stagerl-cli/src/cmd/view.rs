@@ -54,7 +54,8 @@ pub fn run(args: Args) -> Result<()> {
     };
     let v = view::view_of_run(&run, args.checkpoint.as_deref(), &source)
         .with_context(|| format!("viewing the policy of the run in {}", args.run.display()))?;
-    let written = stagerl::io::write_new(&args.out, v.to_html()?.as_bytes(), args.force)?;
+    let written = stagerl::io::write_new(&args.out, v.to_html()?.as_bytes(), args.force)
+        .with_context(|| format!("writing the view to {}", args.out.display()))?;
     let reached = v.trajectories.iter().filter(|t| t.reached).count();
     outln!("{}: {} trajectories ({reached} reached), {written}", args.out.display(), v.trajectories.len())
 }
