@@ -213,3 +213,70 @@ pub fn view_of_run(run: &RunDir, checkpoint: Option<&Path>, source: &ViewSource)
     }
     Ok(view)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn a_view_embeds_its_plans_as_json_and_nothing_closes_the_script_early() {
+        let cfg = Config::default();
+        let mut planner = Planner::jacobian(&cfg, None).unwrap();
+        let target = [0.4, 0.2, 0.3];
+        let plan = planner.plan(&target, None).unwrap();
+        let chain = planner.env().chain().clone();
+        let mut view = View::for_planner("a </script><b> title", &planner);
+        view.push(&chain, "plan", target, &plan).unwrap();
+        let t = &view.trajectories[0];
+        assert_eq!(t.frames.len(), plan.rows());
+        for (f, ee) in t.frames.iter().zip(&plan.ee_pos) {
+            assert_eq!(f.len(), chain.dof() + 1);
+            assert!((Vector3::from(f[chain.dof()]) - Vector3::from(*ee)).norm() < 1e-12);
+        }
+        assert_eq!((view.dt_s, view.beta_m), (cfg.task.dt_s, cfg.reward.beta_m));
+        let html = view.to_html().unwrap();
+        assert_eq!(html.matches("</script>").count(), TEMPLATE.matches("</script>").count());
+        assert!(!html.contains(DATA_MARK));
+        let start = html.find("application/json\">").unwrap() + "application/json\">".len();
+        let end = start + html[start..].find("</script>").unwrap();
+        let data: serde_json::Value = serde_json::from_str(&html[start..end]).unwrap();
+        assert_eq!(data["title"], "a </script><b> title");
+        let x = data["trajectories"][0]["frames"][3][6][0].as_f64().unwrap();
+        assert!((x - t.frames[3][6][0]).abs() <= 0.5e-4 && (x * 1e4 - (x * 1e4).round()).abs() < 1e-6);
+        // At most MAX_TRAJECTORIES.
+        view.trajectories = vec![t.clone(); MAX_TRAJECTORIES];
+        let e = view.push(&chain, "one more", target, &plan).unwrap_err().to_string();
+        assert!(e.contains("at most 500") && e.contains("one more"), "{e}");
+    }
+
+    #[test]
+    fn requests_are_read_with_their_line_numbers() {
+        let text = "{\"target\":[0.4,0.2,0.3]}\n\n  \n{\"target\":[0.1,0.2,0.3],\"start\":[0,0,0,0,0,0]}\n";
+        let r = parse_requests(text, "p.jsonl").unwrap();
+        assert_eq!(r.iter().map(|(l, _)| *l).collect::<Vec<_>>(), [1, 4]);
+        assert_eq!(r[1].1.start.as_deref(), Some(&[0.0; 6][..]));
+        let e =
+            parse_requests("{\"target\":[1,2,3]}\n{\"target\":[1,2,\n", "p.jsonl").unwrap_err().to_string();
+        assert!(e.contains("p.jsonl line 2, column") && !e.contains(" at line "), "{e}");
+        let e = parse_requests("\n", "p.jsonl").unwrap_err().to_string();
+        assert!(e.contains("holds no plan request"), "{e}");
+    }
+
+    #[test]
+    fn eval_targets_are_the_evaluations_targets() {
+        let cfg = Config::default();
+        let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
+        let ts = eval_targets(&cfg, 3, 42).unwrap();
+        let mut driver = crate::env::Observed(
+            |_: &ReachEnv, a: &mut [f32]| {
+                a.fill(0.0);
+                Ok(())
+            },
+            |_: &crate::env::Transition<'_>| Ok(crate::env::Flow::Continue),
+        );
+        let (_, records) = crate::train::eval::evaluate_with(&mut env, 3, 42, &mut driver).unwrap();
+        let want: Vec<[f64; 3]> = records.iter().map(|r| r.target).collect();
+        assert_eq!(ts, want);
+    }
+}
