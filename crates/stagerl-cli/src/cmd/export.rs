@@ -4,12 +4,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The run directory whose policy is exported (holds config.toml and checkpoints/).
-    #[arg(long)]
-    run: PathBuf,
-    /// Checkpoint to export (default: the run's best, else final, else latest).
-    #[arg(long)]
-    checkpoint: Option<PathBuf>,
+    #[command(flatten)]
+    run: super::RunArgs,
     /// The ONNX file to write (opset 13; input `observation` [batch, obs_dim] f32, output
     /// `joint_velocity` [batch, dof] f32, rad/s).
     #[arg(long)]
@@ -20,9 +16,9 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let run = RunDir::new(&args.run);
-    let (checkpoint, bytes) = stagerl::export::onnx_of_run(&run, args.checkpoint.as_deref())
-        .with_context(|| format!("exporting the policy of the run in {}", args.run.display()))?;
+    let run = RunDir::new(&args.run.run);
+    let (checkpoint, bytes) = stagerl::export::onnx_of_run(&run, args.run.checkpoint.as_deref())
+        .with_context(|| format!("exporting the policy of the run in {}", args.run.run.display()))?;
     let written = stagerl::io::write_new(&args.out, &bytes, args.force)
         .with_context(|| format!("writing the ONNX model to {}", args.out.display()))?;
     outln!("{} ({} bytes, from {}): {written}", args.out.display(), bytes.len(), checkpoint.display())

@@ -33,6 +33,17 @@ impl RobotArgs {
     }
 }
 
+/// The trained run a command reads: `--run` and `--checkpoint`.
+#[derive(clap::Args)]
+pub struct RunArgs {
+    /// The run directory (holds config.toml and checkpoints/).
+    #[arg(long)]
+    pub run: std::path::PathBuf,
+    /// Checkpoint to use (default: the run's best, else final, else latest).
+    #[arg(long)]
+    pub checkpoint: Option<std::path::PathBuf>,
+}
+
 /// The `--algo` parser: `--help` lists the algorithms.
 pub fn algo_parser() -> impl clap::builder::TypedValueParser<Value = stagerl::agent::Algo> {
     use clap::builder::TypedValueParser;

@@ -5,12 +5,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The run directory whose policy plans (holds config.toml and checkpoints/).
-    #[arg(long)]
-    run: PathBuf,
-    /// Checkpoint to plan with (default: the run's best, else final, else latest).
-    #[arg(long)]
-    checkpoint: Option<PathBuf>,
+    #[command(flatten)]
+    run: super::RunArgs,
     /// Plan to the first N targets of the evaluation seed --seed, from the home pose (1 to
     /// 500; default 5).
     #[arg(long, conflicts_with = "plans", value_parser = clap::value_parser!(u32).range(1..=view::MAX_TRAJECTORIES as i64))]
@@ -32,7 +28,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let run = RunDir::new(&args.run);
+    let run = RunDir::new(&args.run.run);
     let source = match &args.plans {
         Some(p) => ViewSource::Requests {
             text: std::fs::read_to_string(p)
@@ -44,7 +40,7 @@ pub fn run(args: Args) -> Result<()> {
                 Some(s) => s,
                 None => {
                     run.load_config()
-                        .with_context(|| format!("reading the run in {}", args.run.display()))?
+                        .with_context(|| format!("reading the run in {}", args.run.run.display()))?
                         .train
                         .eval_seed
                 }
@@ -52,8 +48,8 @@ pub fn run(args: Args) -> Result<()> {
             ViewSource::Targets { count: args.targets.unwrap_or(5), seed }
         }
     };
-    let v = view::view_of_run(&run, args.checkpoint.as_deref(), &source)
-        .with_context(|| format!("viewing the policy of the run in {}", args.run.display()))?;
+    let v = view::view_of_run(&run, args.run.checkpoint.as_deref(), &source)
+        .with_context(|| format!("viewing the policy of the run in {}", args.run.run.display()))?;
     let written = stagerl::io::write_new(&args.out, v.to_html()?.as_bytes(), args.force)
         .with_context(|| format!("writing the view to {}", args.out.display()))?;
     let reached = v.trajectories.iter().filter(|t| t.reached).count();
