@@ -73,7 +73,7 @@ impl View {
             dt_s,
             beta_m,
             link_radius_m: LINK_RADIUS_M.min(reach / 20.0),
-            center: [o.x, o.y, (o.z + reach / 3.0).max(0.0)],
+            center: [o.x, o.y, (o.z + reach / 4.0).max(0.0)],
             extent_m: reach,
             trajectories: Vec::new(),
         }
