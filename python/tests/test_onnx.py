@@ -8,7 +8,7 @@ ONNX checker.
   q += v * dt clamped to the limits) on the 100 targets of a `stagerl eval` reaches exactly the
   targets that evaluation reached.
 
-Each algorithm family is covered: TD3 (the actor's tanh output, as DDPG) and SAC (tanh of the
+Each algorithm is covered: DDPG and TD3 (the actor's tanh output) and SAC (tanh of the
 mean half). The runs are tiny (trained here in a few seconds): parity needs no good policy, and
 the rollout comparison holds for any success count; a larger success radius (beta = 0.05 m)
 makes some targets reached.
@@ -43,7 +43,7 @@ def run_cli(stagerl_bin, *args, stdin=None):
     return p.stdout
 
 
-@pytest.fixture(scope="module", params=["td3", "sac"])
+@pytest.fixture(scope="module", params=["ddpg", "td3", "sac"])
 def exported(request, stagerl_bin, tmp_path_factory):
     """A tiny trained run of the algorithm, its exported model and the model's session."""
     d = tmp_path_factory.mktemp(f"onnx-{request.param}")
@@ -116,6 +116,7 @@ def test_the_model_matches_stagerls_own_actions(exported, stagerl_bin):
     obs, expected = np.concatenate(obs), np.concatenate(expected)
     (got,) = session.run(None, {"observation": obs})
     worst = np.max(np.abs(got - expected))
+    print(f"parity: {len(obs)} observations, largest difference {worst:.2e} rad/s")
     assert len(obs) >= 1000 and worst <= 1e-5, f"{len(obs)} observations, largest difference {worst} rad/s"
 
 
@@ -147,5 +148,6 @@ def test_the_model_rolled_out_here_reaches_what_stagerl_eval_reaches(exported, s
         reached |= hit
         active &= ~hit
     eval_success = trials["success"].astype(bool)
+    print(f"rollout: {reached.sum()} of {len(targets)} reached here, {eval_success.sum()} by stagerl eval")
     assert reached.sum() == eval_success.sum(), f"{reached.sum()} reached here, {eval_success.sum()} by stagerl eval"
     assert np.array_equal(reached, eval_success), np.flatnonzero(reached != eval_success)
