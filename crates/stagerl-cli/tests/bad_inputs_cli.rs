@@ -156,6 +156,8 @@ const REWARD_LINES: &[Case] = &[
     Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_far.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["plans_far.jsonl line 2", "out of reach"] },
     Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_start.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["plans_start.jsonl line 1", "start pose has 2 values, expected 6"] },
     Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/empty-plans.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["holds no plan request"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/huge-plans.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["huge-plans.jsonl is larger than 1048576 bytes"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_many.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["501 plan requests", "1 to 500"] },
     Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "$DIR/bad.toml"], stdin: "", expect: &["bad.toml exists", "--force"] },
     Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "$DIR/no-such-dir/v.html"], stdin: "", expect: &["no-such-dir/v.html", "No such file"] },
     Case { args: &["plan", "--controller", "jacobian", "--target", "0.4,0.2,0.3", "--view", "$DIR/bad.toml"], stdin: "", expect: &["bad.toml exists", "--force"] },
@@ -240,6 +242,8 @@ fn fixture(dir: &Path) {
     std::fs::write(dir.join("plans_far.jsonl"), format!("{good_plan}{{\"target\":[3,0,0.3]}}\n")).unwrap();
     std::fs::write(dir.join("plans_start.jsonl"), "{\"target\":[0.4,0.2,0.3],\"start\":[0,0]}\n").unwrap();
     std::fs::write(dir.join("empty-plans.jsonl"), "\n  \n").unwrap();
+    std::fs::write(dir.join("huge-plans.jsonl"), good_plan.repeat(50_000)).unwrap();
+    std::fs::write(dir.join("plans_many.jsonl"), good_plan.repeat(501)).unwrap();
     std::fs::write(dir.join("huge_hidden.toml"), "[agent]\nhidden = [16384, 16384, 16384, 16384]\n").unwrap();
     std::fs::write(dir.join("huge_replay.toml"), "[agent]\nhidden = [4096, 4096]\nbuffer_size = 100000000\n")
         .unwrap();

@@ -30,11 +30,7 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let run = RunDir::new(&args.run.run);
     let source = match &args.plans {
-        Some(p) => ViewSource::Requests {
-            text: std::fs::read_to_string(p)
-                .with_context(|| format!("reading the plans file {}", p.display()))?,
-            origin: p.display().to_string(),
-        },
+        Some(p) => ViewSource::Requests { text: read_plans(p)?, origin: p.display().to_string() },
         None => {
             let seed = match args.seed {
                 Some(s) => s,
@@ -54,4 +50,22 @@ pub fn run(args: Args) -> Result<()> {
         .with_context(|| format!("writing the view to {}", args.out.display()))?;
     let reached = v.trajectories.iter().filter(|t| t.reached).count();
     outln!("{}: {} trajectories ({reached} reached), {written}", args.out.display(), v.trajectories.len())
+}
+
+/// The plans file, at most [`view::MAX_PLANS_FILE_BYTES`].
+fn read_plans(path: &std::path::Path) -> Result<String> {
+    use std::io::Read;
+    let context = || format!("reading the plans file {}", path.display());
+    let file = std::fs::File::open(path).with_context(context)?;
+    let mut text = String::new();
+    file.take(view::MAX_PLANS_FILE_BYTES + 1).read_to_string(&mut text).with_context(context)?;
+    if text.len() as u64 > view::MAX_PLANS_FILE_BYTES {
+        anyhow::bail!(
+            "the plans file {} is larger than {} bytes; a view shows at most {} plans",
+            path.display(),
+            view::MAX_PLANS_FILE_BYTES,
+            view::MAX_TRAJECTORIES
+        );
+    }
+    Ok(text)
 }

@@ -25,6 +25,9 @@ const DATA_MARK: &str = "/*STAGERL_DATA*/";
 /// Most trajectories one view holds (a plan of 200 steps on a 6-joint arm is ~30 kB of JSON).
 pub const MAX_TRAJECTORIES: usize = 500;
 
+/// The largest plans file read, bytes (1 MiB holds thousands of requests, more than a view shows).
+pub const MAX_PLANS_FILE_BYTES: u64 = 1 << 20;
+
 /// Radius of the capsules drawn for the links, metres.
 pub const LINK_RADIUS_M: f64 = 0.035;
 
