@@ -52,7 +52,7 @@ impl std::fmt::Display for Written {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Written::New => "written",
-            Written::Unchanged => "unchanged: the same results",
+            Written::Unchanged => "unchanged: the same contents",
             Written::Replaced => "replaced (--force)",
         })
     }
