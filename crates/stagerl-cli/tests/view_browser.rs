@@ -62,16 +62,25 @@ fn console_lines(stderr: &[u8]) -> Vec<String> {
         .collect()
 }
 
-/// Pixels of the canvas area (below the control bar) that differ from the page background, and
-/// the distinct colours there.
-fn canvas_pixels(png_path: &Path) -> (usize, usize) {
+/// What the canvas area (below the control bar) of a screenshot holds.
+#[derive(Debug)]
+struct Canvas {
+    /// Pixels off the page background.
+    drawn: usize,
+    /// Distinct colours.
+    colours: usize,
+    /// Strongly coloured pixels (the arm, the path, the target; the floor grid and the page are grey).
+    saturated: usize,
+}
+
+fn canvas_pixels(png_path: &Path) -> Canvas {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(png_path).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
     let info = reader.next_frame(&mut buf).unwrap();
     let channels = info.color_type.samples();
     assert!(info.width >= 400 && info.height >= 300, "{}x{}", info.width, info.height);
-    let (mut drawn, mut colours) = (0, HashSet::new());
+    let (mut drawn, mut colours, mut saturated) = (0, HashSet::new(), 0);
     for y in 60..info.height as usize - 30 {
         for x in 0..info.width as usize {
             let i = (y * info.width as usize + x) * channels;
@@ -79,15 +88,17 @@ fn canvas_pixels(png_path: &Path) -> (usize, usize) {
             if px != [0xf4, 0xf5, 0xf7] {
                 drawn += 1;
             }
+            if px.iter().max().unwrap() - px.iter().min().unwrap() > 80 {
+                saturated += 1;
+            }
             colours.insert(px);
         }
     }
-    (drawn, colours.len())
+    Canvas { drawn, colours: colours.len(), saturated }
 }
 
-/// What the browser shows of `page`: console lines, the DOM, the canvas's drawn pixels and
-/// colours.
-fn show(page: &Path, dir: &Path) -> (Vec<String>, String, (usize, usize)) {
+/// What the browser shows of `page`: console lines, the DOM, the canvas.
+fn show(page: &Path, dir: &Path) -> (Vec<String>, String, Canvas) {
     let shot = dir.join(format!("{}.png", page.file_stem().unwrap().to_string_lossy()));
     let o = browse(page, &dir.join("profile-shot"), &[format!("--screenshot={}", shot.display())]);
     assert!(o.status.success(), "chromium failed: {}", String::from_utf8_lossy(&o.stderr));
@@ -163,11 +174,14 @@ fn the_view_loads_runs_and_draws_in_a_headless_browser() {
         }
     }
 
-    let (console, dom, (drawn, colours)) = show(&page, &dir);
+    let (console, dom, canvas) = show(&page, &dir);
     assert!(console.is_empty(), "console messages: {console:#?}");
     assert!(dom.contains("<span id=\"info\">step "), "the script did not run: {dom}");
     assert_eq!(dom.matches("<option value=").count(), 4, "{dom}");
-    assert!(drawn > 5_000 && colours > 100, "blank canvas: {drawn} drawn pixels, {colours} colours");
+    assert!(
+        canvas.drawn > 5_000 && canvas.colours > 100 && canvas.saturated > 500,
+        "blank canvas: {canvas:?}"
+    );
 
     // `plan --view`: the Jacobian controller's plan in one view.
     let planned = dir.join("plan.html");
@@ -179,16 +193,22 @@ fn the_view_loads_runs_and_draws_in_a_headless_browser() {
     let rows = ok(o).lines().count();
     let data = view_data(&std::fs::read_to_string(&planned).unwrap());
     assert_eq!(data["trajectories"][0]["frames"].as_array().unwrap().len(), rows - 1);
-    let (console, dom, (drawn, colours)) = show(&planned, &dir);
+    let (console, dom, canvas) = show(&planned, &dir);
     assert!(dom.contains("<span id=\"info\">step ") && dom.contains(">plan (reached)<"), "{dom}");
     assert!(console.is_empty(), "console messages: {console:#?}");
-    assert!(drawn > 5_000 && colours > 100, "blank canvas: {drawn} drawn pixels, {colours} colours");
+    assert!(
+        canvas.drawn > 5_000 && canvas.colours > 100 && canvas.saturated > 500,
+        "blank canvas: {canvas:?}"
+    );
 
     // The same checks catch a page whose script fails.
     let broken = dir.join("broken.html");
     std::fs::write(&broken, html.replace("\"trajectories\":[", "\"trajectories\":[}")).unwrap();
-    let (console, dom, (drawn, _)) = show(&broken, &dir);
+    let (console, dom, canvas) = show(&broken, &dir);
     assert!(console.iter().any(|l| l.contains("Uncaught SyntaxError")), "{console:#?}");
-    assert!(!dom.contains("<span id=\"info\">step ") && drawn < 1000, "{drawn}");
+    assert!(
+        !dom.contains("<span id=\"info\">step ") && canvas.drawn < 1000 && canvas.saturated == 0,
+        "{canvas:?}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
