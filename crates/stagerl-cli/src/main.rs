@@ -34,6 +34,13 @@ enum Command {
     /// Plan a joint trajectory from a start pose to a target with a trained run's deterministic
     /// policy (or the Jacobian controller): one JSON line (or CSV row) per state, then a summary.
     Plan(cmd::plan::Args),
+    /// Export a trained run's policy as an ONNX model (the actor, the deterministic action rule
+    /// and the speed-limit scaling: observation in, joint velocities in rad/s out).
+    Export(cmd::export::Args),
+    /// Write an animated 3D view of a trained run's planned trajectories: one self-contained
+    /// HTML file (the arm, the targets, the end-effector paths; play/pause, a step slider, an
+    /// orbit camera).
+    View(cmd::view::Args),
     /// Forward kinematics: JSON lines {"joints":[...]} on stdin (radians), one
     /// {"position":[x,y,z],"quaternion":[x,y,z,w]} line out per input (metres, base frame).
     Fk(cmd::fk::Args),
@@ -61,6 +68,8 @@ fn main() -> ExitCode {
         Command::Reproduce(a) => cmd::reproduce::run(a),
         Command::Demo(a) => cmd::demo::run(a),
         Command::Plan(a) => cmd::plan::run(a),
+        Command::Export(a) => cmd::export::run(a),
+        Command::View(a) => cmd::view::run(a),
         Command::Fk(a) => cmd::fk::run(a),
         Command::Reward(a) => cmd::reward::run(a),
         Command::Report(a) => cmd::report::run(a),

@@ -130,6 +130,38 @@ const REWARD_LINES: &[Case] = &[
     Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0]}\n", expect: &["line 1", "`joint_vel` has 3 values, expected 6", "ur5"] },
     Case { args: &["reward", "--function", "sar", "--robot", "$DIR/two.urdf"], stdin: "$GOOD\n", expect: &["line 1", "`joint_vel` has 6 values, expected 2", "two.urdf"] },
     Case { args: &["reward", "--function", "sar", "--robot", "$DIR/missing.urdf"], stdin: "$GOOD\n", expect: &["missing.urdf"] },
+    // Export: run directories, checkpoints, an --out that exists (without --force), is a
+    // directory or cannot be written.
+    Case { args: &["export", "--run", "$DIR/nope", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["nope", "config.toml"] },
+    Case { args: &["export", "--run", "$RUN"], stdin: "", expect: &["--out"] },
+    Case { args: &["export", "--run", "$EMPTY", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["holds no checkpoint"] },
+    Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/garbage.safetensors", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["garbage.safetensors"] },
+    Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/truncated.safetensors", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["truncated.safetensors"] },
+    Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/missing.safetensors", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["missing.safetensors"] },
+    Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/runs/td3/checkpoints/final.safetensors", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["checkpoint of algorithm `td3`, the config says `sac`"] },
+    Case { args: &["export", "--run", "$RUN", "--out", "$DIR/bad.toml"], stdin: "", expect: &["bad.toml exists", "--force"] },
+    Case { args: &["export", "--run", "$RUN", "--out", "$DIR/empty-dir", "--force"], stdin: "", expect: &["empty-dir is a directory"] },
+    Case { args: &["export", "--run", "$RUN", "--out", "$DIR/no-such-dir/p.onnx"], stdin: "", expect: &["no-such-dir/p.onnx", "No such file"] },
+    // View: run directories, target counts, plans files with bad lines, --out.
+    Case { args: &["view", "--run", "$DIR/nope", "--out", "$DIR/out/v.html"], stdin: "", expect: &["nope", "config.toml"] },
+    Case { args: &["view", "--run", "$EMPTY", "--out", "$DIR/out/v.html"], stdin: "", expect: &["holds no checkpoint"] },
+    Case { args: &["view", "--run", "$RUN", "--checkpoint", "$DIR/garbage.safetensors", "--out", "$DIR/out/v.html"], stdin: "", expect: &["garbage.safetensors"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "0", "--out", "$DIR/out/v.html"], stdin: "", expect: &["--targets", "0 is not in 1..=500"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "1000000", "--out", "$DIR/out/v.html"], stdin: "", expect: &["--targets", "1000000 is not in 1..=500"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "-3", "--out", "$DIR/out/v.html"], stdin: "", expect: &["-3"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "2", "--plans", "$DIR/plans_bad_json.jsonl"], stdin: "", expect: &["cannot be used with"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/missing.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["missing.jsonl", "No such file"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_bad_json.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["plans_bad_json.jsonl line 3, column", "EOF while parsing"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_bad_field.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["plans_bad_field.jsonl line 2", "unknown field `targt`"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_far.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["plans_far.jsonl line 2", "out of reach"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_start.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["plans_start.jsonl line 1", "start pose has 2 values, expected 6"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/empty-plans.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["holds no plan request"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/huge-plans.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["huge-plans.jsonl is larger than 1048576 bytes"] },
+    Case { args: &["view", "--run", "$RUN", "--plans", "$DIR/plans_many.jsonl", "--out", "$DIR/out/v.html"], stdin: "", expect: &["501 plan requests", "1 to 500"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "$DIR/bad.toml"], stdin: "", expect: &["bad.toml exists", "--force"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "$DIR/no-such-dir/v.html"], stdin: "", expect: &["no-such-dir/v.html", "No such file"] },
+    Case { args: &["plan", "--controller", "jacobian", "--target", "0.4,0.2,0.3", "--view", "$DIR/bad.toml"], stdin: "", expect: &["bad.toml exists", "--force"] },
+    Case { args: &["plan", "--controller", "jacobian", "--target", "0.4,0.2,0.3", "--force"], stdin: "", expect: &["--view"] },
     // Finite input whose terms overflow f64.
     Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[1e200,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`distance` = inf is not finite"] },
     Case { args: &["reward", "--function", "stride"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[1e200,0,0,0,0,0]}\n", expect: &["line 1", "`move` = inf is not finite"] },
@@ -203,6 +235,15 @@ fn fixture(dir: &Path) {
     )
     .unwrap();
     std::fs::create_dir_all(dir.join("empty-dir")).unwrap();
+    let good_plan = "{\"target\":[0.4,0.2,0.3]}\n";
+    std::fs::write(dir.join("plans_bad_json.jsonl"), format!("{good_plan}\n{{\"target\":[0.4,\n")).unwrap();
+    std::fs::write(dir.join("plans_bad_field.jsonl"), format!("{good_plan}{{\"targt\":[0.4,0.2,0.3]}}\n"))
+        .unwrap();
+    std::fs::write(dir.join("plans_far.jsonl"), format!("{good_plan}{{\"target\":[3,0,0.3]}}\n")).unwrap();
+    std::fs::write(dir.join("plans_start.jsonl"), "{\"target\":[0.4,0.2,0.3],\"start\":[0,0]}\n").unwrap();
+    std::fs::write(dir.join("empty-plans.jsonl"), "\n  \n").unwrap();
+    std::fs::write(dir.join("huge-plans.jsonl"), good_plan.repeat(50_000)).unwrap();
+    std::fs::write(dir.join("plans_many.jsonl"), good_plan.repeat(501)).unwrap();
     std::fs::write(dir.join("huge_hidden.toml"), "[agent]\nhidden = [16384, 16384, 16384, 16384]\n").unwrap();
     std::fs::write(dir.join("huge_replay.toml"), "[agent]\nhidden = [4096, 4096]\nbuffer_size = 100000000\n")
         .unwrap();

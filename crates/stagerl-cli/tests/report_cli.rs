@@ -88,6 +88,28 @@ fn report_on_trained_runs() {
     assert_eq!(runs_drawn.len(), 2, "{runs_drawn:?}");
     let starts: Vec<&str> = traj.lines().filter(|l| l.split(',').nth(2) == Some("0")).collect();
     assert_eq!(starts.len(), 6, "{traj}");
+    // The same trials as animated 3D views: the targets of trajectories.csv, in order.
+    let csv_targets: Vec<Vec<String>> =
+        starts.iter().map(|l| l.split(',').skip(6).take(3).map(String::from).collect()).collect();
+    let mut view_targets = Vec::new();
+    for role in ["best", "worst"] {
+        let html = std::fs::read_to_string(out.join(format!("view-{role}.html"))).unwrap();
+        let start = html.find("application/json\">").unwrap() + "application/json\">".len();
+        let end = start + html[start..].find("</script>").unwrap();
+        let data: serde_json::Value = serde_json::from_str(&html[start..end]).unwrap();
+        assert!(data["title"].as_str().unwrap().starts_with(role), "{}", data["title"]);
+        for t in data["trajectories"].as_array().unwrap() {
+            view_targets.push(
+                t["target"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap().to_string())
+                    .collect::<Vec<_>>(),
+            );
+        }
+    }
+    assert_eq!(view_targets, csv_targets);
 
     // A smaller window lets the criterion run; a bad criterion is an error naming the option.
     ok(&stagerl(&[

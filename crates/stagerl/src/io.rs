@@ -37,6 +37,49 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
+/// What [`write_new`] (or a writer like it) did with a file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Written {
+    /// A new file.
+    New,
+    /// The file held these very contents; left as is.
+    Unchanged,
+    /// The file held other contents and was replaced (`force`).
+    Replaced,
+}
+
+impl std::fmt::Display for Written {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Written::New => "written",
+            Written::Unchanged => "unchanged: the same contents",
+            Written::Replaced => "replaced (--force)",
+        })
+    }
+}
+
+/// Write `bytes` to `path` atomically ([`write_atomic`]) unless `path` already holds them; a
+/// file with other contents is replaced only with `force` (never silently).
+pub fn write_new(path: &Path, bytes: &[u8], force: bool) -> Result<Written> {
+    let written = match fs::read(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Written::New,
+        Ok(old) if old == bytes => return Ok(Written::Unchanged),
+        Ok(_) if force => Written::Replaced,
+        Ok(_) => {
+            return Err(Error::InvalidInput(format!(
+                "{} exists and holds something else; pass --force to replace it",
+                path.display()
+            )))
+        }
+        Err(_) if path.is_dir() => {
+            return Err(Error::InvalidInput(format!("{} is a directory, not a file", path.display())))
+        }
+        Err(e) => return Err(Error::io(path, e)),
+    };
+    write_atomic(path, bytes)?;
+    Ok(written)
+}
+
 /// Whether `name` is a temporary file of [`write_atomic`] (`<name>.tmp-<pid>`).
 pub fn is_temp_name(name: &str) -> bool {
     name.rsplit_once(".tmp-")
@@ -84,6 +127,23 @@ mod tests {
         assert_eq!(names.len(), 1, "{names:?}");
         let e = write_atomic(&dir.join("missing/b.txt"), b"x").unwrap_err().to_string();
         assert!(e.contains("missing/b.txt"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn write_new_refuses_other_contents_without_force() {
+        let dir = std::env::temp_dir().join(format!("stagerl-io-new-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("model.onnx");
+        assert_eq!(write_new(&p, b"one", false).unwrap(), Written::New);
+        assert_eq!(write_new(&p, b"one", false).unwrap(), Written::Unchanged);
+        let e = write_new(&p, b"two", false).unwrap_err().to_string();
+        assert!(e.contains("model.onnx") && e.contains("--force"), "{e}");
+        assert_eq!(fs::read(&p).unwrap(), b"one");
+        assert_eq!(write_new(&p, b"two", true).unwrap(), Written::Replaced);
+        assert_eq!(fs::read(&p).unwrap(), b"two");
+        let e = write_new(&dir, b"x", true).unwrap_err().to_string();
+        assert!(e.contains("is a directory"), "{e}");
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -17,6 +17,9 @@
 //!   measured against.
 //! - [`plan`]: a trajectory from a start pose to a target with a trained policy or the
 //!   controller; [`policy`]: the portable description of a checkpoint's policy.
+//! - [`export`]: the policy as an ONNX model ([`proto`]: the protobuf encoder it and the
+//!   TensorBoard writer share).
+//! - [`view`]: planned trajectories as a self-contained, animated HTML 3D view.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
@@ -33,6 +36,7 @@ pub mod controller;
 pub mod env;
 pub mod error;
 pub mod experiment;
+pub mod export;
 pub mod io;
 pub mod lock;
 pub mod log;
@@ -41,6 +45,7 @@ pub mod metrics;
 pub mod nn;
 pub mod plan;
 pub mod policy;
+pub mod proto;
 pub mod provenance;
 pub mod replay;
 pub mod report;
@@ -53,6 +58,7 @@ pub mod stats;
 pub mod text;
 pub mod train;
 pub mod validate;
+pub mod view;
 
 pub use error::{Error, Result};
 /// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).

@@ -1,15 +1,10 @@
 use anyhow::{Context, Result};
 use stagerl::train::{self, EvalSummary, RunDir};
-use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The run directory (holds config.toml and checkpoints/).
-    #[arg(long)]
-    run: PathBuf,
-    /// Checkpoint to evaluate (default: the run's best, else final, else latest).
-    #[arg(long)]
-    checkpoint: Option<PathBuf>,
+    #[command(flatten)]
+    run: super::RunArgs,
     /// Random targets (1 to 10 000 000; every trial's record is kept for the CSV).
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
     trials: u32,
@@ -26,12 +21,12 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let dir = RunDir::new(&args.run);
-    let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.display()))?;
-    let loaded = train::eval::load_run_agent(&dir, &cfg, args.checkpoint.as_deref())?;
+    let dir = RunDir::new(&args.run.run);
+    let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.run.display()))?;
+    let loaded = train::eval::load_run_agent(&dir, &cfg, args.run.checkpoint.as_deref())?;
     // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
     // directory untouched).
-    let _lock = super::train::lock_run(&args.run)?;
+    let _lock = super::train::lock_run(&args.run.run)?;
     let stop = super::train::stop_flag()?;
     let e = match train::eval::evaluate_loaded(loaded, args.trials, args.seed, Some(&stop)) {
         Err(e @ stagerl::Error::Stopped { .. }) => {

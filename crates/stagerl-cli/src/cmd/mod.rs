@@ -1,12 +1,14 @@
 pub mod bench;
 pub mod demo;
 pub mod eval;
+pub mod export;
 pub mod fk;
 pub mod plan;
 pub mod report;
 pub mod reproduce;
 pub mod reward;
 pub mod train;
+pub mod view;
 
 use anyhow::{Context, Result};
 use stagerl::config::Config;
@@ -29,6 +31,17 @@ impl RobotArgs {
         stagerl::robot::Chain::load(&self.robot, self.tip.as_deref())
             .with_context(|| format!("loading robot `{}`", self.robot))
     }
+}
+
+/// The trained run a command reads: `--run` and `--checkpoint`.
+#[derive(clap::Args)]
+pub struct RunArgs {
+    /// The run directory (holds config.toml and checkpoints/).
+    #[arg(long)]
+    pub run: std::path::PathBuf,
+    /// Checkpoint to use (default: the run's best, else final, else latest).
+    #[arg(long)]
+    pub checkpoint: Option<std::path::PathBuf>,
 }
 
 /// The `--algo` parser: `--help` lists the algorithms.

@@ -1,6 +1,7 @@
 use anyhow::{bail, Context, Result};
 use stagerl::plan::{BatchLine, PlanRequest, Planner};
 use stagerl::rundir::RunDir;
+use stagerl::view::{self, View};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;
 
@@ -34,6 +35,13 @@ pub struct Args {
     /// standard error).
     #[arg(long, value_enum)]
     format: Option<Format>,
+    /// Also write the plan (or, in batch mode, the first 500 plans) as an animated 3D view: a
+    /// self-contained HTML file (see `stagerl view`).
+    #[arg(long)]
+    view: Option<PathBuf>,
+    /// Replace an existing --view file that holds something else.
+    #[arg(long, requires = "view")]
+    force: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -50,22 +58,27 @@ pub enum Format {
 
 pub fn run(args: Args) -> Result<()> {
     let mut planner = planner(&args)?;
+    let mut view = args.view.as_ref().map(|_| View::for_planner(&view_title(&args), &planner));
     if let Some(path) = &args.targets {
         if args.format == Some(Format::Csv) {
             bail!("--format csv is for a single plan; batch mode (--targets) writes JSON lines");
         }
         let out = crate::out::stdout()?;
         if path.as_os_str() == "-" {
-            return batch(&mut planner, std::io::stdin().lock(), out).map(drop);
+            batch(&mut planner, std::io::stdin().lock(), out, view.as_mut())?;
+        } else {
+            let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+            batch(&mut planner, std::io::BufReader::new(file), out, view.as_mut())
+                .with_context(|| format!("planning the targets of {}", path.display()))?;
         }
-        let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-        return batch(&mut planner, std::io::BufReader::new(file), out)
-            .map(drop)
-            .with_context(|| format!("planning the targets of {}", path.display()));
+        return write_view(&args, view.as_ref());
     }
     let target = numbers("--target", args.target.as_deref().unwrap_or_default())?;
     let start = args.start.as_deref().map(|s| numbers("--start", s)).transpose()?;
     let plan = planner.plan(&target, start.as_deref())?;
+    if let Some(v) = &mut view {
+        v.push(planner.env().chain(), "plan", [target[0], target[1], target[2]], &plan)?;
+    }
     if let Some(w) = &plan.warning {
         errln!("stagerl: warning: {w}")?;
     }
@@ -88,7 +101,23 @@ pub fn run(args: Args) -> Result<()> {
     if format == Format::Csv {
         errln!("{summary}")?;
     }
-    Ok(())
+    write_view(&args, view.as_ref())
+}
+
+fn view_title(args: &Args) -> String {
+    match (&args.run, args.controller) {
+        (_, Some(Controller::Jacobian)) => "Jacobian controller".into(),
+        (Some(run), None) => format!("plans of {}", run.display()),
+        (None, None) => String::new(),
+    }
+}
+
+/// Write `view` to `--view`, if asked for; a line on standard error says what was written.
+fn write_view(args: &Args, view: Option<&View>) -> Result<()> {
+    let (Some(path), Some(view)) = (&args.view, view) else { return Ok(()) };
+    let written = stagerl::io::write_new(path, view.to_html()?.as_bytes(), args.force)
+        .with_context(|| format!("writing the view to {}", path.display()))?;
+    errln!("stagerl: view of {} plan(s) in {}: {written}", view.trajectories.len(), path.display())
 }
 
 /// The last line of a plan's output: `{"summary":{...}}`, fields in the summary's order.
@@ -115,8 +144,14 @@ fn planner(args: &Args) -> Result<Planner> {
 }
 
 /// Plan every JSON line of `input` ([`PlanRequest`]), one [`BatchLine`] out per line; warnings
-/// on standard error. Returns the number of control steps planned.
-pub fn batch(planner: &mut Planner, input: impl BufRead, output: impl Write) -> Result<u64> {
+/// on standard error. The first [`view::MAX_TRAJECTORIES`] plans also go into `view`. Returns
+/// the number of control steps planned.
+pub fn batch(
+    planner: &mut Planner,
+    input: impl BufRead,
+    output: impl Write,
+    mut view: Option<&mut View>,
+) -> Result<u64> {
     let (mut k, mut steps) = (0u64, 0u64);
     crate::jsonl::process(input, output, |req: PlanRequest| {
         k += 1;
@@ -125,6 +160,10 @@ pub fn batch(planner: &mut Planner, input: impl BufRead, output: impl Write) -> 
             errln!("stagerl: warning: plan {k}: {w}")?;
         }
         steps += u64::from(plan.summary.steps);
+        if let Some(v) = view.as_deref_mut().filter(|v| v.trajectories.len() < view::MAX_TRAJECTORIES) {
+            let t = &req.target;
+            v.push(planner.env().chain(), &format!("plan {k}"), [t[0], t[1], t[2]], &plan)?;
+        }
         Ok(BatchLine(plan))
     })?;
     Ok(steps)

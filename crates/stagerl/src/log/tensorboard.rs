@@ -11,26 +11,13 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
+use crate::proto::{put_f32, put_f64, put_int, put_len_delimited};
 use crate::{Error, Result};
 
 /// The CRC mask TFRecord applies: rotate right by 15 and add a constant.
 pub fn masked_crc32c(data: &[u8]) -> u32 {
     let crc = crc32c::crc32c(data);
     crc.rotate_right(15).wrapping_add(0xa282_ead8)
-}
-
-fn put_varint(out: &mut Vec<u8>, mut v: u64) {
-    while v >= 0x80 {
-        out.push((v as u8) | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
-}
-
-fn put_len_delimited(out: &mut Vec<u8>, field: u32, bytes: &[u8]) {
-    put_varint(out, u64::from(field << 3 | 2));
-    put_varint(out, bytes.len() as u64);
-    out.extend_from_slice(bytes);
 }
 
 /// Encode an `Event` with a wall time, step, and either a file version or one scalar.
@@ -41,18 +28,15 @@ fn encode_event(
     scalar: Option<(&str, f32)>,
 ) -> Vec<u8> {
     let mut ev = Vec::with_capacity(64);
-    ev.push(1 << 3 | 1); // wall_time, fixed64
-    ev.extend_from_slice(&wall_time.to_le_bytes());
-    ev.push(2 << 3); // step, varint
-    put_varint(&mut ev, step as u64);
+    put_f64(&mut ev, 1, wall_time);
+    put_int(&mut ev, 2, step);
     if let Some(v) = file_version {
         put_len_delimited(&mut ev, 3, v.as_bytes());
     }
     if let Some((tag, value)) = scalar {
         let mut val = Vec::with_capacity(tag.len() + 8);
         put_len_delimited(&mut val, 1, tag.as_bytes());
-        val.push(2 << 3 | 5); // simple_value, fixed32
-        val.extend_from_slice(&value.to_le_bytes());
+        put_f32(&mut val, 2, value); // simple_value
         let mut summary = Vec::with_capacity(val.len() + 4);
         put_len_delimited(&mut summary, 1, &val);
         put_len_delimited(&mut ev, 5, &summary);

@@ -302,7 +302,8 @@ pub fn pick_trajectory_runs<'a>(
 
 /// Read the runs under `dir` and write the report into `opts.out`: `table1.md`, `table1.csv`,
 /// `table1.json`, `claims.md`, `figure7.{png,svg}`, `figure8.{png,svg}` and, when
-/// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}`.
+/// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}` and
+/// `view-best.html`, `view-worst.html` (animated 3D views of those runs' plans).
 pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     let clock = crate::provenance::Clock::now();
     check_options(dir, opts)?;
@@ -345,38 +346,7 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     )?);
 
     if opts.trajectories > 0 {
-        let mut sets: Vec<Rollouts> = Vec::new();
-        for (run, role, success) in pick_trajectory_runs(&groups, &report.groups) {
-            let seed = run.final_eval.as_ref().map_or(run.config.train.eval_seed, |f| f.seed);
-            match trajectory::rollout(run, opts.trajectories, seed) {
-                Ok(mut r) => {
-                    let rate = success
-                        .map(|s| format!(", group's evaluation success {:.1} %", 100.0 * s))
-                        .unwrap_or_default();
-                    r.title = format!("{role}: {}{rate}", r.title);
-                    sets.push(r)
-                }
-                Err(e) => report.warnings.push(format!("trajectories of {}: {e}", run.name)),
-            }
-        }
-        if sets.is_empty() {
-            report.warnings.push("no trajectories drawn: no run with a loadable checkpoint".into());
-        } else {
-            crate::io::write_atomic(&out("trajectories.csv"), trajectory::to_csv(&sets).as_bytes())?;
-            files.push(out("trajectories.csv"));
-            files.extend(plot::save(&plot::TrajectoryFigure { sets: sets.clone() }, &out("trajectories"))?);
-            report.trajectories = sets
-                .iter()
-                .map(|s| TrajectorySummary {
-                    title: s.title.clone(),
-                    run: s.run.clone(),
-                    checkpoint: s.checkpoint.clone(),
-                    eval_seed: s.eval_seed,
-                    trials: s.paths.len(),
-                    reached: s.paths.iter().filter(|p| p.success).count(),
-                })
-                .collect();
-        }
+        files.extend(write_trajectories(&groups, &mut report, opts)?);
     }
     let command =
         if opts.command.is_empty() { vec!["(library call)".to_string()] } else { opts.command.clone() };
@@ -389,6 +359,59 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
         .map_err(|e| Error::InvalidInput(format!("report JSON: {e}")))?;
     crate::io::write_atomic(&json_path, json.as_bytes())?;
     Ok(report)
+}
+
+/// The evaluation trajectories of the best and the worst run (`trajectories.{png,svg,csv}`) and
+/// their animated 3D views (`view-best.html`, `view-worst.html`, the same targets planned from
+/// the home pose, at most [`crate::view::MAX_TRAJECTORIES`]); the files written.
+fn write_trajectories(groups: &[Group], report: &mut Report, opts: &ReportOptions) -> Result<Vec<PathBuf>> {
+    let out = |name: &str| opts.out.join(name);
+    let mut files = Vec::new();
+    let mut sets: Vec<Rollouts> = Vec::new();
+    for (run, role, success) in pick_trajectory_runs(groups, &report.groups) {
+        let seed = run.final_eval.as_ref().map_or(run.config.train.eval_seed, |f| f.seed);
+        match trajectory::rollout(run, opts.trajectories, seed) {
+            Ok(mut r) => {
+                let rate = success
+                    .map(|s| format!(", group's evaluation success {:.1} %", 100.0 * s))
+                    .unwrap_or_default();
+                r.title = format!("{role}: {}{rate}", r.title);
+                let count = opts.trajectories.min(crate::view::MAX_TRAJECTORIES as u32);
+                let source = crate::view::ViewSource::Targets { count, seed };
+                let ckpt = PathBuf::from(&r.checkpoint);
+                match crate::view::view_of_run(&crate::rundir::RunDir::new(&run.dir), Some(&ckpt), &source) {
+                    Ok(mut v) => {
+                        v.title = r.title.clone();
+                        let p = out(&format!("view-{role}.html"));
+                        crate::io::write_atomic(&p, v.to_html()?.as_bytes())?;
+                        files.push(p);
+                    }
+                    Err(e) => report.warnings.push(format!("3D view of {}: {e}", run.name)),
+                }
+                sets.push(r)
+            }
+            Err(e) => report.warnings.push(format!("trajectories of {}: {e}", run.name)),
+        }
+    }
+    if sets.is_empty() {
+        report.warnings.push("no trajectories drawn: no run with a loadable checkpoint".into());
+        return Ok(files);
+    }
+    crate::io::write_atomic(&out("trajectories.csv"), trajectory::to_csv(&sets).as_bytes())?;
+    files.push(out("trajectories.csv"));
+    files.extend(plot::save(&plot::TrajectoryFigure { sets: sets.clone() }, &out("trajectories"))?);
+    report.trajectories = sets
+        .iter()
+        .map(|s| TrajectorySummary {
+            title: s.title.clone(),
+            run: s.run.clone(),
+            checkpoint: s.checkpoint.clone(),
+            eval_seed: s.eval_seed,
+            trials: s.paths.len(),
+            reached: s.paths.iter().filter(|p| p.success).count(),
+        })
+        .collect();
+    Ok(files)
 }
 
 /// The checks of [`generate`] made before anything is written, so that a report is written whole

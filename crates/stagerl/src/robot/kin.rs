@@ -319,27 +319,44 @@ impl Kinematics {
         from_cols(&m)
     }
 
-    /// Geometric Jacobian, row-major `6 x n` into `jac` (`jac.len() >= 6 n`), and the tip transform.
-    #[inline]
-    pub fn jacobian_tf(&self, q: &[f64], jac: &mut [f64]) -> Tf {
-        let n = self.steps.len();
-        let jac = &mut jac[..6 * n];
+    /// The frames along the chain: `at(i, z_i, p_i)` for each joint `i` (its axis and origin in
+    /// the root frame, before its motion), then the tip transform.
+    #[inline(always)]
+    fn walk(&self, q: &[f64], mut at: impl FnMut(usize, [f64; 3], [f64; 3])) -> Cols {
         let mut m = self.base;
-        // First pass: joint origins p_i into rows 0..3, joint axes z_i into rows 3..6.
         let mut sc = [(0.0, 1.0); CHUNK];
         for (i, (s, &qi)) in self.steps.iter().zip(q).enumerate() {
             if i % CHUNK == 0 {
                 sc = sin_cos_chunk(&q[i..q.len().min(i + CHUNK)]);
             }
             let (z, p) = (m[2], m[3]);
-            for (r, (zr, pr)) in
-                [(z[0][0], p[0][0]), (z[0][1], p[0][1]), (z[1][0], p[1][0])].into_iter().enumerate()
-            {
-                jac[r * n + i] = pr;
-                jac[(r + 3) * n + i] = zr;
-            }
+            at(i, [z[0][0], z[0][1], z[1][0]], [p[0][0], p[0][1], p[1][0]]);
             m = advance(&m, s.prismatic, qi, sc[i % CHUNK], &s.after);
         }
+        m
+    }
+
+    /// The origin of every joint frame (in the root frame, metres), then the tip's: `n + 1`
+    /// points, the arm's skeleton.
+    pub fn joint_origins(&self, q: &[f64]) -> Vec<[f64; 3]> {
+        let mut points = Vec::with_capacity(self.steps.len() + 1);
+        let m = self.walk(q, |_, _, p| points.push(p));
+        points.push([m[3][0][0], m[3][0][1], m[3][1][0]]);
+        points
+    }
+
+    /// Geometric Jacobian, row-major `6 x n` into `jac` (`jac.len() >= 6 n`), and the tip transform.
+    #[inline]
+    pub fn jacobian_tf(&self, q: &[f64], jac: &mut [f64]) -> Tf {
+        let n = self.steps.len();
+        let jac = &mut jac[..6 * n];
+        // First pass: joint origins p_i into rows 0..3, joint axes z_i into rows 3..6.
+        let m = self.walk(q, |i, z, p| {
+            for r in 0..3 {
+                jac[r * n + i] = p[r];
+                jac[(r + 3) * n + i] = z[r];
+            }
+        });
         let tip = [m[3][0][0], m[3][0][1], m[3][1][0]];
         // Second pass: revolute [z x (p_tip - p); z], prismatic [z; 0].
         for (i, s) in self.steps.iter().enumerate() {

@@ -242,6 +242,14 @@ impl Chain {
         Ok(pose)
     }
 
+    /// The arm's skeleton for joint values `q` (checked as [`Chain::try_fk`] checks them): the
+    /// origin of every joint frame, root to tip, then the tip's position, metres, base frame
+    /// (`dof + 1` points; links are the segments between consecutive points).
+    pub fn joint_origins(&self, q: &[f64]) -> Result<Vec<[f64; 3]>> {
+        self.check_q(q)?;
+        Ok(self.kin.joint_origins(q))
+    }
+
     /// Geometric Jacobian of the tip, row-major 6 x dof into `jac` (rows: vx, vy, vz, wx, wy, wz,
     /// base frame). Returns the tip pose as a by-product.
     ///

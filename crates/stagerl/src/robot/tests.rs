@@ -654,3 +654,39 @@ fn reach_bound_holds_and_is_tight_enough() {
         assert!(bound < 2.0 * farthest, "bound {bound}, farthest {farthest}");
     }
 }
+
+#[test]
+fn joint_origins_are_the_skeleton_of_the_arm() {
+    let mut rng = Rng::new(11);
+    for chain in [Chain::ur5(), test_arm()] {
+        for _ in 0..50 {
+            let q = random_q(&chain, &mut rng);
+            let points = chain.joint_origins(&q).unwrap();
+            assert_eq!(points.len(), chain.dof() + 1);
+            let first = Vector3::from(points[0]);
+            assert!((first - chain.first_joint_origin()).norm() < 1e-12);
+            let tip = Vector3::from(points[chain.dof()]);
+            assert!((tip - chain.fk(&q).position).norm() < 1e-12);
+            // The jacobian's joint origins: column i's linear part is z_i x (tip - p_i).
+            let mut jac = vec![0.0; 6 * chain.dof()];
+            chain.jacobian(&q, &mut jac);
+            let n = chain.dof();
+            for (i, j) in chain.joints().iter().enumerate() {
+                if j.kind == JointKind::Revolute {
+                    let z = Vector3::new(jac[3 * n + i], jac[4 * n + i], jac[5 * n + i]);
+                    let lin = Vector3::new(jac[i], jac[n + i], jac[2 * n + i]);
+                    let want = z.cross(&(tip - Vector3::from(points[i])));
+                    assert!((lin - want).norm() < 1e-12, "joint {i}");
+                }
+            }
+        }
+    }
+    // UR5 (revolute only): consecutive origins are the constant link lengths apart.
+    let ur5 = Chain::ur5();
+    let points = ur5.joint_origins(&random_q(&ur5, &mut rng)).unwrap();
+    for (w, len) in points.windows(2).zip(ur5.kin.link_lengths()) {
+        let d = (Vector3::from(w[1]) - Vector3::from(w[0])).norm();
+        assert!((d - len).abs() < 1e-12, "{d} vs {len}");
+    }
+    assert!(ur5.joint_origins(&[0.0; 5]).unwrap_err().to_string().contains("expected length 6"));
+}

@@ -185,25 +185,7 @@ pub fn evaluate_loaded(
 }
 
 /// What [`write_command_eval`] did with the per-trial CSV.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Written {
-    /// A new file.
-    New,
-    /// The file held these very results; left as is.
-    Unchanged,
-    /// The file held other results and was replaced (`force`).
-    Replaced,
-}
-
-impl std::fmt::Display for Written {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Written::New => "written",
-            Written::Unchanged => "unchanged: the same results",
-            Written::Replaced => "replaced (--force)",
-        })
-    }
-}
+pub use crate::io::Written;
 
 /// Write the per-trial CSV of an evaluation by `stagerl eval`, its own file
 /// ([`RunDir::eval_command`], never the closing evaluation a report reads), unless it already

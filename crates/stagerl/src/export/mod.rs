@@ -1,0 +1,25 @@
+//! Exporting a trained policy for use outside stagerl: [`onnx`], the actor with the action rule
+//! and the speed-limit scaling inside the graph.
+
+pub mod onnx;
+
+use std::path::{Path, PathBuf};
+
+use crate::policy::PolicySpec;
+use crate::rundir::RunDir;
+use crate::Result;
+
+/// The ONNX model of a run directory's checkpoint (`checkpoint`, else the best available: best,
+/// final, latest), the checkpoint's path first. The checkpoint is loaded as `stagerl eval` and
+/// `stagerl plan` load it (checked against the run's config).
+pub fn onnx_of_run(run: &RunDir, checkpoint: Option<&Path>) -> Result<(PathBuf, Vec<u8>)> {
+    let cfg = run.load_config()?;
+    let (path, env, agent) = crate::train::eval::load_run_agent(run, &cfg, checkpoint)?;
+    let spec = PolicySpec::new(&cfg, &env, agent.as_ref());
+    let meta = onnx::ModelInfo {
+        config_hash: crate::train::config_hash(&cfg),
+        checkpoint: path.display().to_string(),
+    };
+    let bytes = onnx::encode(&spec, agent.actor(), &meta)?;
+    Ok((path, bytes))
+}

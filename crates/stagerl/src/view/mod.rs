@@ -1,0 +1,285 @@
+//! The HTML 3D view of planned trajectories: one self-contained file (no network access, no
+//! JavaScript library: the renderer, a hand-written canvas-2D one, is in `template.html`,
+//! included at build time) that draws the arm as capsules between its joint frames (from the
+//! URDF chain, [`Chain::joint_origins`]), the target ball of radius beta and the end-effector
+//! path, and animates each plan at real time (one step per control period) with play/pause, a
+//! step slider, a trajectory selector and an orbit camera (drag; wheel to zoom).
+//!
+//! Positions in the embedded JSON are rounded to 0.1 mm (the drawing needs no more; the file
+//! stays small): [`View::trajectories`] holds them at full precision.
+
+use serde::Serialize;
+use std::path::Path;
+
+use crate::config::Config;
+use crate::env::ReachEnv;
+use crate::plan::{Plan, PlanRequest, Planner};
+use crate::robot::Chain;
+use crate::rundir::RunDir;
+use crate::{Error, Result};
+
+/// The page, with `/*STAGERL_DATA*/` where the JSON goes.
+const TEMPLATE: &str = include_str!("template.html");
+const DATA_MARK: &str = "/*STAGERL_DATA*/";
+
+/// Most trajectories one view holds (a plan of 200 steps on a 6-joint arm is ~30 kB of JSON).
+pub const MAX_TRAJECTORIES: usize = 500;
+
+/// The largest plans file read, bytes (1 MiB holds thousands of requests, more than a view shows).
+pub const MAX_PLANS_FILE_BYTES: u64 = 1 << 20;
+
+/// Radius of the capsules drawn for the links, metres.
+pub const LINK_RADIUS_M: f64 = 0.035;
+
+/// One planned trajectory of a view.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ViewTrajectory {
+    pub label: String,
+    /// Metres, base frame.
+    pub target: [f64; 3],
+    pub reached: bool,
+    pub steps: u32,
+    pub final_distance: f64,
+    /// Per row of the plan, the arm's skeleton: the joint-frame origins then the tip (metres).
+    pub frames: Vec<Vec<[f64; 3]>>,
+    /// Distance to the target per row, metres.
+    pub distance: Vec<f64>,
+}
+
+/// What a view shows (serialised into the page).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct View {
+    pub title: String,
+    /// Control period, seconds: the animation shows one row per period.
+    pub dt_s: f64,
+    /// Radius of the target ball, metres.
+    pub beta_m: f64,
+    pub link_radius_m: f64,
+    /// The point the camera orbits (the middle of the arm's reach), metres.
+    pub center: [f64; 3],
+    /// The arm's reach, metres (the camera's scale).
+    pub extent_m: f64,
+    pub trajectories: Vec<ViewTrajectory>,
+}
+
+fn round_mm10(v: f64) -> f64 {
+    (v * 1e4).round() / 1e4
+}
+
+impl View {
+    /// An empty view of `chain` for plans with control period `dt_s` and success radius `beta_m`.
+    pub fn new(title: &str, chain: &Chain, dt_s: f64, beta_m: f64) -> View {
+        let o = chain.first_joint_origin();
+        let reach = chain.reach_m();
+        View {
+            title: title.into(),
+            dt_s,
+            beta_m,
+            link_radius_m: LINK_RADIUS_M.min(reach / 20.0),
+            center: [o.x, o.y, (o.z + reach / 4.0).max(0.0)],
+            extent_m: reach,
+            trajectories: Vec::new(),
+        }
+    }
+
+    /// An empty view of the plans of `planner` (its arm, control period and success radius).
+    pub fn for_planner(title: &str, planner: &Planner) -> View {
+        let env = planner.env();
+        View::new(title, env.chain(), env.task().dt_s, env.reward_config().beta_m)
+    }
+
+    /// Add `plan` (to `target`, metres) under `label`; at most [`MAX_TRAJECTORIES`].
+    pub fn push(&mut self, chain: &Chain, label: &str, target: [f64; 3], plan: &Plan) -> Result<()> {
+        if self.trajectories.len() >= MAX_TRAJECTORIES {
+            return Err(Error::InvalidInput(format!(
+                "a view holds at most {MAX_TRAJECTORIES} trajectories; `{label}` would be one more"
+            )));
+        }
+        let frames = plan.q.chunks_exact(plan.dof).map(|q| chain.joint_origins(q)).collect::<Result<_>>()?;
+        self.trajectories.push(ViewTrajectory {
+            label: label.into(),
+            target,
+            reached: plan.summary.reached,
+            steps: plan.summary.steps,
+            final_distance: plan.summary.final_distance,
+            frames,
+            distance: plan.distance.clone(),
+        });
+        Ok(())
+    }
+
+    /// The page: the template with this view as JSON (positions rounded to 0.1 mm).
+    pub fn to_html(&self) -> Result<String> {
+        let mut rounded = self.clone();
+        for t in &mut rounded.trajectories {
+            t.frames.iter_mut().flatten().flatten().for_each(|v| *v = round_mm10(*v));
+            t.distance.iter_mut().for_each(|v| *v = round_mm10(*v));
+        }
+        let json = serde_json::to_string(&rounded)
+            .map_err(|e| Error::InvalidInput(format!("the view's data does not serialise: {e}")))?;
+        // `<` only occurs inside JSON strings, where `\u003c` means the same: no `</script>`.
+        Ok(TEMPLATE.replacen(DATA_MARK, &json.replace('<', "\\u003c"), 1))
+    }
+}
+
+/// Where the plans of a run's view come from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ViewSource {
+    /// The first `count` targets of evaluation seed `seed` (those `stagerl eval --seed` uses),
+    /// each from the home pose.
+    Targets { count: u32, seed: u64 },
+    /// Plan requests, one JSON object per line as `stagerl plan --targets` reads them; the
+    /// path names the file in errors.
+    Requests { text: String, origin: String },
+}
+
+/// The first `count` targets of evaluation seed `seed` on the task of `cfg`, metres.
+pub fn eval_targets(cfg: &Config, count: u32, seed: u64) -> Result<Vec<[f64; 3]>> {
+    let mut env = ReachEnv::from_config(cfg, 0)?;
+    let mut out = Vec::with_capacity(count as usize);
+    for i in 0..count {
+        if i == 0 {
+            env.reset_with_seed(seed);
+        } else {
+            env.reset();
+        }
+        let t = env.target();
+        out.push([t.x, t.y, t.z]);
+    }
+    Ok(out)
+}
+
+/// Parse plan requests, one JSON object per non-blank line, each with its 1-based line number;
+/// an error names the line.
+pub fn parse_requests(text: &str, origin: &str) -> Result<Vec<(usize, PlanRequest)>> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let r: PlanRequest = serde_json::from_str(line).map_err(|e| {
+            let text = e.to_string();
+            let what = text.rsplit_once(" at line ").map_or(text.as_str(), |(w, _)| w);
+            Error::InvalidInput(format!(
+                "{origin} line {}, column {}: {what} (expected {{\"target\":[x,y,z]}} or \
+                 {{\"target\":[x,y,z],\"start\":[q1,..]}})",
+                i + 1,
+                e.column()
+            ))
+        })?;
+        out.push((i + 1, r));
+    }
+    if out.is_empty() {
+        return Err(Error::InvalidInput(format!(
+            "{origin} holds no plan request (one JSON object per line)"
+        )));
+    }
+    Ok(out)
+}
+
+/// The view of a run's policy (its `checkpoint`, else the best available) on `source`'s plans.
+pub fn view_of_run(run: &RunDir, checkpoint: Option<&Path>, source: &ViewSource) -> Result<View> {
+    let cfg = run.load_config()?;
+    let requests = match source {
+        ViewSource::Targets { count, seed } => {
+            let n = *count as usize;
+            if n == 0 || n > MAX_TRAJECTORIES {
+                return Err(Error::InvalidInput(format!(
+                    "{count} targets: a view shows 1 to {MAX_TRAJECTORIES} trajectories"
+                )));
+            }
+            let targets = eval_targets(&cfg, *count, *seed)?;
+            let requests = targets.into_iter().map(|t| PlanRequest { target: t.to_vec(), start: None });
+            requests.enumerate().map(|(i, r)| (i + 1, r)).collect()
+        }
+        ViewSource::Requests { text, origin } => parse_requests(text, origin)?,
+    };
+    if requests.len() > MAX_TRAJECTORIES {
+        return Err(Error::InvalidInput(format!(
+            "{} plan requests: a view shows 1 to {MAX_TRAJECTORIES} trajectories",
+            requests.len()
+        )));
+    }
+    let (path, mut planner) = Planner::from_run(run, checkpoint, None)?;
+    let title = format!("{} {} ({})", cfg.agent.algo.name(), cfg.reward.function.name(), path.display());
+    let chain = planner.env().chain().clone();
+    let mut view = View::for_planner(&title, &planner);
+    for (line, r) in &requests {
+        let (label, plan) = match source {
+            ViewSource::Requests { origin, .. } => (
+                format!("line {line}"),
+                planner.plan_request(r).map_err(|e| match e {
+                    Error::InvalidInput(m) => Error::InvalidInput(format!("{origin} line {line}: {m}")),
+                    other => other,
+                })?,
+            ),
+            ViewSource::Targets { .. } => (format!("target {line}"), planner.plan_request(r)?),
+        };
+        view.push(&chain, &label, [r.target[0], r.target[1], r.target[2]], &plan)?;
+    }
+    Ok(view)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn a_view_embeds_its_plans_as_json_and_nothing_closes_the_script_early() {
+        let cfg = Config::default();
+        let mut planner = Planner::jacobian(&cfg, None).unwrap();
+        let target = [0.4, 0.2, 0.3];
+        let plan = planner.plan(&target, None).unwrap();
+        let chain = planner.env().chain().clone();
+        let mut view = View::for_planner("a </script><b> title", &planner);
+        view.push(&chain, "plan", target, &plan).unwrap();
+        let t = &view.trajectories[0];
+        assert_eq!(t.frames.len(), plan.rows());
+        for (f, ee) in t.frames.iter().zip(&plan.ee_pos) {
+            assert_eq!(f.len(), chain.dof() + 1);
+            assert!((Vector3::from(f[chain.dof()]) - Vector3::from(*ee)).norm() < 1e-12);
+        }
+        assert_eq!((view.dt_s, view.beta_m), (cfg.task.dt_s, cfg.reward.beta_m));
+        let html = view.to_html().unwrap();
+        assert_eq!(html.matches("</script>").count(), TEMPLATE.matches("</script>").count());
+        assert!(!html.contains(DATA_MARK));
+        let start = html.find("application/json\">").unwrap() + "application/json\">".len();
+        let end = start + html[start..].find("</script>").unwrap();
+        let data: serde_json::Value = serde_json::from_str(&html[start..end]).unwrap();
+        assert_eq!(data["title"], "a </script><b> title");
+        let x = data["trajectories"][0]["frames"][3][6][0].as_f64().unwrap();
+        assert!((x - t.frames[3][6][0]).abs() <= 0.5e-4 && (x * 1e4 - (x * 1e4).round()).abs() < 1e-6);
+        // At most MAX_TRAJECTORIES.
+        view.trajectories = vec![t.clone(); MAX_TRAJECTORIES];
+        let e = view.push(&chain, "one more", target, &plan).unwrap_err().to_string();
+        assert!(e.contains("at most 500") && e.contains("one more"), "{e}");
+    }
+
+    #[test]
+    fn requests_are_read_with_their_line_numbers() {
+        let text = "{\"target\":[0.4,0.2,0.3]}\n\n  \n{\"target\":[0.1,0.2,0.3],\"start\":[0,0,0,0,0,0]}\n";
+        let r = parse_requests(text, "p.jsonl").unwrap();
+        assert_eq!(r.iter().map(|(l, _)| *l).collect::<Vec<_>>(), [1, 4]);
+        assert_eq!(r[1].1.start.as_deref(), Some(&[0.0; 6][..]));
+        let e =
+            parse_requests("{\"target\":[1,2,3]}\n{\"target\":[1,2,\n", "p.jsonl").unwrap_err().to_string();
+        assert!(e.contains("p.jsonl line 2, column") && !e.contains(" at line "), "{e}");
+        let e = parse_requests("\n", "p.jsonl").unwrap_err().to_string();
+        assert!(e.contains("holds no plan request"), "{e}");
+    }
+
+    #[test]
+    fn eval_targets_are_the_evaluations_targets() {
+        let cfg = Config::default();
+        let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
+        let ts = eval_targets(&cfg, 3, 42).unwrap();
+        let mut driver = crate::env::Observed(
+            |_: &ReachEnv, a: &mut [f32]| {
+                a.fill(0.0);
+                Ok(())
+            },
+            |_: &crate::env::Transition<'_>| Ok(crate::env::Flow::Continue),
+        );
+        let (_, records) = crate::train::eval::evaluate_with(&mut env, 3, 42, &mut driver).unwrap();
+        let want: Vec<[f64; 3]> = records.iter().map(|r| r.target).collect();
+        assert_eq!(ts, want);
+    }
+}
