@@ -62,19 +62,29 @@ def _str_arg(name: str, value: Any, allowed: str) -> Optional[str]:
     return value
 
 
+def core_args(reward, config, robot, render_mode) -> dict:
+    """The native constructor's keyword arguments for the environment's arguments, checked."""
+    if render_mode is not None:
+        raise ValueError(f"`render_mode` = {render_mode!r} is invalid: stagerl/Reach-v0 renders nothing (None)")
+    reward = _str_arg("reward", reward, "one of 'basic', 'posture', 'stride', 'har', 'sar'")
+    robot = _str_arg("robot", robot, "'ur5' or a path to a URDF file")
+    if robot is not None and robot != "ur5" and not os.path.isfile(robot):
+        raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5' or a path to a URDF file)")
+    return {"reward": reward, "robot": robot, **_config_args(config)}
+
+
+def draw_seed(rng: np.random.Generator) -> int:
+    """The 64-bit seed of the Rust environment's next episode, drawn from ``rng``."""
+    return int(rng.integers(0, 2**64, dtype=np.uint64))
+
+
 class ReachEnv(gym.Env):
     """One reaching environment over the Rust ``ReachEnv`` (see the module documentation)."""
 
     metadata = {"render_modes": []}
 
     def __init__(self, reward: Optional[str] = None, config=None, robot=None, render_mode: Optional[str] = None):
-        if render_mode is not None:
-            raise ValueError(f"`render_mode` = {render_mode!r} is invalid: stagerl/Reach-v0 renders nothing (None)")
-        reward = _str_arg("reward", reward, "one of 'basic', 'posture', 'stride', 'har', 'sar'")
-        robot = _str_arg("robot", robot, "'ur5' or a path to a URDF file")
-        if robot is not None and robot != "ur5" and not os.path.isfile(robot):
-            raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5' or a path to a URDF file)")
-        self._core = _core.ReachCore(reward=reward, robot=robot, **_config_args(config))
+        self._core = _core.ReachCore(**core_args(reward, config, robot, render_mode))
         low, high = self._core.observation_bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         n = self._core.act_dim
@@ -88,8 +98,7 @@ class ReachEnv(gym.Env):
         super().reset(seed=seed)
         if options:
             raise ValueError(f"`options` = {options!r} is invalid: stagerl/Reach-v0 takes no reset options")
-        rust_seed = int(self.np_random.integers(0, 2**64, dtype=np.uint64))
-        obs, distance = self._core.reset(rust_seed)
+        obs, distance = self._core.reset(draw_seed(self.np_random))
         return obs, {"distance": distance, "is_success": distance < self._core.beta_m}
 
     def step(self, action):
@@ -112,4 +121,4 @@ class ReachEnv(gym.Env):
 def register_envs() -> None:
     """Register ``stagerl/Reach-v0`` with Gymnasium (done on ``import stagerl``)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="stagerl.envs:ReachEnv")
+        gym.register(id=ENV_ID, entry_point="stagerl.envs:ReachEnv", vector_entry_point="stagerl.vector:ReachVectorEnv")

@@ -67,9 +67,10 @@ pub(crate) const STEP_KEYS: [&str; 17] = [
     "total",
 ];
 
-fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
+/// The values of [`STEP_KEYS`] for a step.
+pub(crate) fn step_values(s: &Step) -> [f64; 17] {
     let t = &s.terms;
-    let values = [
+    [
         t.distance,
         f64::from(u8::from(t.reached)),
         t.position,
@@ -87,17 +88,20 @@ fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
         t.reward,
         t.bonus,
         t.total,
-    ];
+    ]
+}
+
+fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    for (k, v) in STEP_KEYS.iter().zip(values) {
+    for (k, v) in STEP_KEYS.iter().zip(step_values(s)) {
         d.set_item(k, v)?;
     }
-    d.set_item("is_success", t.reached)?;
+    d.set_item("is_success", s.terms.reached)?;
     Ok(d)
 }
 
 /// An observation (or a bound of one) as a numpy float32 array.
-type Obs<'py> = Bound<'py, PyArray1<f32>>;
+pub(crate) type Obs<'py> = Bound<'py, PyArray1<f32>>;
 
 /// One reaching environment (see `stagerl::env::ReachEnv`).
 #[pyclass(module = "stagerl._core")]
@@ -186,7 +190,7 @@ impl ReachCore {
 /// Bounds that hold for every observation an episode can produce (f32, as the observation is):
 /// joints within their limits and within `max_steps` full-speed steps of the home pose
 /// (continuous joints have no limits), positions within the arm's reach, deltas within twice it.
-fn obs_bounds(env: &ReachEnv) -> (Vec<f32>, Vec<f32>) {
+pub(crate) fn obs_bounds(env: &ReachEnv) -> (Vec<f32>, Vec<f32>) {
     let chain = env.chain();
     let task = env.task();
     let travel = f64::from(task.max_steps) * task.dt_s;

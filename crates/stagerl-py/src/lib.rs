@@ -16,6 +16,7 @@ use pyo3::prelude::*;
 mod env;
 mod kin;
 mod reward;
+mod vec;
 
 /// The Python exception for a library error.
 pub(crate) fn to_py(e: stagerl::Error) -> PyErr {
@@ -56,6 +57,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<env::ReachCore>()?;
     m.add_class::<kin::Chain>()?;
+    m.add_class::<vec::VecCore>()?;
     m.add_function(wrap_pyfunction!(reward::compute, m)?)?;
     m.add_function(wrap_pyfunction!(reward::keys, m)?)?;
     Ok(())

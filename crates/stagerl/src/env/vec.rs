@@ -150,7 +150,10 @@ impl VecEnv {
         let n = self.envs.len();
         let d = self.obs_dim();
         let env = self.envs.get_mut(i).ok_or_else(|| {
-            Error::InvalidInput(format!("environment {i} does not exist: the vector env holds {n} (0 to {})", n - 1))
+            Error::InvalidInput(format!(
+                "environment {i} does not exist: the vector env holds {n} (0 to {})",
+                n - 1
+            ))
         })?;
         env.reset_with_seed(seed);
         self.obs[i * d..(i + 1) * d].copy_from_slice(env.observation());

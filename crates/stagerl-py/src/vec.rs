@@ -1,0 +1,273 @@
+//! The batch of reaching environments for `stagerl.vector.ReachVectorEnv` (the Gymnasium
+//! `VectorEnv` lives in Python): the library's `VecEnv` with next-step autoreset.
+
+use numpy::PyUntypedArrayMethods;
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::prelude::*;
+
+use stagerl::env::VecEnv;
+
+use crate::env::{build_config, obs_bounds, step_values, Obs, STEP_KEYS};
+use crate::{bad_arg, guard, to_py};
+
+type F64s<'py> = Bound<'py, PyArray1<f64>>;
+type Bools<'py> = Bound<'py, PyArray1<bool>>;
+
+/// What a step returns: observations (N, obs_dim), rewards, terminated, truncated, the values of
+/// `STEP_KEYS` (17, N), `is_success`, which environments were reset instead of stepped and how
+/// many, and the environments whose seed pool to refill.
+type StepOut<'py> = (
+    Bound<'py, PyArray2<f32>>,
+    F64s<'py>,
+    Bools<'py>,
+    Bools<'py>,
+    Bound<'py, PyArray2<f64>>,
+    Bools<'py>,
+    Bools<'py>,
+    usize,
+    Vec<usize>,
+);
+
+/// `num_envs` reaching environments stepped together (see `stagerl::env::VecEnv`).
+///
+/// Every episode of environment `i` starts from the next seed of its pool, a block of seeds the
+/// Python side draws from the sub-environment's generator ([`VecCore::refill`]); a call that
+/// uses a pool's last seed returns the environments to refill.
+#[pyclass(module = "stagerl._core")]
+pub struct VecCore {
+    env: VecEnv,
+    pools: Vec<Vec<u64>>,
+    used: Vec<usize>,
+    next_seeds: Vec<u64>,
+}
+
+impl VecCore {
+    fn observations<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        array2(py, self.env.len(), self.env.obs_dim(), |out| out.copy_from_slice(self.env.observations()))
+    }
+
+    /// Take the next seed of environment `i`'s pool into `next_seeds[i]`.
+    fn take_seed(&mut self, i: usize) -> PyResult<()> {
+        let seed = self.pools[i].get(self.used[i]).copied().ok_or_else(|| {
+            pyo3::exceptions::PyRuntimeError::new_err(format!(
+                "internal error in stagerl: the seed pool of environment {i} is empty; please report it"
+            ))
+        })?;
+        self.next_seeds[i] = seed;
+        self.used[i] += 1;
+        Ok(())
+    }
+
+    /// The environments whose pool is used up.
+    fn exhausted(&self) -> Vec<usize> {
+        (0..self.env.len()).filter(|&i| self.used[i] >= self.pools[i].len()).collect()
+    }
+
+    /// The actions as a slice of `num_envs x act_dim` values.
+    fn actions<'a>(&self, actions: &'a PyReadonlyArray2<'_, f32>) -> PyResult<&'a [f32]> {
+        let (n, a) = (self.env.len(), self.env.act_dim());
+        let shape = actions.shape();
+        if shape != [n, a] {
+            return Err(bad_arg(
+                "actions.shape",
+                format!("({}, {})", shape[0], shape[1]),
+                &format!("({n}, {a}): one action per environment, one value per joint"),
+            ));
+        }
+        actions
+            .as_slice()
+            .map_err(|_| bad_arg("actions", "a non-contiguous array", "a C-contiguous float32 array"))
+    }
+}
+
+/// A new `rows x cols` array whose values `fill` writes (all of them).
+fn array2<'py, T: numpy::Element>(
+    py: Python<'py>,
+    rows: usize,
+    cols: usize,
+    fill: impl FnOnce(&mut [T]),
+) -> Bound<'py, PyArray2<T>> {
+    // SAFETY: a new C-contiguous array that nothing else refers to yet; `fill` writes every
+    // value before Python sees it (the callers copy a whole slice or write every index).
+    unsafe {
+        let a = PyArray2::<T>::new(py, [rows, cols], false);
+        fill(a.as_slice_mut().expect("a new array is contiguous"));
+        a
+    }
+}
+
+#[pymethods]
+impl VecCore {
+    #[new]
+    #[pyo3(signature = (num_envs, config_path=None, config_json=None, reward=None, robot=None))]
+    fn new(
+        num_envs: usize,
+        config_path: Option<&str>,
+        config_json: Option<&str>,
+        reward: Option<&str>,
+        robot: Option<&str>,
+    ) -> PyResult<Self> {
+        if num_envs == 0 {
+            return Err(bad_arg("num_envs", 0, "an integer >= 1"));
+        }
+        guard("ReachVectorEnv", || {
+            let cfg = build_config(config_path, config_json, reward, robot)?;
+            let env = VecEnv::from_config(num_envs, &cfg, 0).map_err(to_py)?;
+            let (pools, used, next_seeds) =
+                (vec![Vec::new(); num_envs], vec![0; num_envs], vec![0; num_envs]);
+            Ok(VecCore { env, pools, used, next_seeds })
+        })
+    }
+
+    #[getter]
+    fn num_envs(&self) -> usize {
+        self.env.len()
+    }
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        self.env.obs_dim()
+    }
+    #[getter]
+    fn act_dim(&self) -> usize {
+        self.env.act_dim()
+    }
+    #[getter]
+    fn max_steps(&self) -> u32 {
+        self.env.envs()[0].task().max_steps
+    }
+    #[getter]
+    fn dt_s(&self) -> f64 {
+        self.env.envs()[0].task().dt_s
+    }
+    #[getter]
+    fn beta_m(&self) -> f64 {
+        self.env.envs()[0].reward_config().beta_m
+    }
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.env.envs()[0].chain().joints().iter().map(|j| j.name.clone()).collect()
+    }
+
+    /// Finite (low, high) bounds of one environment's observation (float32).
+    fn observation_bounds<'py>(&self, py: Python<'py>) -> PyResult<(Obs<'py>, Obs<'py>)> {
+        let (lo, hi) = guard("observation_bounds", || Ok(obs_bounds(&self.env.envs()[0])))?;
+        Ok((PyArray1::from_vec(py, lo), PyArray1::from_vec(py, hi)))
+    }
+
+    /// Replace environment `i`'s seed pool (its next episodes' seeds, in order).
+    fn refill(&mut self, i: usize, seeds: PyReadonlyArray1<'_, u64>) -> PyResult<()> {
+        let n = self.env.len();
+        if i >= n {
+            return Err(bad_arg("i", i, &format!("an environment index, 0 to {}", n - 1)));
+        }
+        let s = seeds.as_slice().map_err(|_| bad_arg("seeds", "a non-contiguous array", "a uint64 array"))?;
+        if s.is_empty() {
+            return Err(bad_arg("seeds.shape", "(0,)", "(K,) with K >= 1 seeds"));
+        }
+        self.pools[i] = s.to_vec();
+        self.used[i] = 0;
+        Ok(())
+    }
+
+    /// Start a new episode in every environment from its pool's next seed; (observations,
+    /// distances_m, environments to refill).
+    #[allow(clippy::type_complexity)]
+    fn reset<'py>(
+        &mut self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyArray2<f32>>, F64s<'py>, Vec<usize>)> {
+        for i in 0..self.env.len() {
+            self.take_seed(i)?;
+        }
+        let (env, seeds) = (&mut self.env, &self.next_seeds);
+        guard("reset", || {
+            for (i, &s) in seeds.iter().enumerate() {
+                env.reset_env_with_seed(i, s).map_err(to_py)?;
+            }
+            Ok(())
+        })?;
+        let d: Vec<f64> = self.env.envs().iter().map(|e| e.distance()).collect();
+        Ok((self.observations(py), PyArray1::from_vec(py, d), self.exhausted()))
+    }
+
+    /// One step with next-step autoreset (`VecEnv::step_next_step_reset`): an environment whose
+    /// episode ended in the previous step starts a new one from its pool's next seed.
+    fn step<'py>(&mut self, py: Python<'py>, actions: PyReadonlyArray2<'py, f32>) -> PyResult<StepOut<'py>> {
+        let actions = self.actions(&actions)?;
+        for i in 0..self.env.len() {
+            if self.env.envs()[i].is_done() {
+                self.take_seed(i)?;
+            }
+        }
+        let (env, seeds) = (&mut self.env, &self.next_seeds);
+        py.detach(|| guard("step", || env.step_next_step_reset(actions, seeds).map_err(to_py)))?;
+        let env = &self.env;
+        let n = env.len();
+        let mut success = Vec::with_capacity(n);
+        let terms = array2(py, STEP_KEYS.len(), n, |terms: &mut [f64]| {
+            for (i, (s, e)) in env.last_steps().iter().zip(env.envs()).enumerate() {
+                if env.autoreset()[i] {
+                    // Only the distance (row 0) is known after a reset; the rest is 0.
+                    terms[i] = e.distance();
+                    (1..STEP_KEYS.len()).for_each(|k| terms[k * n + i] = 0.0);
+                    success.push(e.distance() < e.reward_config().beta_m);
+                } else {
+                    for (k, v) in step_values(s).into_iter().enumerate() {
+                        terms[k * n + i] = v;
+                    }
+                    success.push(s.terms.reached);
+                }
+            }
+        });
+        Ok((
+            self.observations(py),
+            PyArray1::from_slice(py, env.rewards()),
+            PyArray1::from_slice(py, env.terminated()),
+            PyArray1::from_slice(py, env.truncated()),
+            terms,
+            PyArray1::from_vec(py, success),
+            PyArray1::from_slice(py, env.autoreset()),
+            env.autoreset().iter().filter(|&&r| r).count(),
+            self.exhausted(),
+        ))
+    }
+
+    /// Seconds taken by `steps` calls of the Rust `VecEnv::step` (same-step autoreset, no
+    /// Python in the loop) on a copy of this batch, with the actions `actions[k % K]` of a
+    /// (K, num_envs, act_dim) array: the native speed the Python vector env is compared with.
+    fn time_native_steps(
+        &self,
+        py: Python<'_>,
+        actions: PyReadonlyArray3<'_, f32>,
+        steps: usize,
+    ) -> PyResult<f64> {
+        let shape = actions.shape();
+        let (n, a) = (self.env.len(), self.env.act_dim());
+        if shape[1..] != [n, a] || shape[0] == 0 {
+            return Err(bad_arg(
+                "actions.shape",
+                format!("{shape:?}"),
+                &format!("(K, {n}, {a}) with K >= 1: K batches of actions"),
+            ));
+        }
+        let flat = actions
+            .as_slice()
+            .map_err(|_| bad_arg("actions", "a non-contiguous array", "a C-contiguous float32 array"))?;
+        let mut env = self.env.clone();
+        for i in 0..n {
+            if env.envs()[i].is_done() {
+                env.reset_env_with_seed(i, i as u64).map_err(to_py)?;
+            }
+        }
+        py.detach(|| {
+            guard("time_native_steps", || {
+                let t = std::time::Instant::now();
+                for (k, batch) in flat.chunks_exact(n * a).cycle().take(steps).enumerate() {
+                    env.step(batch)
+                        .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("step {k}: {e}")))?;
+                }
+                Ok(t.elapsed().as_secs_f64())
+            })
+        })
+    }
+}
