@@ -16,6 +16,10 @@ in [-1, 1], scaled by the joint's speed limit. The episode terminates when the t
 ``stride``, ``gamma_posture``, ``har``, ``alpha1``, ``alpha2``, ``sar``, ``basic``, ``reward``,
 ``bonus``, ``total``) and ``is_success``; ``reset`` returns ``distance`` and ``is_success``.
 
+``reset(options={"target": [x, y, z], "start": [q1, ..]})`` starts the episode at ``start``
+(radians; default: the home pose) with the given target (metres) instead of a random one (as
+``stagerl plan`` does); the target stream is not advanced.
+
 Seeding: each ``reset`` draws a 64-bit seed for the Rust environment from ``self.np_random``
 (after ``super().reset(seed=seed)``), so the same seed gives the same episodes.
 """
@@ -97,9 +101,24 @@ class ReachEnv(gym.Env):
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
         if options:
-            raise ValueError(f"`options` = {options!r} is invalid: stagerl/Reach-v0 takes no reset options")
-        obs, distance = self._core.reset(draw_seed(self.np_random))
+            obs, distance = self._reset_to(options)
+        else:
+            obs, distance = self._core.reset(draw_seed(self.np_random))
         return obs, {"distance": distance, "is_success": distance < self._core.beta_m}
+
+    def _reset_to(self, options: dict):
+        allowed = "a dict with `target` (3 numbers, metres) and optionally `start` (one number per joint, radians)"
+        if not isinstance(options, dict) or "target" not in options or set(options) - {"target", "start"}:
+            raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
+        try:
+            target = np.asarray(options["target"], dtype=np.float64).tolist()
+            start = options.get("start")
+            start = None if start is None else np.asarray(start, dtype=np.float64).tolist()
+        except (TypeError, ValueError):
+            raise ValueError(f"`options` = {options!r} is invalid: {allowed}") from None
+        if not isinstance(target, list) or (start is not None and not isinstance(start, list)):
+            raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
+        return self._core.reset_to(target, start)
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float32)

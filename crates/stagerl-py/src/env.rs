@@ -162,6 +162,26 @@ impl ReachCore {
         Ok((PyArray1::from_vec(py, obs), self.env.distance()))
     }
 
+    /// Start an episode at joint positions `start` (radians; default: the home pose) with the
+    /// given target (metres); the random stream is untouched. Returns (obs, distance_m).
+    #[pyo3(signature = (target, start=None))]
+    fn reset_to<'py>(
+        &mut self,
+        py: Python<'py>,
+        target: Vec<f64>,
+        start: Option<Vec<f64>>,
+    ) -> PyResult<(Obs<'py>, f64)> {
+        let &[x, y, z] = target.as_slice() else {
+            return Err(bad_arg("target", format!("{target:?}"), "3 values x, y, z in metres"));
+        };
+        let start = start.unwrap_or_else(|| self.env.task().home_pose.clone());
+        let env = &mut self.env;
+        let obs = guard("reset", || {
+            Ok(env.reset_to(&start, stagerl::nalgebra::Vector3::new(x, y, z)).map_err(to_py)?.to_vec())
+        })?;
+        Ok((PyArray1::from_vec(py, obs), self.env.distance()))
+    }
+
     /// One step: (obs, reward, terminated, truncated, info).
     fn step<'py>(
         &mut self,

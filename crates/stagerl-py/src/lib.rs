@@ -1,7 +1,8 @@
 //! `stagerl._core`: the native half of the Python package `stagerl` (python/).
 //!
-//! Thin bindings over the library: the reaching environment ([`env`]), the rewards over batches
-//! of rows ([`reward`]) and the kinematics of any URDF chain ([`kin`]). The Python modules in
+//! Thin bindings over the library: the reaching environment ([`env`]) and a batch of them
+//! ([`vec`]), the rewards over batches of rows ([`reward`]), the kinematics of any URDF chain
+//! ([`kin`]), trained policies and planning ([`policy`]). The Python modules in
 //! `python/stagerl/` hold the Gymnasium API, argument defaults and documentation; this crate
 //! holds no logic of its own beyond shapes, conversions and error mapping.
 //!
@@ -15,6 +16,7 @@ use pyo3::prelude::*;
 
 mod env;
 mod kin;
+mod policy;
 mod reward;
 mod vec;
 
@@ -58,6 +60,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<env::ReachCore>()?;
     m.add_class::<kin::Chain>()?;
     m.add_class::<vec::VecCore>()?;
+    m.add_class::<policy::PolicyCore>()?;
+    m.add_function(wrap_pyfunction!(policy::plan, m)?)?;
     m.add_function(wrap_pyfunction!(reward::compute, m)?)?;
     m.add_function(wrap_pyfunction!(reward::keys, m)?)?;
     Ok(())

@@ -81,7 +81,7 @@ impl VecCore {
 }
 
 /// A new `rows x cols` array whose values `fill` writes (all of them).
-fn array2<'py, T: numpy::Element>(
+pub(crate) fn array2<'py, T: numpy::Element>(
     py: Python<'py>,
     rows: usize,
     cols: usize,
