@@ -40,13 +40,7 @@ from . import _core
 from .envs import core_args
 
 #: The keys of a step's reward terms in ``info``, in the order of ``ReachEnv``'s step info.
-STEP_KEYS = (
-    "distance", "reached", "position", "phi", "direction", "posture", "move", "stride",
-    "gamma_posture", "har", "alpha1", "alpha2", "sar", "basic", "reward", "bonus", "total",
-)
-
-
-_MASK_KEYS = tuple("_" + k for k in STEP_KEYS)
+STEP_KEYS = tuple(_core.STEP_KEYS)
 
 #: How many episode seeds a sub-environment draws from its generator at once.
 SEED_BLOCK = 64
@@ -120,24 +114,7 @@ class ReachVectorEnv(VectorEnv):
         actions = np.ascontiguousarray(actions, dtype=np.float32)
         if actions.shape != self.action_space.shape:
             raise ValueError(f"`actions.shape` = {actions.shape} is invalid: expected {self.action_space.shape}")
-        obs, rewards, terminated, truncated, terms, success, reset, n_reset, exhausted = self._core.step(actions)
+        obs, rewards, terminated, truncated, info, exhausted = self._core.step(actions)
         if exhausted:
             self._refill_all(exhausted)
-        return obs, rewards, terminated, truncated, self._info(terms, success, reset, n_reset)
-
-    def _info(self, terms: np.ndarray, success: np.ndarray, reset: np.ndarray, n_reset: int) -> dict:
-        """The step's info; its masks are read-only (one array may serve several keys)."""
-        if n_reset == 0:
-            info = dict(zip(STEP_KEYS, terms))
-            info.update(dict.fromkeys(_MASK_KEYS, self._ones))
-        elif n_reset == self.num_envs:
-            info = {"distance": terms[0], "_distance": self._ones}
-        else:
-            stepped = ~reset
-            stepped.flags.writeable = False
-            info = dict(zip(STEP_KEYS, terms))
-            info.update(dict.fromkeys(_MASK_KEYS[1:], stepped))
-            info["_distance"] = self._ones
-        info["is_success"] = success
-        info["_is_success"] = self._ones
-        return info
+        return obs, rewards, terminated, truncated, info

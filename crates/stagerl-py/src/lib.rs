@@ -57,6 +57,7 @@ pub(crate) fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("STEP_KEYS", env::STEP_KEYS.to_vec())?;
     m.add_class::<env::ReachCore>()?;
     m.add_class::<kin::Chain>()?;
     m.add_class::<vec::VecCore>()?;

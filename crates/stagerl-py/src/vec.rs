@@ -3,7 +3,9 @@
 
 use numpy::PyUntypedArrayMethods;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::intern;
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyString};
 
 use stagerl::env::VecEnv;
 
@@ -13,20 +15,10 @@ use crate::{bad_arg, guard, to_py};
 type F64s<'py> = Bound<'py, PyArray1<f64>>;
 type Bools<'py> = Bound<'py, PyArray1<bool>>;
 
-/// What a step returns: observations (N, obs_dim), rewards, terminated, truncated, the values of
-/// `STEP_KEYS` (17, N), `is_success`, which environments were reset instead of stepped and how
-/// many, and the environments whose seed pool to refill.
-type StepOut<'py> = (
-    Bound<'py, PyArray2<f32>>,
-    F64s<'py>,
-    Bools<'py>,
-    Bools<'py>,
-    Bound<'py, PyArray2<f64>>,
-    Bools<'py>,
-    Bools<'py>,
-    usize,
-    Vec<usize>,
-);
+/// What a step returns: observations (N, obs_dim), rewards, terminated, truncated, the info
+/// dict and the environments whose seed pool to refill.
+type StepOut<'py> =
+    (Bound<'py, PyArray2<f32>>, F64s<'py>, Bools<'py>, Bools<'py>, Bound<'py, PyDict>, Vec<usize>);
 
 /// `num_envs` reaching environments stepped together (see `stagerl::env::VecEnv`).
 ///
@@ -39,6 +31,10 @@ pub struct VecCore {
     pools: Vec<Vec<u64>>,
     used: Vec<usize>,
     next_seeds: Vec<u64>,
+    /// The info keys (`STEP_KEYS`) and their mask keys (`_` + key) as Python strings.
+    keys: Vec<(Py<PyString>, Py<PyString>)>,
+    /// A read-only all-true mask, shared by every key that every environment holds.
+    all: Py<PyArray1<bool>>,
 }
 
 impl VecCore {
@@ -56,6 +52,47 @@ impl VecCore {
         self.next_seeds[i] = seed;
         self.used[i] += 1;
         Ok(())
+    }
+
+    /// Vector info (Gymnasium's convention): every key of `STEP_KEYS` with its `_key` mask (the
+    /// environments stepped; an environment reset in this step holds only `distance`), and
+    /// `is_success`. The masks are read-only; one array serves several keys.
+    fn info<'py>(&self, py: Python<'py>, success: Vec<bool>) -> PyResult<Bound<'py, PyDict>> {
+        let env = &self.env;
+        let n = env.len();
+        let resets = env.autoreset().iter().filter(|&&r| r).count();
+        let all = self.all.bind(py);
+        let stepped = match resets {
+            0 => Some(all.clone()),
+            r if r == n => None,
+            _ => {
+                let m = PyArray1::from_vec(py, env.autoreset().iter().map(|r| !r).collect());
+                m.getattr(intern!(py, "flags"))?.setattr(intern!(py, "writeable"), false)?;
+                Some(m)
+            }
+        };
+        // Row k: the values of STEP_KEYS[k]; after a reset only the distance is known (the rest 0).
+        let mut table = vec![0.0; STEP_KEYS.len() * n];
+        for (i, (s, e)) in env.last_steps().iter().zip(env.envs()).enumerate() {
+            if env.autoreset()[i] {
+                table[i] = e.distance();
+            } else {
+                step_values(s).iter().enumerate().for_each(|(k, &v)| table[k * n + i] = v);
+            }
+        }
+        let info = PyDict::new(py);
+        for (k, ((key, mask_key), row)) in self.keys.iter().zip(table.chunks_exact(n)).enumerate() {
+            let mask = match (k, &stepped) {
+                (0, _) => all,
+                (_, Some(m)) => m,
+                (_, None) => continue,
+            };
+            info.set_item(key.bind(py), PyArray1::from_slice(py, row))?;
+            info.set_item(mask_key.bind(py), mask)?;
+        }
+        info.set_item(intern!(py, "is_success"), PyArray1::from_vec(py, success))?;
+        info.set_item(intern!(py, "_is_success"), all)?;
+        Ok(info)
     }
 
     /// The environments whose pool is used up.
@@ -101,6 +138,7 @@ impl VecCore {
     #[new]
     #[pyo3(signature = (num_envs, config_path=None, config_json=None, reward=None, robot=None))]
     fn new(
+        py: Python<'_>,
         num_envs: usize,
         config_path: Option<&str>,
         config_json: Option<&str>,
@@ -110,13 +148,18 @@ impl VecCore {
         if num_envs == 0 {
             return Err(bad_arg("num_envs", 0, "an integer >= 1"));
         }
-        guard("ReachVectorEnv", || {
+        let env = guard("ReachVectorEnv", || {
             let cfg = build_config(config_path, config_json, reward, robot)?;
-            let env = VecEnv::from_config(num_envs, &cfg, 0).map_err(to_py)?;
-            let (pools, used, next_seeds) =
-                (vec![Vec::new(); num_envs], vec![0; num_envs], vec![0; num_envs]);
-            Ok(VecCore { env, pools, used, next_seeds })
-        })
+            VecEnv::from_config(num_envs, &cfg, 0).map_err(to_py)
+        })?;
+        let keys = STEP_KEYS
+            .iter()
+            .map(|k| (PyString::new(py, k).unbind(), PyString::new(py, &format!("_{k}")).unbind()))
+            .collect();
+        let all = PyArray1::from_vec(py, vec![true; num_envs]);
+        all.getattr("flags")?.setattr("writeable", false)?;
+        let (pools, used, next_seeds) = (vec![Vec::new(); num_envs], vec![0; num_envs], vec![0; num_envs]);
+        Ok(VecCore { env, pools, used, next_seeds, keys, all: all.unbind() })
     }
 
     #[getter]
@@ -202,32 +245,27 @@ impl VecCore {
         let (env, seeds) = (&mut self.env, &self.next_seeds);
         py.detach(|| guard("step", || env.step_next_step_reset(actions, seeds).map_err(to_py)))?;
         let env = &self.env;
-        let n = env.len();
-        let mut success = Vec::with_capacity(n);
-        let terms = array2(py, STEP_KEYS.len(), n, |terms: &mut [f64]| {
-            for (i, (s, e)) in env.last_steps().iter().zip(env.envs()).enumerate() {
-                if env.autoreset()[i] {
-                    // Only the distance (row 0) is known after a reset; the rest is 0.
-                    terms[i] = e.distance();
-                    (1..STEP_KEYS.len()).for_each(|k| terms[k * n + i] = 0.0);
-                    success.push(e.distance() < e.reward_config().beta_m);
-                } else {
-                    for (k, v) in step_values(s).into_iter().enumerate() {
-                        terms[k * n + i] = v;
+        let success = env
+            .last_steps()
+            .iter()
+            .zip(env.envs())
+            .zip(env.autoreset())
+            .map(
+                |((s, e), &reset)| {
+                    if reset {
+                        e.distance() < e.reward_config().beta_m
+                    } else {
+                        s.terms.reached
                     }
-                    success.push(s.terms.reached);
-                }
-            }
-        });
+                },
+            )
+            .collect();
         Ok((
             self.observations(py),
             PyArray1::from_slice(py, env.rewards()),
             PyArray1::from_slice(py, env.terminated()),
             PyArray1::from_slice(py, env.truncated()),
-            terms,
-            PyArray1::from_vec(py, success),
-            PyArray1::from_slice(py, env.autoreset()),
-            env.autoreset().iter().filter(|&&r| r).count(),
+            self.info(py, success)?,
             self.exhausted(),
         ))
     }
