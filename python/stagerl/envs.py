@@ -77,6 +77,19 @@ def core_args(reward, config, robot, render_mode) -> dict:
     return {"reward": reward, "robot": robot, **_config_args(config)}
 
 
+def describe(env, core) -> tuple:
+    """Set ``env``'s ``render_mode`` (None), ``max_steps``, ``dt_s`` (seconds), ``joint_names``
+    and ``_beta_m`` (metres) from the native ``core``; one environment's observation and action
+    spaces (float32, finite bounds; actions in [-1, 1])."""
+    facts = core.describe()
+    env.render_mode = None
+    env.max_steps, env.dt_s, env.joint_names = facts["max_steps"], facts["dt_s"], facts["joint_names"]
+    env._beta_m = facts["beta_m"]
+    n = facts["act_dim"]
+    obs = spaces.Box(facts["observation_low"], facts["observation_high"], dtype=np.float32)
+    return obs, spaces.Box(-np.ones(n, np.float32), np.ones(n, np.float32), dtype=np.float32)
+
+
 def draw_seed(rng: np.random.Generator) -> int:
     """The 64-bit seed of the Rust environment's next episode, drawn from ``rng``."""
     return int(rng.integers(0, 2**64, dtype=np.uint64))
@@ -89,14 +102,7 @@ class ReachEnv(gym.Env):
 
     def __init__(self, reward: Optional[str] = None, config=None, robot=None, render_mode: Optional[str] = None):
         self._core = _core.ReachCore(**core_args(reward, config, robot, render_mode))
-        low, high = self._core.observation_bounds()
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        n = self._core.act_dim
-        self.action_space = spaces.Box(-np.ones(n, np.float32), np.ones(n, np.float32), dtype=np.float32)
-        self.render_mode = None
-        self.max_steps = self._core.max_steps
-        self.dt_s = self._core.dt_s
-        self.joint_names = self._core.joint_names
+        self.observation_space, self.action_space = describe(self, self._core)
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
@@ -104,7 +110,7 @@ class ReachEnv(gym.Env):
             obs, distance = self._reset_to(options)
         else:
             obs, distance = self._core.reset(draw_seed(self.np_random))
-        return obs, {"distance": distance, "is_success": distance < self._core.beta_m}
+        return obs, {"distance": distance, "is_success": distance < self._beta_m}
 
     def _reset_to(self, options: dict):
         allowed = "a dict with `target` (3 numbers, metres) and optionally `start` (one number per joint, radians)"

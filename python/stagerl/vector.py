@@ -31,13 +31,12 @@ from __future__ import annotations
 from typing import Optional, Sequence, Union
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from . import _core
-from .envs import core_args
+from .envs import core_args, describe
 
 #: The keys of a step's reward terms in ``info``, in the order of ``ReachEnv``'s step info.
 STEP_KEYS = tuple(_core.STEP_KEYS)
@@ -57,17 +56,9 @@ class ReachVectorEnv(VectorEnv):
             raise ValueError(f"`num_envs` = {num_envs!r} is invalid: an integer >= 1")
         self._core = _core.VecCore(int(num_envs), **core_args(reward, config, robot, render_mode))
         self.num_envs = int(num_envs)
-        low, high = self._core.observation_bounds()
-        self.single_observation_space = spaces.Box(low, high, dtype=np.float32)
-        n = self._core.act_dim
-        self.single_action_space = spaces.Box(-np.ones(n, np.float32), np.ones(n, np.float32), dtype=np.float32)
+        self.single_observation_space, self.single_action_space = describe(self, self._core)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.render_mode = None
-        self.max_steps = self._core.max_steps
-        self.dt_s = self._core.dt_s
-        self.joint_names = self._core.joint_names
-        self._beta_m = self._core.beta_m
         self._rngs: list = [None] * self.num_envs
         self._ones = np.ones(self.num_envs, bool)
         self._ones.flags.writeable = False

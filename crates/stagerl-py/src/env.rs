@@ -101,7 +101,7 @@ fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
 }
 
 /// An observation (or a bound of one) as a numpy float32 array.
-pub(crate) type Obs<'py> = Bound<'py, PyArray1<f32>>;
+type Obs<'py> = Bound<'py, PyArray1<f32>>;
 
 /// One reaching environment (see `stagerl::env::ReachEnv`).
 #[pyclass(module = "stagerl._core")]
@@ -125,35 +125,9 @@ impl ReachCore {
         })
     }
 
-    #[getter]
-    fn obs_dim(&self) -> usize {
-        self.env.obs_dim()
-    }
-    #[getter]
-    fn act_dim(&self) -> usize {
-        self.env.act_dim()
-    }
-    #[getter]
-    fn max_steps(&self) -> u32 {
-        self.env.task().max_steps
-    }
-    #[getter]
-    fn dt_s(&self) -> f64 {
-        self.env.task().dt_s
-    }
-    #[getter]
-    fn beta_m(&self) -> f64 {
-        self.env.reward_config().beta_m
-    }
-    #[getter]
-    fn joint_names(&self) -> Vec<String> {
-        self.env.chain().joints().iter().map(|j| j.name.clone()).collect()
-    }
-
-    /// Finite (low, high) bounds of every observation value (float32), see `obs_bounds`.
-    fn observation_bounds<'py>(&self, py: Python<'py>) -> PyResult<(Obs<'py>, Obs<'py>)> {
-        let (lo, hi) = guard("observation_bounds", || Ok(obs_bounds(&self.env)))?;
-        Ok((PyArray1::from_vec(py, lo), PyArray1::from_vec(py, hi)))
+    /// What the environment is: see [`describe`].
+    fn describe<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        describe(py, &self.env)
     }
 
     /// Reseed the environment's random stream and start an episode; returns (obs, distance_m).
@@ -207,10 +181,27 @@ impl ReachCore {
     }
 }
 
+/// The facts of an environment the Python side reads once: `obs_dim`, `act_dim`, `max_steps`,
+/// `dt_s` (seconds), `beta_m` (metres), `joint_names`, and `observation_low` and
+/// `observation_high` (float32 arrays, see [`obs_bounds`]).
+pub(crate) fn describe<'py>(py: Python<'py>, env: &ReachEnv) -> PyResult<Bound<'py, PyDict>> {
+    let (lo, hi) = guard("describe", || Ok(obs_bounds(env)))?;
+    let d = PyDict::new(py);
+    d.set_item("obs_dim", env.obs_dim())?;
+    d.set_item("act_dim", env.act_dim())?;
+    d.set_item("max_steps", env.task().max_steps)?;
+    d.set_item("dt_s", env.task().dt_s)?;
+    d.set_item("beta_m", env.reward_config().beta_m)?;
+    d.set_item("joint_names", env.chain().joints().iter().map(|j| j.name.clone()).collect::<Vec<_>>())?;
+    d.set_item("observation_low", PyArray1::from_vec(py, lo))?;
+    d.set_item("observation_high", PyArray1::from_vec(py, hi))?;
+    Ok(d)
+}
+
 /// Bounds that hold for every observation an episode can produce (f32, as the observation is):
 /// joints within their limits and within `max_steps` full-speed steps of the home pose
 /// (continuous joints have no limits), positions within the arm's reach, deltas within twice it.
-pub(crate) fn obs_bounds(env: &ReachEnv) -> (Vec<f32>, Vec<f32>) {
+fn obs_bounds(env: &ReachEnv) -> (Vec<f32>, Vec<f32>) {
     let chain = env.chain();
     let task = env.task();
     let travel = f64::from(task.max_steps) * task.dt_s;

@@ -36,6 +36,20 @@ pub(crate) fn bad_arg(field: &str, value: impl std::fmt::Display, allowed: &str)
     PyValueError::new_err(format!("`{field}` = {value} is invalid: {allowed}"))
 }
 
+/// The values of a C-contiguous array, or a `ValueError` naming `field`.
+pub(crate) fn contiguous<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    field: &str,
+    array: &'a numpy::PyReadonlyArray<'_, T, D>,
+) -> PyResult<&'a [T]> {
+    array.as_slice().map_err(|_| {
+        let dtype = std::any::type_name::<T>()
+            .replace("f64", "float64")
+            .replace("f32", "float32")
+            .replace("u64", "uint64");
+        bad_arg(field, "a non-contiguous array", &format!("a C-contiguous {dtype} array"))
+    })
+}
+
 /// Run `f`, turning a panic into a `RuntimeError` (a bug in stagerl, never the caller's fault).
 pub(crate) fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {

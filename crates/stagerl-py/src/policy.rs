@@ -11,7 +11,7 @@ use stagerl::plan::Planner;
 use stagerl::rundir::RunDir;
 
 use crate::vec::array2;
-use crate::{bad_arg, guard, to_py};
+use crate::{bad_arg, contiguous, guard, to_py};
 
 /// The deterministic policy of a checkpoint (`Agent::predict`, as evaluation and planning run it).
 #[pyclass(module = "stagerl._core")]
@@ -79,9 +79,7 @@ impl PolicyCore {
                 &format!("(N, {od}): the policy's observation length"),
             ));
         }
-        let obs = obs
-            .as_slice()
-            .map_err(|_| bad_arg("obs", "a non-contiguous array", "a C-contiguous float32 array"))?;
+        let obs = contiguous("obs", &obs)?;
         if let Some(k) = obs.iter().position(|x| !x.is_finite()) {
             return Err(bad_arg(&format!("obs[{}, {}]", k / od, k % od), obs[k], "a finite number"));
         }

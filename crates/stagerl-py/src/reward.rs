@@ -7,7 +7,7 @@ use pyo3::types::PyDict;
 use stagerl::nalgebra::Vector3;
 use stagerl::reward::{RewardConfig, RewardInput, RewardTerms};
 
-use crate::{bad_arg, guard, to_py};
+use crate::{bad_arg, contiguous, guard, to_py};
 
 /// The keys of the result, in the order `stagerl reward` writes them.
 #[pyfunction]
@@ -33,7 +33,7 @@ fn rows<'a>(
             &format!("({want_r}, {want_c})"),
         ));
     }
-    array.as_slice().map_err(|_| bad_arg(field, "a non-contiguous array", "a C-contiguous float64 array"))
+    contiguous(field, array)
 }
 
 /// Every reported term for every row; `config_json` holds the reward section's fields.

@@ -9,8 +9,8 @@ use pyo3::types::{PyDict, PyString};
 
 use stagerl::env::VecEnv;
 
-use crate::env::{build_config, obs_bounds, step_values, Obs, STEP_KEYS};
-use crate::{bad_arg, guard, to_py};
+use crate::env::{build_config, describe, step_values, STEP_KEYS};
+use crate::{bad_arg, contiguous, guard, to_py};
 
 type F64s<'py> = Bound<'py, PyArray1<f64>>;
 type Bools<'py> = Bound<'py, PyArray1<bool>>;
@@ -111,9 +111,7 @@ impl VecCore {
                 &format!("({n}, {a}): one action per environment, one value per joint"),
             ));
         }
-        actions
-            .as_slice()
-            .map_err(|_| bad_arg("actions", "a non-contiguous array", "a C-contiguous float32 array"))
+        contiguous("actions", actions)
     }
 }
 
@@ -166,35 +164,10 @@ impl VecCore {
     fn num_envs(&self) -> usize {
         self.env.len()
     }
-    #[getter]
-    fn obs_dim(&self) -> usize {
-        self.env.obs_dim()
-    }
-    #[getter]
-    fn act_dim(&self) -> usize {
-        self.env.act_dim()
-    }
-    #[getter]
-    fn max_steps(&self) -> u32 {
-        self.env.envs()[0].task().max_steps
-    }
-    #[getter]
-    fn dt_s(&self) -> f64 {
-        self.env.envs()[0].task().dt_s
-    }
-    #[getter]
-    fn beta_m(&self) -> f64 {
-        self.env.envs()[0].reward_config().beta_m
-    }
-    #[getter]
-    fn joint_names(&self) -> Vec<String> {
-        self.env.envs()[0].chain().joints().iter().map(|j| j.name.clone()).collect()
-    }
 
-    /// Finite (low, high) bounds of one environment's observation (float32).
-    fn observation_bounds<'py>(&self, py: Python<'py>) -> PyResult<(Obs<'py>, Obs<'py>)> {
-        let (lo, hi) = guard("observation_bounds", || Ok(obs_bounds(&self.env.envs()[0])))?;
-        Ok((PyArray1::from_vec(py, lo), PyArray1::from_vec(py, hi)))
+    /// What one environment is: see `env::describe`.
+    fn describe<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        describe(py, &self.env.envs()[0])
     }
 
     /// Replace environment `i`'s seed pool (its next episodes' seeds, in order).
@@ -203,7 +176,7 @@ impl VecCore {
         if i >= n {
             return Err(bad_arg("i", i, &format!("an environment index, 0 to {}", n - 1)));
         }
-        let s = seeds.as_slice().map_err(|_| bad_arg("seeds", "a non-contiguous array", "a uint64 array"))?;
+        let s = contiguous("seeds", &seeds)?;
         if s.is_empty() {
             return Err(bad_arg("seeds.shape", "(0,)", "(K,) with K >= 1 seeds"));
         }
@@ -288,9 +261,7 @@ impl VecCore {
                 &format!("(K, {n}, {a}) with K >= 1: K batches of actions"),
             ));
         }
-        let flat = actions
-            .as_slice()
-            .map_err(|_| bad_arg("actions", "a non-contiguous array", "a C-contiguous float32 array"))?;
+        let flat = contiguous("actions", &actions)?;
         let mut env = self.env.clone();
         for i in 0..n {
             if env.envs()[i].is_done() {
