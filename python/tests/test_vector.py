@@ -140,11 +140,14 @@ def test_info_holds_every_term_and_observations_stay_in_the_space():
     assert full > 250
 
 
-def test_native_speed_measurement_steps_the_same_batch():
-    envs = ReachVectorEnv(num_envs=4)
+def test_native_speed_measurement_steps_a_copy():
+    envs, twin = ReachVectorEnv(num_envs=4, config=SHORT), ReachVectorEnv(num_envs=4, config=SHORT)
     envs.reset(seed=0)
-    actions = np.zeros((3, 4, 6), np.float32)
+    twin.reset(seed=0)
+    actions = np.random.default_rng(1).uniform(-1, 1, (3, 4, 6)).astype(np.float32)
     assert envs._core.time_native_steps(actions, 10) > 0.0
+    # The batch itself was not stepped.
+    assert data_equivalence(envs.step(actions[0]), twin.step(actions[0]), exact=True)
     with pytest.raises(ValueError, match=r"actions.shape.*\(K, 4, 6\)"):
         envs._core.time_native_steps(np.zeros((3, 5, 6), np.float32), 10)
 
