@@ -7,18 +7,23 @@ Importing the package registers the Gymnasium environment ``stagerl/Reach-v0``::
     import stagerl
 
     env = gym.make("stagerl/Reach-v0", reward="sar")
+    envs = gym.make_vec("stagerl/Reach-v0", num_envs=256, vectorization_mode="vector_entry_point")
 
-Modules: :mod:`stagerl.envs` (the environment), :mod:`stagerl.rewards` (the rewards over numpy
-arrays), :mod:`stagerl.kinematics` (batched forward kinematics and Jacobians of URDF chains).
+Modules: :mod:`stagerl.envs` (the environment), :mod:`stagerl.vector` (the native batch of
+environments), :mod:`stagerl.rewards` (the rewards over numpy
+arrays), :mod:`stagerl.policies` (trained policies: :class:`Policy`, :func:`plan`),
+:mod:`stagerl.kinematics` (batched forward kinematics and Jacobians of URDF chains).
 Units: metres, radians, seconds; quaternions are (x, y, z, w).
 """
 
 from . import _core
-from . import envs, kinematics, rewards
+from . import envs, kinematics, policies, rewards, vector
 from .envs import ReachEnv, register_envs
 from .kinematics import Chain
+from .policies import Policy, plan
+from .vector import ReachVectorEnv
 
 __version__ = _core.__version__
-__all__ = ["ReachEnv", "Chain", "envs", "kinematics", "rewards", "register_envs", "__version__"]
+__all__ = ["ReachEnv", "ReachVectorEnv", "Chain", "Policy", "plan", "policies", "envs", "kinematics", "rewards", "vector", "register_envs", "__version__"]
 
 register_envs()

@@ -16,6 +16,10 @@ in [-1, 1], scaled by the joint's speed limit. The episode terminates when the t
 ``stride``, ``gamma_posture``, ``har``, ``alpha1``, ``alpha2``, ``sar``, ``basic``, ``reward``,
 ``bonus``, ``total``) and ``is_success``; ``reset`` returns ``distance`` and ``is_success``.
 
+``reset(options={"target": [x, y, z], "start": [q1, ..]})`` starts the episode at ``start``
+(radians; default: the home pose) with the given target (metres) instead of a random one (as
+``stagerl plan`` does); the target stream is not advanced.
+
 Seeding: each ``reset`` draws a 64-bit seed for the Rust environment from ``self.np_random``
 (after ``super().reset(seed=seed)``), so the same seed gives the same episodes.
 """
@@ -62,35 +66,65 @@ def _str_arg(name: str, value: Any, allowed: str) -> Optional[str]:
     return value
 
 
+def core_args(reward, config, robot, render_mode) -> dict:
+    """The native constructor's keyword arguments for the environment's arguments, checked."""
+    if render_mode is not None:
+        raise ValueError(f"`render_mode` = {render_mode!r} is invalid: stagerl/Reach-v0 renders nothing (None)")
+    reward = _str_arg("reward", reward, "one of 'basic', 'posture', 'stride', 'har', 'sar'")
+    robot = _str_arg("robot", robot, "'ur5' or a path to a URDF file")
+    if robot is not None and robot != "ur5" and not os.path.isfile(robot):
+        raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5' or a path to a URDF file)")
+    return {"reward": reward, "robot": robot, **_config_args(config)}
+
+
+def describe(env, core) -> tuple:
+    """Set ``env``'s ``render_mode`` (None), ``max_steps``, ``dt_s`` (seconds), ``joint_names``
+    and ``_beta_m`` (metres) from the native ``core``; one environment's observation and action
+    spaces (float32, finite bounds; actions in [-1, 1])."""
+    facts = core.describe()
+    env.render_mode = None
+    env.max_steps, env.dt_s, env.joint_names = facts["max_steps"], facts["dt_s"], facts["joint_names"]
+    env._beta_m = facts["beta_m"]
+    n = facts["act_dim"]
+    obs = spaces.Box(facts["observation_low"], facts["observation_high"], dtype=np.float32)
+    return obs, spaces.Box(-np.ones(n, np.float32), np.ones(n, np.float32), dtype=np.float32)
+
+
+def draw_seed(rng: np.random.Generator) -> int:
+    """The 64-bit seed of the Rust environment's next episode, drawn from ``rng``."""
+    return int(rng.integers(0, 2**64, dtype=np.uint64))
+
+
 class ReachEnv(gym.Env):
     """One reaching environment over the Rust ``ReachEnv`` (see the module documentation)."""
 
     metadata = {"render_modes": []}
 
     def __init__(self, reward: Optional[str] = None, config=None, robot=None, render_mode: Optional[str] = None):
-        if render_mode is not None:
-            raise ValueError(f"`render_mode` = {render_mode!r} is invalid: stagerl/Reach-v0 renders nothing (None)")
-        reward = _str_arg("reward", reward, "one of 'basic', 'posture', 'stride', 'har', 'sar'")
-        robot = _str_arg("robot", robot, "'ur5' or a path to a URDF file")
-        if robot is not None and robot != "ur5" and not os.path.isfile(robot):
-            raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5' or a path to a URDF file)")
-        self._core = _core.ReachCore(reward=reward, robot=robot, **_config_args(config))
-        low, high = self._core.observation_bounds()
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        n = self._core.act_dim
-        self.action_space = spaces.Box(-np.ones(n, np.float32), np.ones(n, np.float32), dtype=np.float32)
-        self.render_mode = None
-        self.max_steps = self._core.max_steps
-        self.dt_s = self._core.dt_s
-        self.joint_names = self._core.joint_names
+        self._core = _core.ReachCore(**core_args(reward, config, robot, render_mode))
+        self.observation_space, self.action_space = describe(self, self._core)
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
         if options:
-            raise ValueError(f"`options` = {options!r} is invalid: stagerl/Reach-v0 takes no reset options")
-        rust_seed = int(self.np_random.integers(0, 2**64, dtype=np.uint64))
-        obs, distance = self._core.reset(rust_seed)
-        return obs, {"distance": distance, "is_success": distance < self._core.beta_m}
+            obs, distance = self._reset_to(options)
+        else:
+            obs, distance = self._core.reset(draw_seed(self.np_random))
+        return obs, {"distance": distance, "is_success": distance < self._beta_m}
+
+    def _reset_to(self, options: dict):
+        allowed = "a dict with `target` (3 numbers, metres) and optionally `start` (one number per joint, radians)"
+        if not isinstance(options, dict) or "target" not in options or set(options) - {"target", "start"}:
+            raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
+        try:
+            target = np.asarray(options["target"], dtype=np.float64).tolist()
+            start = options.get("start")
+            start = None if start is None else np.asarray(start, dtype=np.float64).tolist()
+        except (TypeError, ValueError):
+            raise ValueError(f"`options` = {options!r} is invalid: {allowed}") from None
+        if not isinstance(target, list) or (start is not None and not isinstance(start, list)):
+            raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
+        return self._core.reset_to(target, start)
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float32)
@@ -112,4 +146,4 @@ class ReachEnv(gym.Env):
 def register_envs() -> None:
     """Register ``stagerl/Reach-v0`` with Gymnasium (done on ``import stagerl``)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="stagerl.envs:ReachEnv")
+        gym.register(id=ENV_ID, entry_point="stagerl.envs:ReachEnv", vector_entry_point="stagerl.vector:ReachVectorEnv")

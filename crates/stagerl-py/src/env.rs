@@ -67,9 +67,10 @@ pub(crate) const STEP_KEYS: [&str; 17] = [
     "total",
 ];
 
-fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
+/// The values of [`STEP_KEYS`] for a step.
+pub(crate) fn step_values(s: &Step) -> [f64; 17] {
     let t = &s.terms;
-    let values = [
+    [
         t.distance,
         f64::from(u8::from(t.reached)),
         t.position,
@@ -87,12 +88,15 @@ fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
         t.reward,
         t.bonus,
         t.total,
-    ];
+    ]
+}
+
+fn step_info<'py>(py: Python<'py>, s: &Step) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    for (k, v) in STEP_KEYS.iter().zip(values) {
+    for (k, v) in STEP_KEYS.iter().zip(step_values(s)) {
         d.set_item(k, v)?;
     }
-    d.set_item("is_success", t.reached)?;
+    d.set_item("is_success", s.terms.reached)?;
     Ok(d)
 }
 
@@ -121,40 +125,34 @@ impl ReachCore {
         })
     }
 
-    #[getter]
-    fn obs_dim(&self) -> usize {
-        self.env.obs_dim()
-    }
-    #[getter]
-    fn act_dim(&self) -> usize {
-        self.env.act_dim()
-    }
-    #[getter]
-    fn max_steps(&self) -> u32 {
-        self.env.task().max_steps
-    }
-    #[getter]
-    fn dt_s(&self) -> f64 {
-        self.env.task().dt_s
-    }
-    #[getter]
-    fn beta_m(&self) -> f64 {
-        self.env.reward_config().beta_m
-    }
-    #[getter]
-    fn joint_names(&self) -> Vec<String> {
-        self.env.chain().joints().iter().map(|j| j.name.clone()).collect()
-    }
-
-    /// Finite (low, high) bounds of every observation value (float32), see `obs_bounds`.
-    fn observation_bounds<'py>(&self, py: Python<'py>) -> PyResult<(Obs<'py>, Obs<'py>)> {
-        let (lo, hi) = guard("observation_bounds", || Ok(obs_bounds(&self.env)))?;
-        Ok((PyArray1::from_vec(py, lo), PyArray1::from_vec(py, hi)))
+    /// What the environment is: see [`describe`].
+    fn describe<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        describe(py, &self.env)
     }
 
     /// Reseed the environment's random stream and start an episode; returns (obs, distance_m).
     fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Obs<'py>, f64)> {
         let obs = guard("reset", || Ok(self.env.reset_with_seed(seed).to_vec()))?;
+        Ok((PyArray1::from_vec(py, obs), self.env.distance()))
+    }
+
+    /// Start an episode at joint positions `start` (radians; default: the home pose) with the
+    /// given target (metres); the random stream is untouched. Returns (obs, distance_m).
+    #[pyo3(signature = (target, start=None))]
+    fn reset_to<'py>(
+        &mut self,
+        py: Python<'py>,
+        target: Vec<f64>,
+        start: Option<Vec<f64>>,
+    ) -> PyResult<(Obs<'py>, f64)> {
+        let &[x, y, z] = target.as_slice() else {
+            return Err(bad_arg("target", format!("{target:?}"), "3 values x, y, z in metres"));
+        };
+        let start = start.unwrap_or_else(|| self.env.task().home_pose.clone());
+        let env = &mut self.env;
+        let obs = guard("reset", || {
+            Ok(env.reset_to(&start, stagerl::nalgebra::Vector3::new(x, y, z)).map_err(to_py)?.to_vec())
+        })?;
         Ok((PyArray1::from_vec(py, obs), self.env.distance()))
     }
 
@@ -181,6 +179,23 @@ impl ReachCore {
         let (p, t) = (self.env.ee_pose().position, self.env.target());
         ([p.x, p.y, p.z], [t.x, t.y, t.z])
     }
+}
+
+/// The facts of an environment the Python side reads once: `obs_dim`, `act_dim`, `max_steps`,
+/// `dt_s` (seconds), `beta_m` (metres), `joint_names`, and `observation_low` and
+/// `observation_high` (float32 arrays, see [`obs_bounds`]).
+pub(crate) fn describe<'py>(py: Python<'py>, env: &ReachEnv) -> PyResult<Bound<'py, PyDict>> {
+    let (lo, hi) = guard("describe", || Ok(obs_bounds(env)))?;
+    let d = PyDict::new(py);
+    d.set_item("obs_dim", env.obs_dim())?;
+    d.set_item("act_dim", env.act_dim())?;
+    d.set_item("max_steps", env.task().max_steps)?;
+    d.set_item("dt_s", env.task().dt_s)?;
+    d.set_item("beta_m", env.reward_config().beta_m)?;
+    d.set_item("joint_names", env.chain().joints().iter().map(|j| j.name.clone()).collect::<Vec<_>>())?;
+    d.set_item("observation_low", PyArray1::from_vec(py, lo))?;
+    d.set_item("observation_high", PyArray1::from_vec(py, hi))?;
+    Ok(d)
 }
 
 /// Bounds that hold for every observation an episode can produce (f32, as the observation is):

@@ -3,7 +3,7 @@
 use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use crate::{bad_arg, guard, to_py};
+use crate::{bad_arg, contiguous, guard, to_py};
 
 /// A serial chain loaded from `"ur5"` or a URDF file (see `stagerl::robot::Chain`).
 #[pyclass(module = "stagerl._core", name = "Chain")]
@@ -28,9 +28,7 @@ impl Chain {
                 ),
             ));
         }
-        let s = q
-            .as_slice()
-            .map_err(|_| bad_arg("q", "a non-contiguous array", "a C-contiguous float64 array"))?;
+        let s = contiguous("q", q)?;
         Ok((n, s))
     }
 }

@@ -1,7 +1,8 @@
 //! `stagerl._core`: the native half of the Python package `stagerl` (python/).
 //!
-//! Thin bindings over the library: the reaching environment ([`env`]), the rewards over batches
-//! of rows ([`reward`]) and the kinematics of any URDF chain ([`kin`]). The Python modules in
+//! Thin bindings over the library: the reaching environment ([`env`]) and a batch of them
+//! ([`vec`]), the rewards over batches of rows ([`reward`]), the kinematics of any URDF chain
+//! ([`kin`]), trained policies and planning ([`policy`]). The Python modules in
 //! `python/stagerl/` hold the Gymnasium API, argument defaults and documentation; this crate
 //! holds no logic of its own beyond shapes, conversions and error mapping.
 //!
@@ -15,7 +16,9 @@ use pyo3::prelude::*;
 
 mod env;
 mod kin;
+mod policy;
 mod reward;
+mod vec;
 
 /// The Python exception for a library error.
 pub(crate) fn to_py(e: stagerl::Error) -> PyErr {
@@ -31,6 +34,20 @@ pub(crate) fn to_py(e: stagerl::Error) -> PyErr {
 /// A `ValueError` naming an argument, its value and what is allowed.
 pub(crate) fn bad_arg(field: &str, value: impl std::fmt::Display, allowed: &str) -> PyErr {
     PyValueError::new_err(format!("`{field}` = {value} is invalid: {allowed}"))
+}
+
+/// The values of a C-contiguous array, or a `ValueError` naming `field`.
+pub(crate) fn contiguous<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    field: &str,
+    array: &'a numpy::PyReadonlyArray<'_, T, D>,
+) -> PyResult<&'a [T]> {
+    array.as_slice().map_err(|_| {
+        let dtype = std::any::type_name::<T>()
+            .replace("f64", "float64")
+            .replace("f32", "float32")
+            .replace("u64", "uint64");
+        bad_arg(field, "a non-contiguous array", &format!("a C-contiguous {dtype} array"))
+    })
 }
 
 /// Run `f`, turning a panic into a `RuntimeError` (a bug in stagerl, never the caller's fault).
@@ -54,8 +71,12 @@ pub(crate) fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("STEP_KEYS", env::STEP_KEYS.to_vec())?;
     m.add_class::<env::ReachCore>()?;
     m.add_class::<kin::Chain>()?;
+    m.add_class::<vec::VecCore>()?;
+    m.add_class::<policy::PolicyCore>()?;
+    m.add_function(wrap_pyfunction!(policy::plan, m)?)?;
     m.add_function(wrap_pyfunction!(reward::compute, m)?)?;
     m.add_function(wrap_pyfunction!(reward::keys, m)?)?;
     Ok(())

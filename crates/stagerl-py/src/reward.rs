@@ -7,7 +7,7 @@ use pyo3::types::PyDict;
 use stagerl::nalgebra::Vector3;
 use stagerl::reward::{RewardConfig, RewardInput, RewardTerms};
 
-use crate::{bad_arg, guard, to_py};
+use crate::{bad_arg, contiguous, guard, to_py};
 
 /// The keys of the result, in the order `stagerl reward` writes them.
 #[pyfunction]
@@ -33,7 +33,7 @@ fn rows<'a>(
             &format!("({want_r}, {want_c})"),
         ));
     }
-    array.as_slice().map_err(|_| bad_arg(field, "a non-contiguous array", "a C-contiguous float64 array"))
+    contiguous(field, array)
 }
 
 /// Every reported term for every row; `config_json` holds the reward section's fields.
@@ -72,33 +72,97 @@ pub fn compute<'py>(
     if cfg.direction == stagerl::reward::DirectionSource::Displacement && prev.is_none() {
         return Err(bad_arg("prev_ee_pos", "None", "an (N, 3) array when direction = \"displacement\""));
     }
-    let columns = guard("rewards.compute", || {
-        let mut out = vec![vec![0.0f64; n]; 12];
-        let v3 = |a: &[f64], i: usize| Vector3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
-        for i in 0..n {
-            let input = RewardInput {
-                ee_pos: v3(p, i),
-                ee_quat: [q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]],
-                target: v3(t, i),
-                joint_vel: &v[j * i..j * (i + 1)],
-                prev_ee_pos: prev.map(|a| v3(a, i)),
-            };
-            let terms = RewardTerms::try_compute(&cfg, dt_s, &input)
-                .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("row {i}: {e}")))?;
-            for (col, (_, x)) in out.iter_mut().zip(terms.reported()) {
-                col[i] = x;
-            }
-        }
-        Ok(out)
-    })?;
+    let reached_at = keys().iter().position(|k| *k == "reached").expect("`reached` is a reported term");
+    let rows = Rows { p, q, t, v, j, prev, reached_at };
+    let mut cols: Vec<Vec<f64>> = (0..KEYS - 1).map(|_| vec![0.0; n]).collect();
+    let mut reached = vec![false; n];
+    py.detach(|| guard("rewards.compute", || compute_parallel(&cfg, dt_s, &rows, &mut cols, &mut reached)))?;
     let d = PyDict::new(py);
-    for (key, col) in keys().into_iter().zip(columns) {
+    let mut cols = cols.into_iter();
+    for key in keys() {
         if key == "reached" {
-            let b: Vec<bool> = col.iter().map(|&x| x != 0.0).collect();
-            d.set_item(key, PyArray1::from_vec(py, b))?;
+            d.set_item(key, PyArray1::from_vec(py, std::mem::take(&mut reached)))?;
         } else {
-            d.set_item(key, PyArray1::from_vec(py, col))?;
+            d.set_item(key, PyArray1::from_vec(py, cols.next().expect("one column per key")))?;
         }
     }
     Ok(d)
+}
+
+/// Number of reported terms (the keys of the result).
+const KEYS: usize = 12;
+
+/// Rows of the inputs below which one thread computes them all.
+const ROWS_PER_THREAD: usize = 1 << 16;
+
+/// The inputs of `compute`, row-major: `j` joint velocities per row.
+struct Rows<'a> {
+    p: &'a [f64],
+    q: &'a [f64],
+    t: &'a [f64],
+    v: &'a [f64],
+    j: usize,
+    prev: Option<&'a [f64]>,
+    /// The index of `reached` among the reported terms (a bool column of its own).
+    reached_at: usize,
+}
+
+/// Every row into `cols` (the reported terms but `reached`, in order) and `reached`, on up to
+/// one thread per core for large inputs (each row is computed alone, so the split changes no
+/// value); the first bad row's error.
+fn compute_parallel(
+    cfg: &RewardConfig,
+    dt_s: f64,
+    rows: &Rows<'_>,
+    cols: &mut [Vec<f64>],
+    reached: &mut [bool],
+) -> PyResult<()> {
+    let n = reached.len();
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    let threads = cores.min(n / ROWS_PER_THREAD).max(1);
+    let chunk = n.div_ceil(threads).max(1);
+    let mut col_chunks: Vec<_> = cols.iter_mut().map(|c| c.chunks_mut(chunk)).collect();
+    let mut reached_chunks = reached.chunks_mut(chunk);
+    std::thread::scope(|s| {
+        let mut handles = Vec::new();
+        for k in 0..n.div_ceil(chunk) {
+            let mine: Vec<&mut [f64]> = col_chunks.iter_mut().filter_map(Iterator::next).collect();
+            let r = reached_chunks.next().expect("one chunk per thread");
+            handles.push(s.spawn(move || compute_rows(cfg, dt_s, rows, k * chunk, mine, r)));
+        }
+        // In row order, so the error returned is the first bad row's.
+        handles.into_iter().try_for_each(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+    })
+}
+
+/// Rows `start..start + reached.len()`.
+fn compute_rows(
+    cfg: &RewardConfig,
+    dt_s: f64,
+    rows: &Rows<'_>,
+    start: usize,
+    mut cols: Vec<&mut [f64]>,
+    reached: &mut [bool],
+) -> PyResult<()> {
+    let (p, q, t, v, j) = (rows.p, rows.q, rows.t, rows.v, rows.j);
+    let v3 = |a: &[f64], i: usize| Vector3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+    for (k, done) in reached.iter_mut().enumerate() {
+        let i = start + k;
+        let input = RewardInput {
+            ee_pos: v3(p, i),
+            ee_quat: [q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]],
+            target: v3(t, i),
+            joint_vel: &v[j * i..j * (i + 1)],
+            prev_ee_pos: rows.prev.map(|a| v3(a, i)),
+        };
+        let terms = RewardTerms::try_compute(cfg, dt_s, &input)
+            .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("row {i}: {e}")))?;
+        *done = terms.reached;
+        let values = terms.reported();
+        let others = values[..rows.reached_at].iter().chain(&values[rows.reached_at + 1..]);
+        for (col, (_, x)) in cols.iter_mut().zip(others) {
+            col[k] = *x;
+        }
+    }
+    Ok(())
 }

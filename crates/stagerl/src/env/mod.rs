@@ -27,7 +27,7 @@ use crate::{Error, Result};
 pub use task::{ObservationKind, ResolvedTask, TaskConfig};
 
 /// The outcome of one step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Step {
     /// Every reward term; `terms.total` is what the agent receives.
     pub terms: RewardTerms,

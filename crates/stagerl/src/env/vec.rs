@@ -15,6 +15,10 @@ use crate::{Error, Result};
 /// episode's first observation goes to [`VecEnv::observations`]) and the observation it ended on is
 /// kept in [`VecEnv::final_observations`], as bootstrapping through a truncation needs it.
 /// Environment `i` draws its targets from `Rng::derived(seed, i)`.
+///
+/// [`VecEnv::step_next_step_reset`] steps with Gymnasium's next-step autoreset instead: an
+/// environment whose episode ended stays at its last observation until the next call, which
+/// resets it (with a seed given by the caller) instead of stepping it.
 #[derive(Clone, Debug)]
 pub struct VecEnv {
     envs: Vec<ReachEnv>,
@@ -24,6 +28,7 @@ pub struct VecEnv {
     terminated: Vec<bool>,
     truncated: Vec<bool>,
     steps: Vec<Step>,
+    autoreset: Vec<bool>,
 }
 
 impl VecEnv {
@@ -52,7 +57,8 @@ impl VecEnv {
             rewards: vec![0.0; n],
             terminated: vec![false; n],
             truncated: vec![false; n],
-            steps: vec![Step { terms: Default::default(), terminated: false, truncated: false }; n],
+            steps: vec![Step::default(); n],
+            autoreset: vec![false; n],
             envs,
         };
         for i in 0..n {
@@ -64,7 +70,62 @@ impl VecEnv {
     /// Step every environment with `actions` (`len() * act_dim()` values, row-major).
     /// Allocation-free. On an error (bad action) no environment has been stepped.
     pub fn step(&mut self, actions: &[f32]) -> Result<()> {
-        let (n, a, d) = (self.envs.len(), self.act_dim(), self.obs_dim());
+        self.step_with(actions, None)
+    }
+
+    /// One step with Gymnasium's next-step autoreset: an environment whose episode ended in the
+    /// previous call is not stepped but reset with `reset_seeds[i]` (its target stream reseeded,
+    /// as [`ReachEnv::reset_with_seed`]; its reward 0, terminated and truncated false, marked in
+    /// [`VecEnv::autoreset`]); every other environment is stepped, and one whose episode ends
+    /// keeps its last observation. `reset_seeds` holds one seed per environment (read only for
+    /// those reset). Allocation-free; on an error no environment has been stepped.
+    pub fn step_next_step_reset(&mut self, actions: &[f32], reset_seeds: &[u64]) -> Result<()> {
+        if reset_seeds.len() != self.envs.len() {
+            return Err(Error::InvalidInput(format!(
+                "reset_seeds has {} values, expected one per environment ({})",
+                reset_seeds.len(),
+                self.envs.len()
+            )));
+        }
+        self.step_with(actions, Some(reset_seeds))
+    }
+
+    /// [`VecEnv::step`] (`reset_seeds` None: same-step autoreset from each environment's own
+    /// stream) or [`VecEnv::step_next_step_reset`].
+    fn step_with(&mut self, actions: &[f32], reset_seeds: Option<&[u64]>) -> Result<()> {
+        self.check_actions(actions)?;
+        let (a, d) = (self.act_dim(), self.obs_dim());
+        for (i, env) in self.envs.iter_mut().enumerate() {
+            let row = i * d..(i + 1) * d;
+            let reset_seed = reset_seeds.filter(|_| env.is_done()).map(|s| s[i]);
+            self.autoreset[i] = reset_seed.is_some();
+            if let Some(seed) = reset_seed {
+                env.reset_with_seed(seed);
+                self.rewards[i] = 0.0;
+                self.terminated[i] = false;
+                self.truncated[i] = false;
+                self.steps[i] = Step::default();
+                self.final_obs[row.clone()].copy_from_slice(env.observation());
+                self.obs[row].copy_from_slice(env.observation());
+                continue;
+            }
+            let s = env.step(&actions[i * a..(i + 1) * a])?;
+            self.rewards[i] = s.total();
+            self.terminated[i] = s.terminated;
+            self.truncated[i] = s.truncated;
+            self.steps[i] = s;
+            self.final_obs[row.clone()].copy_from_slice(env.observation());
+            if s.done() && reset_seeds.is_none() {
+                env.reset();
+            }
+            self.obs[row].copy_from_slice(env.observation());
+        }
+        Ok(())
+    }
+
+    /// `len() * act_dim()` finite values, or an error naming the first bad one.
+    fn check_actions(&self, actions: &[f32]) -> Result<()> {
+        let (n, a) = (self.envs.len(), self.act_dim());
         if actions.len() != n * a {
             return Err(Error::InvalidInput(format!(
                 "actions has {} values, expected {n} environments x {a} joints = {}",
@@ -80,19 +141,24 @@ impl VecEnv {
                 actions[k]
             )));
         }
-        for (i, env) in self.envs.iter_mut().enumerate() {
-            let s = env.step(&actions[i * a..(i + 1) * a])?;
-            self.rewards[i] = s.total();
-            self.terminated[i] = s.terminated;
-            self.truncated[i] = s.truncated;
-            self.steps[i] = s;
-            let row = i * d..(i + 1) * d;
-            self.final_obs[row.clone()].copy_from_slice(env.observation());
-            if s.done() {
-                env.reset();
-            }
-            self.obs[row].copy_from_slice(env.observation());
-        }
+        Ok(())
+    }
+
+    /// Reseed environment `i`'s target stream with `seed` and start its next episode (as
+    /// [`ReachEnv::reset_with_seed`]); its observation row is updated.
+    pub fn reset_env_with_seed(&mut self, i: usize, seed: u64) -> Result<()> {
+        let n = self.envs.len();
+        let d = self.obs_dim();
+        let env = self.envs.get_mut(i).ok_or_else(|| {
+            Error::InvalidInput(format!(
+                "environment {i} does not exist: the vector env holds {n} (0 to {})",
+                n - 1
+            ))
+        })?;
+        env.reset_with_seed(seed);
+        self.obs[i * d..(i + 1) * d].copy_from_slice(env.observation());
+        self.final_obs[i * d..(i + 1) * d].copy_from_slice(env.observation());
+        self.autoreset[i] = false;
         Ok(())
     }
 
@@ -131,6 +197,11 @@ impl VecEnv {
     /// Every reward term of the last step, per environment.
     pub fn last_steps(&self) -> &[Step] {
         &self.steps
+    }
+    /// Which environments the last [`VecEnv::step_next_step_reset`] reset instead of stepping
+    /// (all false after [`VecEnv::step`]).
+    pub fn autoreset(&self) -> &[bool] {
+        &self.autoreset
     }
     /// The environments themselves.
     pub fn envs(&self) -> &[ReachEnv] {
@@ -181,6 +252,43 @@ mod tests {
         assert!(resets >= 6, "120 steps of 3 envs hold at least 6 episode ends, saw {resets}");
         // Environments draw different targets.
         assert_ne!(v.envs()[0].target(), v.envs()[1].target());
+    }
+
+    #[test]
+    fn next_step_autoreset_resets_ended_envs_on_the_next_call() {
+        let n = 3;
+        let mut v = ur5_vec(n, 2).unwrap();
+        let mut singles: Vec<ReachEnv> = (0..n).map(|i| v.envs()[i].clone()).collect();
+        let mut rng = Rng::new(4);
+        let (mut ends, mut autoresets) = (0, 0);
+        for k in 0..150u64 {
+            let actions: Vec<f32> = (0..n * 6).map(|_| rng.uniform_range(-1.0, 1.0) as f32).collect();
+            let seeds: Vec<u64> = (0..n as u64).map(|i| 1000 * k + i).collect();
+            let was_done: Vec<bool> = v.envs().iter().map(ReachEnv::is_done).collect();
+            v.step_next_step_reset(&actions, &seeds).unwrap();
+            for (i, e) in singles.iter_mut().enumerate() {
+                assert_eq!(v.autoreset()[i], was_done[i]);
+                if was_done[i] {
+                    e.reset_with_seed(seeds[i]);
+                    autoresets += 1;
+                    assert_eq!((v.rewards()[i], v.terminated()[i], v.truncated()[i]), (0.0, false, false));
+                } else {
+                    let s = e.step(&actions[i * 6..(i + 1) * 6]).unwrap();
+                    assert_eq!(v.rewards()[i], s.total());
+                    assert_eq!((v.terminated()[i], v.truncated()[i]), (s.terminated, s.truncated));
+                    ends += usize::from(s.done());
+                }
+                // An ended episode keeps its last observation until the next call.
+                assert_eq!(&v.observations()[i * 16..(i + 1) * 16], e.observation());
+                assert_eq!(v.envs()[i].target(), e.target());
+            }
+        }
+        assert!(ends >= 6 && autoresets >= ends - n, "{ends} episode ends, {autoresets} autoresets");
+        assert!(v.step_next_step_reset(&[0.0; 18], &[0; 2]).is_err());
+        v.reset_env_with_seed(1, 9).unwrap();
+        singles[1].reset_with_seed(9);
+        assert_eq!(&v.observations()[16..32], singles[1].observation());
+        assert!(v.reset_env_with_seed(3, 0).unwrap_err().to_string().contains("environment 3"));
     }
 
     #[test]

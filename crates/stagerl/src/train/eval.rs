@@ -146,6 +146,21 @@ pub fn load_run_agent(
     Ok((checkpoint, env, agent))
 }
 
+/// A trained policy from `path`: a run directory (its best available checkpoint, with its
+/// `config.toml`, as [`load_run_agent`]) or a checkpoint file (with the config every checkpoint
+/// embeds as its `config` metadata); the checkpoint's path first.
+pub fn load_policy(path: &Path) -> Result<(PathBuf, ReachEnv, Box<dyn Agent>)> {
+    if path.is_dir() {
+        let run = RunDir::new(path);
+        return load_run_agent(&run, &run.load_config()?, None);
+    }
+    let ck = crate::checkpoint::Checkpoint::load(path)?;
+    let cfg = Config::from_toml_str(ck.meta("config")?, path)?;
+    let env = ReachEnv::from_config(&cfg, 0)?;
+    let agent = super::load_agent(&cfg, &env, path)?;
+    Ok((path.to_path_buf(), env, agent))
+}
+
 /// What [`evaluate_run`] found.
 #[derive(Clone, Debug)]
 pub struct RunEval {
