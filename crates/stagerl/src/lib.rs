@@ -54,6 +54,7 @@ pub mod rng;
 pub mod robot;
 pub mod rundir;
 pub mod schedule;
+pub mod simd;
 pub mod stats;
 pub mod text;
 pub mod train;

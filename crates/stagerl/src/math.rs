@@ -190,7 +190,27 @@ pub fn sin_cos_f64(x: f64) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::Rng;
+
+    /// A small generator of its own (xorshift64*), so that these tests need no other module.
+    struct Rng(u64);
+
+    impl Rng {
+        fn new(seed: u64) -> Self {
+            Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+        }
+        fn next_u64(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+        fn uniform(&mut self) -> f64 {
+            (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        }
+        fn uniform_range(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * self.uniform()
+        }
+    }
 
     /// Distance in units in the last place between two finite f32 of the same sign.
     fn ulp32(a: f32, b: f32) -> u32 {

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::nn::simd::multiversion;
+use crate::simd::multiversion;
 
 /// xoshiro256++ with a Box-Muller normal sampler.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -239,7 +239,7 @@ mod tests {
 
     #[test]
     fn box_muller_block_bit_identical_at_every_level() {
-        use crate::nn::SimdLevel;
+        use crate::simd::SimdLevel;
         let mut r = Rng::new(5);
         let n = 101;
         let (u1, u2): (Vec<f64>, Vec<f64>) = (0..n).map(|_| r.box_muller_uniforms()).unzip();

@@ -2,8 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::simd::multiversion;
 use super::Scalar;
+use crate::simd::multiversion;
 
 /// Adam over one flat parameter slice.
 ///

@@ -24,8 +24,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::ops::{copy_row, grow};
-use super::simd::multiversion;
 use super::Scalar;
+use crate::simd::multiversion;
 
 /// How the raw network output `s` becomes the log standard deviation `l`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -62,7 +62,6 @@ mod matmul;
 mod mlp;
 mod ops;
 mod scalar;
-pub(crate) mod simd;
 
 #[cfg(test)]
 mod tests;
@@ -78,4 +77,3 @@ pub use ops::{
     polyak_update, scale, sum_of_squares,
 };
 pub use scalar::{tanh_f32, Scalar};
-pub use simd::{simd_level, SimdLevel};

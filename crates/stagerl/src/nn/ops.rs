@@ -3,8 +3,8 @@
 //!
 //! All of them are single passes over slices and allocate nothing.
 
-use super::simd::multiversion;
 use super::Scalar;
+use crate::simd::multiversion;
 
 /// Lanes of the independent partial sums in reductions, so that the loops vectorise.
 const LANES: usize = 16;

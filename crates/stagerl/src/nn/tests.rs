@@ -506,3 +506,81 @@ fn polyak_between_networks() {
     target.copy_params_from(&source);
     assert_eq!(target.params(), source.params());
 }
+
+/// The multiversioned loops of the engine (see `crate::simd`) give the same bits at every level.
+mod simd_levels {
+    use crate::nn::activation::{backward_kernel_at, backward_sum_kernel_at, bias_apply_kernel_at};
+    use crate::nn::adam::{adam_kernel_at, Coefs};
+    use crate::nn::ops::{polyak_kernel_at, scale_at, sum_of_squares_at};
+    use crate::nn::Activation;
+    use crate::rng::Rng;
+    use crate::simd::SimdLevel;
+
+    const LEVELS: [SimdLevel; 3] = [SimdLevel::Avx512, SimdLevel::Avx2, SimdLevel::Baseline];
+
+    /// Values of every magnitude, both signs, zeros, subnormals and a lane-count-unfriendly length.
+    fn values(rng: &mut Rng, n: usize) -> Vec<f32> {
+        (0..n)
+            .map(|i| match i % 7 {
+                0 => 0.0,
+                1 => -(f32::MIN_POSITIVE / 3.0) * rng.uniform() as f32,
+                2 => (rng.normal() * 1e-20) as f32,
+                3 => (rng.normal() * 1e6) as f32,
+                _ => rng.normal() as f32,
+            })
+            .collect()
+    }
+
+    fn bits(x: &[f32]) -> Vec<u32> {
+        x.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// Every multiversioned loop gives the same bits at every level (where the CPU has it).
+    #[test]
+    fn every_level_is_bit_identical() {
+        let mut rng = Rng::new(11);
+        let (rows, cols) = (37, 29);
+        let n = rows * cols;
+        let (y0, g0, b0, p0, m0) = (
+            values(&mut rng, n),
+            values(&mut rng, n),
+            values(&mut rng, cols),
+            values(&mut rng, n),
+            values(&mut rng, n),
+        );
+        let v0: Vec<f32> = values(&mut rng, n).iter().map(|v| v * v).collect();
+        let mut outs: Vec<Vec<Vec<u32>>> = Vec::new();
+        for level in LEVELS {
+            let mut out = Vec::new();
+            for act in [Activation::Identity, Activation::Relu, Activation::Tanh] {
+                let mut y = y0.clone();
+                bias_apply_kernel_at(level, act, &mut y, &b0);
+                let (mut g, mut gb) = (g0.clone(), b0.clone());
+                backward_sum_kernel_at(level, act, &y, &mut g, &mut gb);
+                let mut g2 = g0.clone();
+                backward_kernel_at(level, act, &y, &mut g2);
+                out.extend([bits(&y), bits(&g), bits(&gb), bits(&g2)]);
+            }
+            let (mut p, mut m, mut v) = (p0.clone(), m0.clone(), v0.clone());
+            let c = Coefs {
+                b1: 0.9,
+                b2: 0.999,
+                c1: 0.1,
+                c2: 1e-3,
+                step_size: 1e-3,
+                inv_sqrt_bias2: 3.7,
+                eps: 1e-8,
+            };
+            adam_kernel_at(level, &mut p, &g0, &mut m, &mut v, c);
+            out.extend([bits(&p), bits(&m), bits(&v)]);
+            let mut t = p0.clone();
+            polyak_kernel_at(level, &mut t, &y0, 0.995, 0.005);
+            scale_at(level, &mut t, 0.37);
+            out.push(bits(&t));
+            out.push(vec![sum_of_squares_at(level, &g0).to_bits()]);
+            outs.push(out);
+        }
+        assert_eq!(outs[0], outs[2], "AVX-512 (or its fallback) differs from the baseline");
+        assert_eq!(outs[1], outs[2], "AVX2 (or its fallback) differs from the baseline");
+    }
+}
