@@ -1,6 +1,7 @@
 //! Elementary functions written in plain IEEE-754 arithmetic, for the training hot paths.
 //!
-//! - [`exp_f32`], [`ln_f32`]: the squashed Gaussian head of SAC (eq. of `nn::SquashedGaussian`).
+//! - [`exp_f32`], [`ln_f32`], [`tanh_f32`]: the activations and the squashed Gaussian head of
+//!   SAC (`nn::SquashedGaussian`).
 //! - [`ln_f64`], [`sin_cos_f64`]: the Box-Muller transform of [`crate::rng::Rng::normal`].
 //!
 //! Why not the C library's: (1) these are branch-free (selects, bit operations, polynomials),
@@ -55,6 +56,37 @@ pub fn exp_f32(x: f32) -> f32 {
         f32::INFINITY
     } else {
         v
+    }
+}
+
+/// tanh for `f32` as a [13/6] odd/even rational function on [-7.905, 7.905] (the approximation of
+/// Eigen's `generic_fast_tanh_float`), `x` itself below 4e-4 and +-1 beyond the clamp.
+///
+/// Branch-free, so loops of it auto-vectorise (glibc's `tanhf` is a scalar call through
+/// `expm1f`); its error is a few ulp (checked against `f64::tanh` in the tests).
+#[inline]
+#[allow(clippy::excessive_precision)] // Eigen's published coefficients, rounded by the compiler
+pub fn tanh_f32(x: f32) -> f32 {
+    const CLAMP: f32 = 7.90531110763549805;
+    const A1: f32 = 4.89352455891786e-03;
+    const A3: f32 = 6.37261928875436e-04;
+    const A5: f32 = 1.48572235717979e-05;
+    const A7: f32 = 5.12229709037114e-08;
+    const A9: f32 = -8.60467152213735e-11;
+    const A11: f32 = 2.00018790482477e-13;
+    const A13: f32 = -2.76076847742355e-16;
+    const B0: f32 = 4.89352518554385e-03;
+    const B2: f32 = 2.26843463243900e-03;
+    const B4: f32 = 1.18534705686654e-04;
+    const B6: f32 = 1.19825839466702e-06;
+    let c = x.clamp(-CLAMP, CLAMP);
+    let x2 = c * c;
+    let p = ((((((A13 * x2 + A11) * x2 + A9) * x2 + A7) * x2 + A5) * x2 + A3) * x2 + A1) * c;
+    let q = ((B6 * x2 + B4) * x2 + B2) * x2 + B0;
+    if x.abs() < 4e-4 {
+        x
+    } else {
+        p / q
     }
 }
 
