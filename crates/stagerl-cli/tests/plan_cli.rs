@@ -309,3 +309,49 @@ fn closed_or_full_stdout_is_an_error() {
         assert!(redirected(args, ">/dev/null", &input).status.success());
     }
 }
+
+#[test]
+fn a_batch_view_beyond_its_limit_says_what_it_left_out() {
+    let dir = scratch("plan-view-limit");
+    let view = dir.join("view.html");
+    let targets: String =
+        (0..502).map(|i| format!("{{\"target\":[0.4,{:.3},0.3]}}\n", 0.001 * i as f64)).collect();
+    let o = with_stdin(
+        &[
+            "plan",
+            "--controller",
+            "jacobian",
+            "--max-steps",
+            "2",
+            "--targets",
+            "-",
+            "--view",
+            view.to_str().unwrap(),
+        ],
+        &targets,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(stdout_of(&o).lines().count(), 502, "the output has every plan");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("the view holds the first 500 of the 502 plans"), "{err}");
+    let html = std::fs::read_to_string(&view).unwrap();
+    assert!(html.contains("\"plan 500\"") && !html.contains("\"plan 501\""), "the view holds plans 1-500");
+    // Within the limit, no such warning.
+    let o = with_stdin(
+        &[
+            "plan",
+            "--controller",
+            "jacobian",
+            "--max-steps",
+            "2",
+            "--targets",
+            "-",
+            "--view",
+            view.to_str().unwrap(),
+            "--force",
+        ],
+        "{\"target\":[0.4,0.2,0.3]}\n",
+    );
+    assert!(o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("the view holds"));
+    std::fs::remove_dir_all(&dir).ok();
+}

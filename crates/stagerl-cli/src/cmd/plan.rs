@@ -166,6 +166,12 @@ pub fn batch(
         }
         Ok(BatchLine(plan))
     })?;
+    if view.is_some() && k > view::MAX_TRAJECTORIES as u64 {
+        errln!(
+            "stagerl: warning: the view holds the first {} of the {k} plans (its limit); the output has all of them",
+            view::MAX_TRAJECTORIES
+        )?;
+    }
     Ok(steps)
 }
 
