@@ -223,6 +223,7 @@ pub struct RewardTerms {
 impl RewardTerms {
     /// The terms `stagerl reward` writes and the demo tabulates, named and in that order
     /// (`movement` as `move`, `reached` as 0 or 1).
+    #[inline]
     pub fn reported(&self) -> [(&'static str, f64); 12] {
         let t = self;
         [
