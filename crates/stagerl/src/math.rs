@@ -9,7 +9,8 @@
 //! of a SAC update at hidden 64; (2) they use only `+ - * /` and `sqrt`, which IEEE-754 rounds
 //! exactly, and Rust never fuses a multiply and an add on its own, so their results are the same
 //! bits on every CPU, every SIMD level and every C library (glibc picks a different `expf` on
-//! CPUs with FMA, and libm versions differ), which makes training results portable.
+//! CPUs with FMA, and libm versions differ), which makes the agents' updates portable (the
+//! environment's kinematics and reward still use the standard library's f64 functions).
 //!
 //! Accuracy (tested against the standard library over their domains): `exp_f32` and `ln_f32`
 //! within 2 ulp, `ln_f64` and `sin_cos_f64` within 2 ulp (`sin_cos_f64` for |x| <= 1e5 rad).
