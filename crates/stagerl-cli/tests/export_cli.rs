@@ -38,6 +38,9 @@ fn export_writes_once_and_refuses_to_overwrite_another_model() {
     // ModelProto: ir_version 7 (field 1), then producer_name "stagerl" (field 2).
     assert_eq!(bytes[..4], [0x08, 0x07, 0x12, 0x07]);
     assert_eq!(&bytes[4..11], b"stagerl");
+    // The checkpoint is named as the run directory names it, with no absolute path of this machine.
+    let has = |text: &str| bytes.windows(text.len()).any(|w| w == text.as_bytes());
+    assert!(has("checkpoints/final.safetensors") && !has(dir.to_str().unwrap()), "the checkpoint's name");
     for name in
         ["observation", "joint_velocity", "actor.layer2.weight", "speed_limits", "config_hash", "Slice"]
     {

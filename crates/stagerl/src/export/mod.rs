@@ -16,10 +16,13 @@ pub fn onnx_of_run(run: &RunDir, checkpoint: Option<&Path>) -> Result<(PathBuf, 
     let cfg = run.load_config()?;
     let (path, env, agent) = crate::train::eval::load_run_agent(run, &cfg, checkpoint)?;
     let spec = PolicySpec::new(&cfg, &env, agent.as_ref());
-    let meta = onnx::ModelInfo {
-        config_hash: crate::train::config_hash(&cfg),
-        checkpoint: path.display().to_string(),
+    // The checkpoint as the run directory names it (`checkpoints/best.safetensors`), or by its
+    // file name when it lies elsewhere: no absolute path of this machine goes into the model.
+    let checkpoint = match path.strip_prefix(&run.root) {
+        Ok(rel) => rel.display().to_string(),
+        Err(_) => path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
     };
+    let meta = onnx::ModelInfo { config_hash: crate::train::config_hash(&cfg), checkpoint };
     let bytes = onnx::encode(&spec, agent.actor(), &meta)?;
     Ok((path, bytes))
 }
