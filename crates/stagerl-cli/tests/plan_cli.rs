@@ -316,20 +316,9 @@ fn a_batch_view_beyond_its_limit_says_what_it_left_out() {
     let view = dir.join("view.html");
     let targets: String =
         (0..502).map(|i| format!("{{\"target\":[0.4,{:.3},0.3]}}\n", 0.001 * i as f64)).collect();
-    let o = with_stdin(
-        &[
-            "plan",
-            "--controller",
-            "jacobian",
-            "--max-steps",
-            "2",
-            "--targets",
-            "-",
-            "--view",
-            view.to_str().unwrap(),
-        ],
-        &targets,
-    );
+    let args = ["plan", "--controller", "jacobian", "--max-steps", "2", "--targets", "-", "--view"];
+    let args: Vec<&str> = args.into_iter().chain([view.to_str().unwrap()]).collect();
+    let o = with_stdin(&args, &targets);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(stdout_of(&o).lines().count(), 502, "the output has every plan");
     let err = String::from_utf8_lossy(&o.stderr);
@@ -337,21 +326,8 @@ fn a_batch_view_beyond_its_limit_says_what_it_left_out() {
     let html = std::fs::read_to_string(&view).unwrap();
     assert!(html.contains("\"plan 500\"") && !html.contains("\"plan 501\""), "the view holds plans 1-500");
     // Within the limit, no such warning.
-    let o = with_stdin(
-        &[
-            "plan",
-            "--controller",
-            "jacobian",
-            "--max-steps",
-            "2",
-            "--targets",
-            "-",
-            "--view",
-            view.to_str().unwrap(),
-            "--force",
-        ],
-        "{\"target\":[0.4,0.2,0.3]}\n",
-    );
+    let forced: Vec<&str> = args.iter().copied().chain(["--force"]).collect();
+    let o = with_stdin(&forced, "{\"target\":[0.4,0.2,0.3]}\n");
     assert!(o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("the view holds"));
     std::fs::remove_dir_all(&dir).ok();
 }
