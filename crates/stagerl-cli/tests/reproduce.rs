@@ -239,5 +239,42 @@ fn smoke_preset_then_report_writes_every_file() {
     let rows = |p: &std::path::Path| std::fs::read_to_string(p).unwrap().lines().count();
     assert_eq!(rows(&best), rows(&last), "the same trials for both checkpoints");
     assert!(table.contains("## Best and final checkpoint") && table.contains("| SAC | SAR | 1 |"), "{table}");
+
+    // Archived: every run stripped of its resumable checkpoint and TensorBoard events, and half
+    // of them of every checkpoint (what a results directory keeps). The sweep is done: nothing
+    // trains or evaluates again, and the report reads the same Table 1.
+    let table_csv = std::fs::read(rep.join("table1.csv")).unwrap();
+    let names = run_dirs(&out).into_iter().filter(|n| n != "report").collect::<Vec<_>>();
+    let kept: Vec<Vec<u8>> =
+        names.iter().map(|n| std::fs::read(out.join(n).join("episodes.csv")).unwrap()).collect();
+    for (i, n) in names.iter().enumerate() {
+        let dir = out.join(n);
+        std::fs::remove_file(dir.join("checkpoints/latest.safetensors")).unwrap();
+        std::fs::remove_dir_all(dir.join("tb")).unwrap();
+        if i % 2 == 1 {
+            std::fs::remove_dir_all(dir.join("checkpoints")).unwrap();
+        }
+    }
+    let r = bin()
+        .args(["reproduce", "--preset", "smoke", "--out", out.to_str().unwrap(), "--jobs", "2"])
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert_eq!(text.lines().filter(|l| l.contains("already done")).count(), 10, "{text}");
+    for (n, bytes) in names.iter().zip(&kept) {
+        assert_eq!(&std::fs::read(out.join(n).join("episodes.csv")).unwrap(), bytes, "{n} trained again");
+        assert!(!out.join(n).join("checkpoints/latest.safetensors").exists(), "{n} trained again");
+    }
+    let r = bin()
+        .args(["report", out.to_str().unwrap(), "--out", root.join("again").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(
+        std::fs::read(root.join("again/table1.csv")).unwrap(),
+        table_csv,
+        "the same Table 1 from the archive"
+    );
     std::fs::remove_dir_all(&root).ok();
 }

@@ -273,7 +273,8 @@ pub fn shard(runs: Vec<RunSpec>, index: usize, count: usize) -> Result<Vec<RunSp
 }
 
 /// Where the run `dir` of `spec` stands in `sweep`: done only when its closing evaluation is
-/// recorded with the sweep's evaluation settings.
+/// recorded with the sweep's evaluation settings (also for an archived run, kept without its
+/// resumable checkpoint: [`final_eval::is_archived`]).
 pub fn status(dir: &Path, spec: &RunSpec, sweep: &SweepSpec) -> Result<RunStatus> {
     let (trials, seed) = (sweep.eval_trials, sweep.eval_seed);
     Ok(match train::checkpointed_episode(dir)? {
@@ -281,6 +282,7 @@ pub fn status(dir: &Path, spec: &RunSpec, sweep: &SweepSpec) -> Result<RunStatus
         Some((_, true)) if final_eval::recorded(dir, seed).is_some() => RunStatus::StaleEval,
         Some((_, true)) => RunStatus::Trained,
         Some((episode, false)) => RunStatus::Partial { episode },
+        None if final_eval::is_archived(dir, &spec.config, trials, seed) => RunStatus::Done,
         None => RunStatus::New,
     })
 }

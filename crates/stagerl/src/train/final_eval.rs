@@ -68,6 +68,18 @@ pub fn is_current(dir: &Path, cfg: &Config, trials: u32, seed: u64) -> bool {
     }
 }
 
+/// Whether `dir` holds an *archived* run: trained and evaluated on the targets of `seed` with
+/// `trials` trials for the config `cfg`, then stripped of its resumable checkpoint
+/// (`checkpoints/latest.safetensors`, which carries the replay buffer: tens of MB for a
+/// 10 000-episode run) so that its results can be kept small (the CSVs, the record, and the
+/// best and final checkpoints where kept). The record is written after training finished, so
+/// it alone shows that the run is complete; nothing needs to train or evaluate it again.
+pub fn is_archived(dir: &Path, cfg: &Config, trials: u32, seed: u64) -> bool {
+    let run = RunDir::new(dir);
+    !run.latest().exists()
+        && recorded(dir, seed).is_some_and(|r| r.trials == trials && r.config_hash == config_hash(cfg))
+}
+
 /// Run the closing evaluation (stopped between trials by `stop`, with [`Error::Stopped`] and
 /// nothing written): the trials' CSV, then the record. Returns the summary and the checkpoint.
 pub fn run(
