@@ -12,9 +12,21 @@ const CONFIG: &str = "[agent]\nhidden = [16, 16]\nlearning_starts = 200\nbatch_s
 
 #[test]
 fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_run() {
-    let root = scratch("resume-kill");
+    sigkills_then_resume("resume-kill", CONFIG);
+}
+
+/// The same with hindsight relabelling: SAC on the sparse reward, the `episode` strategy.
+#[test]
+fn sigkill_then_resume_with_her_gives_the_uninterrupted_run() {
+    let config =
+        format!("{CONFIG}[agent.her]\nstrategy = \"episode\"\nk = 2\n[reward]\nfunction = \"basic\"\n");
+    sigkills_then_resume("resume-kill-her", &config);
+}
+
+fn sigkills_then_resume(name: &str, config: &str) {
+    let root = scratch(name);
     let cfg = root.join("c.toml");
-    std::fs::write(&cfg, CONFIG).unwrap();
+    std::fs::write(&cfg, config).unwrap();
     let (full, cut) = (root.join("full"), root.join("cut"));
     let out = run(&[
         "train",

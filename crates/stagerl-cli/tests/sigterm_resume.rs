@@ -17,9 +17,24 @@ const CONFIG: &str =
 
 #[test]
 fn sigterm_at_random_moments_then_resume_gives_the_uninterrupted_run() {
-    let root = scratch("resume-sigterm");
+    sigterms_then_resume("resume-sigterm", CONFIG, 88);
+}
+
+/// With hindsight relabelling the episode under way is part of the saved state (what has been
+/// seen of it is relabelled when it ends): DDPG on the sparse reward, the `future` strategy.
+#[test]
+fn sigterm_then_resume_with_her_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}\n[agent.her]\nstrategy = \"future\"\nk = 4\n[reward]\nfunction = \"basic\"\n",
+        CONFIG.replace("[agent]\n", "[agent]\nalgo = \"ddpg\"\n")
+    );
+    sigterms_then_resume("resume-sigterm-her", &config, 89);
+}
+
+fn sigterms_then_resume(name: &str, config: &str, seed: u64) {
+    let root = scratch(name);
     let cfg = root.join("c.toml");
-    std::fs::write(&cfg, CONFIG).unwrap();
+    std::fs::write(&cfg, config).unwrap();
     let (full, cut) = (root.join("full"), root.join("cut"));
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let out = run(&["train", "--config", &s(&cfg), "--out", &s(&full), "--eval-trials", "0"]);
@@ -29,7 +44,7 @@ fn sigterm_at_random_moments_then_resume_gives_the_uninterrupted_run() {
     // fixed seed), then a short random delay so the signal lands anywhere inside the episode (or
     // its update, or an evaluation). Waiting for a new row also means the process is past its
     // start-up, signal handler installed.
-    let mut rng = stagerl::rng::Rng::new(88);
+    let mut rng = stagerl::rng::Rng::new(seed);
     let rows =
         || std::fs::read_to_string(cut.join("episodes.csv")).map(|t| t.lines().count() as u64).unwrap_or(0);
     let mut stops = Vec::new();

@@ -201,9 +201,11 @@ pub fn write_preset(out: &Path, text: &str) -> Result<()> {
     crate::io::write_atomic(&path, text.as_bytes())
 }
 
-/// The name of a config's run directory: `<algo>-<reward>-seed<seed>`.
+/// The name of a config's run directory: `<algo>-<reward>-seed<seed>`, with hindsight
+/// relabelling `<algo>-<reward>-her-<strategy>-seed<seed>`.
 pub fn run_name(cfg: &Config) -> String {
-    format!("{}-{}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed)
+    let her = cfg.agent.her.map(|h| format!("-her-{}", h.strategy.name())).unwrap_or_default();
+    format!("{}-{}{her}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed)
 }
 
 /// The shard a process runs, `(index, count)`: the flags when given; for each flag that is

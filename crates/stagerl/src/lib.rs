@@ -23,6 +23,7 @@
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
+//!   [`her`]: their hindsight relabelling;
 //!   [`train`]: the off-policy loop and evaluation; [`rundir`]: the run directory; [`checkpoint`],
 //!   [`log`] (the CSV files and TensorBoard), [`io`]: what runs write; [`experiment`]: sweeps;
 //!   [`metrics`], [`report`]: the paper's indicators, tables and figures.
@@ -37,6 +38,7 @@ pub mod env;
 pub mod error;
 pub mod experiment;
 pub mod export;
+pub mod her;
 pub mod io;
 pub mod lock;
 pub mod log;

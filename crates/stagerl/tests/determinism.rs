@@ -4,11 +4,25 @@
 use stagerl::agent::Algo;
 use stagerl::checkpoint::Checkpoint;
 use stagerl::config::Config;
+use stagerl::her::{HerConfig, HerStrategy};
+use stagerl::reward::RewardFunction;
 use stagerl::train::{train, RunDir};
 
 fn run(algo: Algo, seed: u64, tag: &str) -> (Vec<String>, Checkpoint) {
+    run_with(algo, seed, tag, None, RewardFunction::Sar)
+}
+
+fn run_with(
+    algo: Algo,
+    seed: u64,
+    tag: &str,
+    her: Option<HerConfig>,
+    reward: RewardFunction,
+) -> (Vec<String>, Checkpoint) {
     let mut cfg = Config::default();
     cfg.agent.algo = algo;
+    cfg.agent.her = her;
+    cfg.reward.function = reward;
     cfg.agent.hidden = vec![32, 32];
     cfg.agent.batch_size = 64;
     cfg.agent.learning_starts = 300;
@@ -17,7 +31,11 @@ fn run(algo: Algo, seed: u64, tag: &str) -> (Vec<String>, Checkpoint) {
     cfg.train.eval_every_episodes = 20;
     cfg.train.eval_trials = 5;
     cfg.train.checkpoint_every_episodes = 10;
-    let dir = std::env::temp_dir().join(format!("stagerl-det-{}-{algo}-{seed}-{tag}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "stagerl-det-{}-{algo}-{seed}-{tag}-{}",
+        std::process::id(),
+        her.is_some()
+    ));
     let summary = train(&cfg, &dir, |_| {}).unwrap();
     assert!(summary.updates > 500, "updates happened: {}", summary.updates);
     let text = std::fs::read_to_string(RunDir::new(&dir).episodes()).unwrap();
@@ -41,5 +59,30 @@ fn same_seed_same_run_different_seed_different_run() {
         }
         let (c, _) = run(algo, 6, "c");
         assert_ne!(a, c, "{algo}: another seed gives another run");
+    }
+}
+
+/// With hindsight relabelling (the sparse reward, each strategy) too; and relabelling changes
+/// the run (the relabelled transitions are learned from).
+#[test]
+fn her_runs_are_deterministic_and_differ_from_plain_runs() {
+    for (algo, strategy) in [
+        (Algo::Sac, HerStrategy::Future),
+        (Algo::Ddpg, HerStrategy::Final),
+        (Algo::Td3, HerStrategy::Episode),
+    ] {
+        let her = Some(HerConfig { strategy, k: 4 });
+        let basic = RewardFunction::Basic;
+        let (a, ca) = run_with(algo, 5, "her-a", her, basic);
+        let (b, cb) = run_with(algo, 5, "her-b", her, basic);
+        assert_eq!(a, b, "{algo} + HER: episodes.csv differs between identical runs");
+        for n in ca.tensor_names() {
+            assert_eq!(ca.tensor(n).unwrap(), cb.tensor(n).unwrap(), "{algo} + HER: tensor {n}");
+        }
+        let (_, plain) = run_with(algo, 5, "her-plain", None, basic);
+        assert!(
+            ca.tensor_names().any(|n| ca.tensor(n).ok() != plain.tensor(n).ok()),
+            "{algo}: relabelling changed nothing"
+        );
     }
 }

@@ -20,13 +20,18 @@ pub struct Args {
     /// Reward function (overrides reward.function).
     #[arg(long, value_parser = super::reward_parser())]
     reward: Option<RewardFunction>,
+    /// Hindsight experience replay with this goal strategy (sets agent.her.strategy, with
+    /// agent.her.k from the config or 4).
+    #[arg(long, value_parser = ["future", "final", "episode"])]
+    her: Option<String>,
     /// Seed (overrides train.seed).
     #[arg(long)]
     seed: Option<u64>,
     /// Training episodes (overrides train.episodes).
     #[arg(long)]
     episodes: Option<u64>,
-    /// Run directory (default: runs/<algo>-<reward>-seed<seed>).
+    /// Run directory (default: runs/<algo>-<reward>-seed<seed>, with --her
+    /// runs/<algo>-<reward>-her-<strategy>-seed<seed>).
     #[arg(long)]
     out: Option<PathBuf>,
     /// A TOML config; defaults otherwise.
@@ -37,7 +42,7 @@ pub struct Args {
     force: bool,
     /// Continue the run in this directory from its last checkpoint (with its own config); a
     /// trained run without its closing evaluation (killed during it) is evaluated.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "seed", "episodes", "out", "config"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "her", "seed", "episodes", "out", "config"])]
     resume: Option<PathBuf>,
     /// Trials of the closing evaluation (deterministic policy); 0 skips it.
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(0..=10_000_000))]
@@ -118,6 +123,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(r) = args.reward {
         cfg.reward.function = r;
+    }
+    if let Some(h) = &args.her {
+        let strategy = h.parse::<stagerl::her::HerStrategy>()?;
+        cfg.agent.her = Some(stagerl::her::HerConfig { strategy, ..cfg.agent.her.unwrap_or_default() });
     }
     if let Some(s) = args.seed {
         cfg.train.seed = s;

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
+use crate::her::HerConfig;
 use crate::validate::{at_least_one, finite, non_negative, positive};
 use crate::{Error, Result};
 
@@ -103,6 +104,10 @@ pub struct AgentConfig {
     /// `[agent.sac]`; unset: [`SacConfig::default`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sac: Option<SacConfig>,
+    /// `agent.her = { strategy = "future" | "final" | "episode", k = 4 }`: hindsight experience
+    /// replay ([`crate::her`]); unset: off (the paper's agents).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub her: Option<HerConfig>,
 }
 
 /// `[agent.ddpg]`: DDPG's exploration.
@@ -185,6 +190,7 @@ impl Default for AgentConfig {
             ddpg: None,
             td3: None,
             sac: None,
+            her: None,
         }
     }
 }
@@ -203,6 +209,7 @@ impl PartialEq for AgentConfig {
         };
         shared(self) == shared(other)
             && (self.ddpg(), self.td3(), self.sac()) == (other.ddpg(), other.td3(), other.sac())
+            && self.her == other.her
     }
 }
 
@@ -367,6 +374,9 @@ impl AgentConfig {
             positive("agent.sac.alpha_lr", s.alpha_lr)?;
             positive("agent.sac.init_alpha", s.init_alpha)?;
             finite("agent.sac.target_entropy_per_dim", s.target_entropy_per_dim)?;
+        }
+        if let Some(h) = &self.her {
+            h.validate()?;
         }
         Ok(())
     }

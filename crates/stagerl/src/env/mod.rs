@@ -55,6 +55,25 @@ pub fn observation_dim(kind: ObservationKind, dof: usize) -> usize {
     }
 }
 
+/// Write the observation entries that depend on the target (metres, base frame) for an
+/// end-effector at `ee` (metres): for the standard observation of a `dof`-joint arm (`obs` of
+/// `dof + 10` values), the target (at `dof + 3..dof + 6`), `obs_delta_scale x (target - ee)`
+/// and its norm. The environment writes its own observations with it, and hindsight relabelling
+/// ([`crate::her`]) writes those of a substituted goal, so both are the same bits.
+pub fn write_target_entries(task: &ResolvedTask, obs: &mut [f32], ee: Vector3<f64>, target: Vector3<f64>) {
+    match task.observation {
+        ObservationKind::Standard => {
+            let n = obs.len() - 10;
+            let d = (target - ee) * task.obs_delta_scale;
+            for k in 0..3 {
+                obs[n + 3 + k] = target[k] as f32;
+                obs[n + 6 + k] = d[k] as f32;
+            }
+            obs[n + 9] = d.norm() as f32;
+        }
+    }
+}
+
 /// Check joint positions for `chain`: one finite value per joint, each within its joint's limits.
 pub fn check_joint_positions(chain: &Chain, q: &[f64]) -> Result<()> {
     let n = chain.dof();
@@ -240,20 +259,16 @@ impl ReachEnv {
         match self.task.observation {
             ObservationKind::Standard => {
                 let n = self.q.len();
-                let (p, t) = (self.ee.position, self.target);
-                let d = (t - p) * self.task.obs_delta_scale;
-                let obs = &mut self.obs;
-                for (o, q) in obs.iter_mut().zip(&self.q) {
+                for (o, q) in self.obs.iter_mut().zip(&self.q) {
                     *o = (q / PI) as f32;
                 }
+                let p = self.ee.position;
                 for k in 0..3 {
-                    obs[n + k] = p[k] as f32;
-                    obs[n + 3 + k] = t[k] as f32;
-                    obs[n + 6 + k] = d[k] as f32;
+                    self.obs[n + k] = p[k] as f32;
                 }
-                obs[n + 9] = d.norm() as f32;
             }
         }
+        write_target_entries(&self.task, &mut self.obs, self.ee.position, self.target);
     }
 
     /// The current observation.

@@ -37,6 +37,7 @@ use crate::agent::{self, Agent, AgentConfig, UpdateStats};
 use crate::checkpoint::Checkpoint;
 use crate::config::Config;
 use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
+use crate::her::{HerState, Relabeller};
 use crate::log::csv::{parse_line, push_row, CsvRow};
 use crate::log::{EpisodeCsv, EpisodeRecord, EvalPoint, EventWriter};
 use crate::replay::{Batch, ReplayBuffer};
@@ -129,6 +130,9 @@ struct LoopState {
     /// A stop came during the periodic evaluation of episode `episode`: it runs first.
     #[serde(default)]
     eval_due: bool,
+    /// Hindsight relabelling (`agent.her`): the episode under way and the goal sampler.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    her: Option<HerState>,
 }
 
 /// An environment step taken whose updates are not all done yet (see [`LoopState`]); once they
@@ -174,6 +178,7 @@ struct Trainer {
     batch: Batch,
     state: LoopState,
     eval_csv: String,
+    relabeller: Relabeller,
 }
 
 impl Trainer {
@@ -199,6 +204,7 @@ impl Trainer {
             best_eval: None,
             step_under_way: None,
             eval_due: false,
+            her: cfg.agent.her.map(|_| HerState::new(Rng::derived(seed, 4))),
         };
         Ok(Trainer {
             hash: config_hash(cfg),
@@ -211,6 +217,7 @@ impl Trainer {
             agent,
             state,
             eval_csv: format!("{}\n", EvalPoint::HEADER),
+            relabeller: Relabeller::default(),
         })
     }
 
@@ -271,6 +278,14 @@ impl Trainer {
         }
         t.agent.load(ck)?;
         t.state = ck.json("train_state")?;
+        if t.state.her.is_some() != cfg.agent.her.is_some() {
+            return Err(Error::InvalidInput(format!(
+                "{}: its training state {} hindsight relabelling, the run's config (agent.her) {}",
+                path.display(),
+                if t.state.her.is_some() { "has" } else { "lacks" },
+                if cfg.agent.her.is_some() { "sets it" } else { "does not" }
+            )));
+        }
         let data: Vec<&[f32]> =
             ReplayBuffer::ARRAY_NAMES.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
         t.buffer.restore(
@@ -421,6 +436,9 @@ impl Trainer {
         }
         if !collector.state.in_episode {
             self.env.reset();
+            if let Some(her) = &mut collector.state.her {
+                her.log.begin(self.env.ee_pose().position);
+            }
             collector.agent.begin_episode();
             collector.state.episode_reward = 0.0;
             collector.state.in_episode = true;
@@ -448,6 +466,7 @@ impl Trainer {
                 self.env.steps()
             )));
         }
+        self.relabel_episode();
         self.state.in_episode = false;
         self.state.episode += 1;
         let record = EpisodeRecord {
@@ -476,6 +495,19 @@ impl Trainer {
             }
         }
         Ok(record)
+    }
+
+    /// With `agent.her`: store the relabelled transitions of the episode just ended.
+    fn relabel_episode(&mut self) {
+        let (Some(cfg), Some(her)) = (self.cfg.agent.her, self.state.her.as_mut()) else {
+            return;
+        };
+        let buffer = &mut self.buffer;
+        let (task, reward) = (self.env.task(), self.env.reward_config());
+        self.relabeller.relabel(&cfg, task, reward, &her.log, &mut her.rng, |x| {
+            buffer.push(x.obs, x.action, x.terms.total, x.next_obs, x.terminal)
+        });
+        her.log.begin(self.env.ee_pose().position);
     }
 
     /// The periodic evaluation of the episode just finished, when due (`state.eval_due`, at an
@@ -625,6 +657,9 @@ impl Driver for Collector<'_> {
         let reward = t.step.total();
         self.state.episode_reward += reward;
         self.buffer.push(t.obs, t.action, reward, t.env.observation(), t.step.terminated);
+        if let Some(her) = &mut self.state.her {
+            her.log.push(t);
+        }
         self.state.env_steps += 1;
         let learning = self.state.env_steps >= self.cfg.learning_starts;
         let step = StepUnderWay::of(t.step, if learning { self.cfg.updates_per_step } else { 0 });
