@@ -35,6 +35,7 @@ use std::time::Instant;
 
 use crate::agent::Algo;
 use crate::config::Config;
+use crate::her::HerConfig;
 use crate::reward::RewardFunction;
 use crate::train::{self, final_eval, EvalSummary, Progress, RunDir, TrainOptions};
 use crate::{Error, Result};
@@ -52,6 +53,41 @@ pub struct SweepSpec {
     /// Seed of the evaluation targets (not `train.eval_seed`, which picks the best checkpoint).
     #[serde(default)]
     pub eval_seed: u64,
+    /// Hindsight relabelling variants ([`crate::her`]): each run of the sweep once per entry,
+    /// `"off"` or a goal strategy (`"future"`, `"final"`, `"episode"`, with `k` from
+    /// `[agent.her]`, else 4). Empty (absent): as the preset's `[agent]` says.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub her: Vec<String>,
+}
+
+impl SweepSpec {
+    /// The `agent.her` of each entry of `sweep.her` (`[base]` when empty), `base` giving `k`.
+    fn her_variants(&self, base: Option<HerConfig>) -> Result<Vec<Option<HerConfig>>> {
+        if self.her.is_empty() {
+            return Ok(vec![base]);
+        }
+        let mut out = Vec::new();
+        for h in &self.her {
+            let v = match h.as_str() {
+                "off" => None,
+                s => Some(HerConfig {
+                    strategy: s.parse().map_err(|_| {
+                        Error::config(
+                            "sweep.her",
+                            format!("{:?}", self.her),
+                            "entries \"off\", \"future\", \"final\" or \"episode\"",
+                        )
+                    })?,
+                    ..base.unwrap_or_default()
+                }),
+            };
+            if out.contains(&v) {
+                return Err(Error::config("sweep.her", format!("{:?}", self.her), "distinct entries"));
+            }
+            out.push(v);
+        }
+        Ok(out)
+    }
 }
 
 fn default_trials() -> u32 {
@@ -91,15 +127,16 @@ pub enum RunStatus {
 }
 
 /// The presets bundled with the library (the files in `configs/`), by name.
-pub const BUNDLED_PRESETS: [(&str, &str); 4] = [
+pub const BUNDLED_PRESETS: [(&str, &str); 5] = [
     ("smoke", include_str!("../../../configs/smoke.toml")),
     ("quick", include_str!("../../../configs/quick.toml")),
     ("tuned", include_str!("../../../configs/tuned.toml")),
     ("paper", include_str!("../../../configs/paper.toml")),
+    ("learners", include_str!("../../../configs/learners.toml")),
 ];
 
 impl Preset {
-    /// A bundled preset by name (`smoke`, `quick`, `tuned`, `paper`), else the preset file at that path;
+    /// A bundled preset by name (`smoke`, `quick`, `tuned`, `paper`, `learners`), else the preset file at that path;
     /// with the preset's text (written to the sweep directory as `preset.toml`).
     pub fn resolve(name_or_path: &str) -> Result<(Preset, String)> {
         if let Some((_, text)) = BUNDLED_PRESETS.iter().find(|(n, _)| *n == name_or_path) {
@@ -168,20 +205,27 @@ impl Preset {
         for &algo in &s.algorithms {
             self.base.agent.for_algo(algo).validate()?;
         }
+        s.her_variants(self.base.agent.her)?;
         Ok(())
     }
 
     /// Every run of the sweep, in order.
     pub fn runs(&self) -> Vec<RunSpec> {
+        // Checked by `validate`, which every constructor runs.
+        let variants =
+            self.sweep.her_variants(self.base.agent.her).unwrap_or_else(|_| vec![self.base.agent.her]);
         let mut out = Vec::new();
         for &algo in &self.sweep.algorithms {
             for &reward in &self.sweep.rewards {
-                for &seed in &self.sweep.seeds {
-                    let mut config = self.base.clone();
-                    config.agent = self.base.agent.for_algo(algo);
-                    config.reward.function = reward;
-                    config.train.seed = seed;
-                    out.push(RunSpec { index: out.len(), name: run_name(&config), config });
+                for &her in &variants {
+                    for &seed in &self.sweep.seeds {
+                        let mut config = self.base.clone();
+                        config.agent = self.base.agent.for_algo(algo);
+                        config.agent.her = her;
+                        config.reward.function = reward;
+                        config.train.seed = seed;
+                        out.push(RunSpec { index: out.len(), name: run_name(&config), config });
+                    }
                 }
             }
         }
@@ -580,6 +624,34 @@ mod tests {
                 .unwrap_err()
                 .to_string();
         assert!(e.contains("agent.ddpg.noise_sigma"), "{e}");
+    }
+
+    #[test]
+    fn her_variants_multiply_the_runs() {
+        let text = "[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"basic\", \"sar\"]\nseeds = [1, 2]\nher = [\"off\", \"future\"]\n[agent.her]\nk = 2\n";
+        let p = Preset::from_toml_str(text, Path::new("t.toml")).unwrap();
+        let names: Vec<String> = p.runs().into_iter().map(|r| r.name).collect();
+        assert_eq!(
+            names,
+            [
+                "sac-basic-seed1",
+                "sac-basic-seed2",
+                "sac-basic-her-future-seed1",
+                "sac-basic-her-future-seed2",
+                "sac-sar-seed1",
+                "sac-sar-seed2",
+                "sac-sar-her-future-seed1",
+                "sac-sar-her-future-seed2"
+            ]
+        );
+        let her = p.runs()[2].config.agent.her.unwrap();
+        assert_eq!((her.strategy, her.k), (crate::her::HerStrategy::Future, 2));
+        assert_eq!(p.runs()[0].config.agent.her, None);
+        for bad in ["[\"sometimes\"]", "[\"off\", \"off\"]"] {
+            let t = text.replace("[\"off\", \"future\"]", bad);
+            let e = Preset::from_toml_str(&t, Path::new("t.toml")).unwrap_err().to_string();
+            assert!(e.contains("sweep.her"), "{e}");
+        }
     }
 
     #[test]
