@@ -659,8 +659,12 @@ mod tests {
         for (name, _) in BUNDLED_PRESETS {
             let (p, _) = Preset::resolve(name).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(p.sweep.algorithms, vec![Algo::Ddpg, Algo::Sac], "{name}");
-            assert_eq!(p.sweep.rewards.len(), 5, "{name}");
+            // The paper's presets cover its five rewards; `learners` the sparse one and SAR.
+            let rewards = if name == "learners" { 2 } else { 5 };
+            assert_eq!(p.sweep.rewards.len(), rewards, "{name}");
         }
+        let (learners, _) = Preset::resolve("learners").unwrap();
+        assert_eq!((learners.runs().len(), learners.base.train.episodes), (24, 5000));
         let (paper, _) = Preset::resolve("paper").unwrap();
         assert_eq!(
             (paper.sweep.seeds.len(), paper.base.train.episodes, paper.sweep.eval_trials),
