@@ -218,6 +218,10 @@ impl Preset {
         for &algo in &self.sweep.algorithms {
             for &reward in &self.sweep.rewards {
                 for &her in &variants {
+                    // Relabelling is for the off-policy agents: PPO runs once, without.
+                    if her.is_some() && !algo.is_off_policy() {
+                        continue;
+                    }
                     for &seed in &self.sweep.seeds {
                         let mut config = self.base.clone();
                         config.agent = self.base.agent.for_algo(algo);
@@ -566,7 +570,7 @@ mod tests {
         let cases = [
             ("[train]\nepisodes = 3\n", "no [sweep]"),
             ("[sweep]\nalgorithms = []\nrewards = [\"sar\"]\nseeds = [1]\n", "sweep.algorithms"),
-            ("[sweep]\nalgorithms = [\"ppo\"]\nrewards = [\"sar\"]\nseeds = [1]\n", "ppo"),
+            ("[sweep]\nalgorithms = [\"a2c\"]\nrewards = [\"sar\"]\nseeds = [1]\n", "a2c"),
             ("[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\"]\nseeds = [1, 1]\n", "sweep.seeds"),
             ("[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\"]\nseeds = [1]\nextra = 2\n", "extra"),
             (
@@ -607,7 +611,7 @@ mod tests {
                         "{written}"
                     );
                 }
-                Algo::Td3 => unreachable!("not in the sweep"),
+                Algo::Td3 | Algo::Ppo => unreachable!("not in the sweep"),
             }
             // The run's resolved config.toml reads back as the same config.
             assert_eq!(Config::from_toml_str(&written, Path::new("config.toml")).unwrap(), run.config);

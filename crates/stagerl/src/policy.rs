@@ -145,6 +145,10 @@ impl PolicySpec {
                 ),
             ),
             Algo::Ddpg | Algo::Td3 => ("actor_output", "a = y: the actor's output (tanh) itself".into()),
+            Algo::Ppo => (
+                "actor_output",
+                "a = y: the actor's output, the Gaussian policy's mean (linear; clipped to [-1, 1] in step 4)".into(),
+            ),
         };
         PolicySpec {
             format_version: POLICY_FORMAT_VERSION,

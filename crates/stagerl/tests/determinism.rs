@@ -1,7 +1,7 @@
 //! The same config and seed give the same run: identical episodes.csv (every column but wall
 //! time) and identical final networks, for every algorithm.
 
-use stagerl::agent::Algo;
+use stagerl::agent::{Algo, PpoConfig};
 use stagerl::checkpoint::Checkpoint;
 use stagerl::config::Config;
 use stagerl::her::{HerConfig, HerStrategy};
@@ -23,6 +23,9 @@ fn run_with(
     cfg.agent.algo = algo;
     cfg.agent.her = her;
     cfg.reward.function = reward;
+    // PPO: rollouts small enough for many updates in 40 episodes.
+    cfg.agent.ppo =
+        (algo == Algo::Ppo).then(|| PpoConfig { num_envs: 4, num_steps: 32, ..PpoConfig::default() });
     cfg.agent.hidden = vec![32, 32];
     cfg.agent.batch_size = 64;
     cfg.agent.learning_starts = 300;

@@ -5,7 +5,7 @@
 
 use safetensors::SafeTensors;
 use serde_json::Value;
-use stagerl::agent::Algo;
+use stagerl::agent::{Algo, PpoConfig};
 use stagerl::config::Config;
 use stagerl::env::ReachEnv;
 use stagerl::nalgebra::Vector3;
@@ -122,6 +122,9 @@ fn small_run(dir: &Path, algo: Algo) -> Config {
     cfg.train.eval_every_episodes = 2;
     cfg.train.eval_trials = 3;
     cfg.train.checkpoint_every_episodes = 3;
+    // PPO: a rollout that updates within the 4 episodes.
+    cfg.agent.ppo =
+        (algo == Algo::Ppo).then(|| PpoConfig { num_envs: 2, num_steps: 16, ..PpoConfig::default() });
     std::fs::remove_dir_all(dir).ok();
     stagerl::train::train(&cfg, dir, |_| {}).unwrap();
     cfg

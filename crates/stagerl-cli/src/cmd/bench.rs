@@ -126,7 +126,7 @@ fn env(a: EnvArgs) -> Result<()> {
 }
 
 fn update(a: UpdateArgs) -> Result<()> {
-    use stagerl::agent::{build, AgentConfig};
+    use stagerl::agent::{build_off_policy, AgentConfig};
     use stagerl::replay::Batch;
     let (od, ad) = (16, 6);
     let cfg = AgentConfig {
@@ -137,7 +137,7 @@ fn update(a: UpdateArgs) -> Result<()> {
     };
     // The whole config's validation: its memory estimate refuses networks too large to allocate.
     Config { agent: cfg.clone(), ..Config::default() }.validate()?;
-    let mut agent = build(&cfg, od, ad, 0)?;
+    let mut agent = build_off_policy(&cfg, od, ad, 0)?;
     let mut rng = Rng::new(1);
     let mut batch = Batch::new(a.batch, od, ad);
     for x in batch.obs.iter_mut().chain(batch.next_obs.iter_mut()).chain(batch.act.iter_mut()) {

@@ -22,16 +22,25 @@ pub enum Algo {
     Td3,
     /// Soft Actor-Critic with automatic entropy tuning (Haarnoja et al. 2018), the paper's second.
     Sac,
+    /// Proximal Policy Optimization (Schulman et al. 2017), on-policy, as CleanRL's
+    /// `ppo_continuous_action`.
+    Ppo,
 }
 
 impl Algo {
-    pub const ALL: [Algo; 3] = [Algo::Ddpg, Algo::Td3, Algo::Sac];
+    pub const ALL: [Algo; 4] = [Algo::Ddpg, Algo::Td3, Algo::Sac, Algo::Ppo];
     pub fn name(self) -> &'static str {
         match self {
             Algo::Ddpg => "ddpg",
             Algo::Td3 => "td3",
             Algo::Sac => "sac",
+            Algo::Ppo => "ppo",
         }
+    }
+
+    /// Learns from a replay buffer (DDPG, TD3, SAC), not from fresh rollouts (PPO).
+    pub fn is_off_policy(self) -> bool {
+        self != Algo::Ppo
     }
 }
 
@@ -47,7 +56,7 @@ impl FromStr for Algo {
         Algo::ALL
             .into_iter()
             .find(|a| a.name() == s)
-            .ok_or_else(|| Error::config("agent.algo", s, "one of ddpg, td3, sac"))
+            .ok_or_else(|| Error::config("agent.algo", s, "one of ddpg, td3, sac, ppo"))
     }
 }
 
@@ -104,6 +113,9 @@ pub struct AgentConfig {
     /// `[agent.sac]`; unset: [`SacConfig::default`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sac: Option<SacConfig>,
+    /// `[agent.ppo]`; unset: [`PpoConfig::default`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ppo: Option<PpoConfig>,
     /// `agent.her = { strategy = "future" | "final" | "episode", k = 4 }`: hindsight experience
     /// replay ([`crate::her`]); unset: off (the paper's agents).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -173,6 +185,67 @@ impl Default for SacConfig {
     }
 }
 
+/// `[agent.ppo]`: PPO's rollouts and clipped update (defaults: CleanRL's
+/// `ppo_continuous_action` where the task allows; see each field). PPO uses the shared `hidden`
+/// (tanh units, as CleanRL), `actor_lr` and `critic_lr` (default 3e-4), `gamma` and
+/// `max_grad_norm` (one global norm over all its parameters, as CleanRL's 0.5 when set); the
+/// replay settings (`batch_size`, `buffer_size`, `learning_starts`, `updates_per_step`, `tau`)
+/// are the off-policy agents' and unused.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PpoConfig {
+    /// Environments stepped together (CleanRL: 1; 8 here, as a reaching episode is short).
+    pub num_envs: usize,
+    /// Steps per environment per rollout: a rollout is `num_envs x num_steps` transitions
+    /// (CleanRL: 1 x 2048; 8 x 256 = 2048 here).
+    pub num_steps: usize,
+    /// Passes over each rollout.
+    pub update_epochs: u32,
+    /// Minibatches per pass (the rollout is split into this many).
+    pub num_minibatches: usize,
+    /// GAE lambda.
+    pub gae_lambda: f64,
+    /// Clip range epsilon of the probability ratio (and of the value change, `clip_vloss`).
+    pub clip_coef: f64,
+    /// Clip the value loss around the rollout's values.
+    pub clip_vloss: bool,
+    /// Entropy bonus coefficient.
+    pub ent_coef: f64,
+    /// Value loss coefficient.
+    pub vf_coef: f64,
+    /// Normalise the advantages of each minibatch.
+    pub norm_adv: bool,
+    /// Decay the learning rates linearly to 0 over the run's episodes.
+    pub anneal_lr: bool,
+    /// Initial log standard deviation of the (state-independent) Gaussian policy.
+    pub init_log_std: f64,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        PpoConfig {
+            num_envs: 8,
+            num_steps: 256,
+            update_epochs: 10,
+            num_minibatches: 32,
+            gae_lambda: 0.95,
+            clip_coef: 0.2,
+            clip_vloss: true,
+            ent_coef: 0.0,
+            vf_coef: 0.5,
+            norm_adv: true,
+            anneal_lr: true,
+            init_log_std: 0.0,
+        }
+    }
+}
+
+/// Most environments PPO steps together.
+pub const MAX_PPO_ENVS: usize = 4096;
+
+/// Most transitions in one PPO rollout.
+pub const MAX_PPO_ROLLOUT: usize = 1 << 22;
+
 impl Default for AgentConfig {
     fn default() -> Self {
         AgentConfig {
@@ -190,6 +263,7 @@ impl Default for AgentConfig {
             ddpg: None,
             td3: None,
             sac: None,
+            ppo: None,
             her: None,
         }
     }
@@ -208,13 +282,14 @@ impl PartialEq for AgentConfig {
             )
         };
         shared(self) == shared(other)
-            && (self.ddpg(), self.td3(), self.sac()) == (other.ddpg(), other.td3(), other.sac())
+            && (self.ddpg(), self.td3(), self.sac(), self.ppo())
+                == (other.ddpg(), other.td3(), other.sac(), other.ppo())
             && self.her == other.her
     }
 }
 
 /// Keys that moved from `[agent]` into an algorithm's section, and where they belong.
-const MOVED_KEYS: [(&str, &str); 10] = [
+const MOVED_KEYS: [(&str, &str); 21] = [
     ("noise", "[agent.ddpg] or [agent.td3]"),
     ("noise_sigma", "[agent.ddpg] or [agent.td3]"),
     ("ou_theta", "[agent.ddpg] or [agent.td3]"),
@@ -225,6 +300,17 @@ const MOVED_KEYS: [(&str, &str); 10] = [
     ("init_alpha", "[agent.sac]"),
     ("target_entropy_per_dim", "[agent.sac]"),
     ("fixed_alpha", "[agent.sac]"),
+    ("num_envs", "[agent.ppo]"),
+    ("num_steps", "[agent.ppo]"),
+    ("update_epochs", "[agent.ppo]"),
+    ("num_minibatches", "[agent.ppo]"),
+    ("gae_lambda", "[agent.ppo]"),
+    ("clip_coef", "[agent.ppo]"),
+    ("clip_vloss", "[agent.ppo]"),
+    ("ent_coef", "[agent.ppo]"),
+    ("vf_coef", "[agent.ppo]"),
+    ("norm_adv", "[agent.ppo]"),
+    ("anneal_lr", "[agent.ppo]"),
 ];
 
 impl AgentConfig {
@@ -234,11 +320,12 @@ impl AgentConfig {
     }
 
     /// The actor's learning rate: as set, else 1e-3 for SAC and 3e-4 for DDPG and TD3 (measured
-    /// on the reaching task: SAC at 3e-4 learns about twice as slowly; DDPG at 1e-3 diverges).
+    /// on the reaching task: SAC at 3e-4 learns about twice as slowly; DDPG at 1e-3 diverges)
+    /// and PPO (CleanRL's).
     pub fn actor_lr(&self) -> f64 {
         self.actor_lr.unwrap_or(match self.algo {
             Algo::Sac => 1e-3,
-            Algo::Ddpg | Algo::Td3 => 3e-4,
+            Algo::Ddpg | Algo::Td3 | Algo::Ppo => 3e-4,
         })
     }
 
@@ -246,7 +333,7 @@ impl AgentConfig {
     pub fn critic_lr(&self) -> f64 {
         self.critic_lr.unwrap_or(match self.algo {
             Algo::Sac => 1e-3,
-            Algo::Ddpg | Algo::Td3 => 3e-4,
+            Algo::Ddpg | Algo::Td3 | Algo::Ppo => 3e-4,
         })
     }
 
@@ -265,13 +352,24 @@ impl AgentConfig {
         self.sac.unwrap_or_default()
     }
 
+    /// PPO's settings: `[agent.ppo]`, else its defaults.
+    pub fn ppo(&self) -> PpoConfig {
+        self.ppo.unwrap_or_default()
+    }
+
     /// The config of one run of `algo` from a preset's: only that algorithm's section is kept.
     pub fn for_algo(&self, algo: Algo) -> AgentConfig {
-        let mut c = AgentConfig { algo, ddpg: None, td3: None, sac: None, ..self.clone() };
+        let mut c = AgentConfig { algo, ddpg: None, td3: None, sac: None, ppo: None, ..self.clone() };
         match algo {
             Algo::Ddpg => c.ddpg = self.ddpg,
             Algo::Td3 => c.td3 = self.td3,
             Algo::Sac => c.sac = self.sac,
+            Algo::Ppo => {
+                c.ppo = self.ppo;
+                // Relabelling needs a replay buffer: a preset's `[agent.her]` is for its
+                // off-policy agents.
+                c.her = None;
+            }
         }
         c
     }
@@ -284,13 +382,14 @@ impl AgentConfig {
             Algo::Ddpg => c.ddpg = Some(self.ddpg()),
             Algo::Td3 => c.td3 = Some(self.td3()),
             Algo::Sac => c.sac = Some(self.sac()),
+            Algo::Ppo => c.ppo = Some(self.ppo()),
         }
         c
     }
 
     /// The algorithms whose sections are set.
     pub fn sections(&self) -> Vec<Algo> {
-        let set = [self.ddpg.is_some(), self.td3.is_some(), self.sac.is_some()];
+        let set = [self.ddpg.is_some(), self.td3.is_some(), self.sac.is_some(), self.ppo.is_some()];
         Algo::ALL.into_iter().zip(set).filter(|(_, s)| *s).map(|(a, _)| a).collect()
     }
 
@@ -308,6 +407,13 @@ impl AgentConfig {
     /// names the field, the value and what is allowed.
     pub fn validate(&self) -> Result<()> {
         self.validate_values()?;
+        if self.algo == Algo::Ppo && self.her.is_some() {
+            return Err(Error::config(
+                "agent.her",
+                "a hindsight relabelling setting",
+                "none with agent.algo = \"ppo\": relabelling rewrites a replay buffer, and PPO learns from fresh rollouts (use ddpg, td3 or sac)",
+            ));
+        }
         match self.sections().into_iter().find(|&a| a != self.algo) {
             Some(other) => Err(Error::config(
                 format!("agent.{other}"),
@@ -375,11 +481,51 @@ impl AgentConfig {
             positive("agent.sac.init_alpha", s.init_alpha)?;
             finite("agent.sac.target_entropy_per_dim", s.target_entropy_per_dim)?;
         }
+        if let Some(p) = &self.ppo {
+            validate_ppo(p)?;
+        }
         if let Some(h) = &self.her {
             h.validate()?;
         }
         Ok(())
     }
+}
+
+/// `[agent.ppo]`'s values.
+fn validate_ppo(p: &PpoConfig) -> Result<()> {
+    if p.num_envs == 0 || p.num_envs > MAX_PPO_ENVS {
+        return Err(Error::config(
+            "agent.ppo.num_envs",
+            p.num_envs,
+            format!("an integer in 1..={MAX_PPO_ENVS}"),
+        ));
+    }
+    let rollout = p.num_envs.saturating_mul(p.num_steps);
+    if p.num_steps == 0 || rollout > MAX_PPO_ROLLOUT {
+        return Err(Error::config(
+            "agent.ppo.num_steps",
+            p.num_steps,
+            format!("an integer >= 1 with num_envs x num_steps <= {MAX_PPO_ROLLOUT} transitions a rollout"),
+        ));
+    }
+    if p.num_minibatches == 0 || p.num_minibatches > rollout {
+        return Err(Error::config(
+            "agent.ppo.num_minibatches",
+            p.num_minibatches,
+            format!("an integer in 1..={rollout} (num_envs x num_steps, the rollout's transitions)"),
+        ));
+    }
+    at_least_one("agent.ppo.update_epochs", p.update_epochs.into())?;
+    if !(p.gae_lambda.is_finite() && (0.0..=1.0).contains(&p.gae_lambda)) {
+        return Err(Error::config("agent.ppo.gae_lambda", p.gae_lambda, "a number in [0, 1]"));
+    }
+    positive("agent.ppo.clip_coef", p.clip_coef)?;
+    non_negative("agent.ppo.ent_coef", p.ent_coef)?;
+    non_negative("agent.ppo.vf_coef", p.vf_coef)?;
+    if !(p.init_log_std.is_finite() && (-20.0..=2.0).contains(&p.init_log_std)) {
+        return Err(Error::config("agent.ppo.init_log_std", p.init_log_std, "a number in [-20, 2]"));
+    }
+    Ok(())
 }
 
 /// The exploration noise of `[agent.ddpg]` or `[agent.td3]` (`section`).

@@ -1,18 +1,20 @@
-//! The off-policy agents. Each algorithm reads top to bottom in its own file: [`td3`] (with
-//! DDPG, [`ddpg`], as its one-critic case, as in Stable-Baselines3) and [`sac`]. What they share
-//! (the [`Agent`] verbs, the one list of learned parts that drives saving, loading and the
-//! non-finite guard, exploration noise) lives here once. The replay buffer and the training loop
-//! are in [`crate::replay`] and [`crate::train`].
+//! The agents. Each algorithm reads top to bottom in its own file: the off-policy [`td3`] (with
+//! DDPG, [`ddpg`], as its one-critic case, as in Stable-Baselines3) and [`sac`], and the
+//! on-policy [`ppo`]. What they share (the [`Agent`] verbs, the one list of learned parts that
+//! drives saving, loading and the non-finite guard, exploration noise) lives here once. The
+//! replay buffer and the training loop are in [`crate::replay`] and [`crate::train`].
 
 mod config;
 pub mod ddpg;
 pub mod noise;
 mod parts;
+pub mod ppo;
 pub mod sac;
 pub mod td3;
 
 pub use config::{
-    AgentConfig, Algo, DdpgConfig, NoiseKind, SacConfig, Td3Config, MAX_BATCH_VALUES, MAX_BUFFER_SIZE,
+    AgentConfig, Algo, DdpgConfig, NoiseKind, PpoConfig, SacConfig, Td3Config, MAX_BATCH_VALUES,
+    MAX_BUFFER_SIZE,
 };
 pub use parts::Learned;
 
@@ -54,8 +56,8 @@ pub trait Agent: Send + Learned {
     fn predict(&mut self, obs: &[f32], action: &mut [f32]);
     /// Called at the start of every training episode (resets temporally correlated noise).
     fn begin_episode(&mut self) {}
-    /// One gradient update on a sampled batch.
-    fn update(&mut self, batch: &Batch) -> UpdateStats;
+    /// How it learns: from a replay buffer or from fresh rollouts.
+    fn learner(&mut self) -> Learner<'_>;
 
     /// Write every network, target network, optimiser state and random state to `ck`.
     fn save(&self, ck: &mut Checkpoint) {
@@ -85,13 +87,46 @@ pub trait Agent: Send + Learned {
     }
 }
 
+/// An off-policy agent: it learns from batches sampled from a replay buffer.
+pub trait OffPolicy: Agent {
+    /// One gradient update on a sampled batch.
+    fn update(&mut self, batch: &Batch) -> UpdateStats;
+}
+
+/// An agent as its learning loop needs it.
+pub enum Learner<'a> {
+    OffPolicy(&'a mut dyn OffPolicy),
+    OnPolicy(&'a mut ppo::Ppo),
+}
+
 /// Build the agent the config asks for. `seed` fixes its initial weights and its noise.
 pub fn build(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Result<Box<dyn Agent>> {
+    cfg.validate()?;
+    Ok(match cfg.algo {
+        Algo::Ppo => Box::new(ppo::Ppo::new(cfg, obs_dim, act_dim, seed)),
+        _ => build_off_policy(cfg, obs_dim, act_dim, seed)?,
+    })
+}
+
+/// Build the off-policy agent the config asks for (an error for PPO).
+pub fn build_off_policy(
+    cfg: &AgentConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    seed: u64,
+) -> Result<Box<dyn OffPolicy>> {
     cfg.validate()?;
     Ok(match cfg.algo {
         Algo::Ddpg => Box::new(ddpg::new(cfg, obs_dim, act_dim, seed)),
         Algo::Td3 => Box::new(td3::Td3::new(cfg, obs_dim, act_dim, seed)),
         Algo::Sac => Box::new(sac::Sac::new(cfg, obs_dim, act_dim, seed)),
+        Algo::Ppo => {
+            return Err(crate::Error::config(
+                "agent.algo",
+                "ppo",
+                "an off-policy algorithm here (ddpg, td3, sac)",
+            ))
+        }
     })
 }
 

@@ -14,7 +14,7 @@
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
 
 use super::parts::learned_parts;
-use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, UpdateStats};
+use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, Learner, OffPolicy, UpdateStats};
 use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
 use crate::replay::Batch;
 use crate::rng::Rng;
@@ -132,6 +132,12 @@ impl Agent for Sac {
         self.head.deterministic(raw, 1, action);
     }
 
+    fn learner(&mut self) -> Learner<'_> {
+        Learner::OffPolicy(self)
+    }
+}
+
+impl OffPolicy for Sac {
     fn update(&mut self, batch: &Batch) -> UpdateStats {
         let (b, od, ad) = (batch.size, self.obs_dim, self.act_dim);
         let alpha = self.alpha();

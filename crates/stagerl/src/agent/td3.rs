@@ -18,7 +18,7 @@
 
 use super::noise::ActionNoise;
 use super::parts::learned_parts;
-use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, NoiseKind, UpdateStats};
+use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats};
 use crate::nn::{concat_cols, Activation, Adam, Mlp};
 use crate::replay::Batch;
 use crate::rng::Rng;
@@ -147,6 +147,12 @@ impl Agent for Td3 {
         self.noise.reset();
     }
 
+    fn learner(&mut self) -> Learner<'_> {
+        Learner::OffPolicy(self)
+    }
+}
+
+impl OffPolicy for Td3 {
     fn update(&mut self, batch: &Batch) -> UpdateStats {
         let (b, od, ad) = (batch.size, self.obs_dim, self.act_dim);
         let gamma = self.cfg.gamma as f32;

@@ -25,9 +25,9 @@ fn random_batch(rng: &mut Rng, b: usize, od: usize, ad: usize) -> Batch {
 
 #[test]
 fn every_algorithm_updates_acts_in_range_and_is_deterministic() {
-    for algo in Algo::ALL {
+    for algo in Algo::ALL.into_iter().filter(|a| a.is_off_policy()) {
         let run = || {
-            let mut agent = build(&small_cfg(algo), 16, 6, 7).unwrap();
+            let mut agent = build_off_policy(&small_cfg(algo), 16, 6, 7).unwrap();
             let mut rng = Rng::new(3);
             let batch = random_batch(&mut rng, 16, 16, 6);
             let mut stats = Vec::new();
@@ -55,9 +55,9 @@ fn every_algorithm_updates_acts_in_range_and_is_deterministic() {
 #[test]
 fn critic_fits_a_fixed_target() {
     // With gamma 0 the critic target is the reward itself: the TD loss must fall.
-    for algo in Algo::ALL {
+    for algo in Algo::ALL.into_iter().filter(|a| a.is_off_policy()) {
         let cfg = AgentConfig { gamma: 0.0, critic_lr: Some(1e-3), ..small_cfg(algo) };
-        let mut agent = build(&cfg, 16, 6, 1).unwrap();
+        let mut agent = build_off_policy(&cfg, 16, 6, 1).unwrap();
         let mut rng = Rng::new(5);
         let batch = random_batch(&mut rng, 16, 16, 6);
         let first = agent.update(&batch).critic_loss;
@@ -71,11 +71,11 @@ fn critic_fits_a_fixed_target() {
 
 #[test]
 fn save_load_round_trip_continues_identically() {
-    for algo in Algo::ALL {
+    for algo in Algo::ALL.into_iter().filter(|a| a.is_off_policy()) {
         let cfg = small_cfg(algo);
         let mut rng = Rng::new(9);
         let batch = random_batch(&mut rng, 16, 16, 6);
-        let mut a = build(&cfg, 16, 6, 11).unwrap();
+        let mut a = build_off_policy(&cfg, 16, 6, 11).unwrap();
         for _ in 0..5 {
             a.update(&batch);
         }
@@ -83,7 +83,7 @@ fn save_load_round_trip_continues_identically() {
         a.save(&mut ck);
         let bytes = ck.to_bytes().unwrap();
         let ck = Checkpoint::from_bytes(&bytes, std::path::Path::new("mem")).unwrap();
-        let mut b = build(&cfg, 16, 6, 999).unwrap();
+        let mut b = build_off_policy(&cfg, 16, 6, 999).unwrap();
         b.load(&ck).unwrap();
         for _ in 0..5 {
             assert_eq!(a.update(&batch), b.update(&batch), "{algo}");
@@ -95,7 +95,7 @@ fn save_load_round_trip_continues_identically() {
         assert_eq!(x, y, "{algo}: exploration continues identically");
         // A different network shape is refused with the tensor's name.
         let other = AgentConfig { hidden: vec![16, 16], ..cfg.clone() };
-        let mut c = build(&other, 16, 6, 1).unwrap();
+        let mut c = build_off_policy(&other, 16, 6, 1).unwrap();
         let e = c.load(&ck).unwrap_err().to_string();
         assert!(e.contains("shape"), "{algo}: {e}");
     }
@@ -162,7 +162,7 @@ fn one_list_of_parts_drives_save_load_and_the_guard() {
         ),
     ];
     for (algo, nets, rest) in expected {
-        let mut agent = build(&small_cfg(algo), 16, 6, 5).unwrap();
+        let mut agent = build_off_policy(&small_cfg(algo), 16, 6, 5).unwrap();
         let (names, others) = part_names(agent.as_ref());
         assert_eq!(names, nets, "{algo}");
         assert_eq!(others, rest, "{algo}");

@@ -162,6 +162,28 @@ impl VecEnv {
         Ok(())
     }
 
+    /// Every environment's state (for checkpoints).
+    pub fn states(&self) -> Vec<super::EnvState> {
+        self.envs.iter().map(ReachEnv::state).collect()
+    }
+
+    /// Restore the states of [`VecEnv::states`], one per environment; the observations follow.
+    pub fn restore(&mut self, states: &[super::EnvState]) -> Result<()> {
+        if states.len() != self.envs.len() {
+            return Err(Error::InvalidInput(format!(
+                "{} environment states for a vector env of {}",
+                states.len(),
+                self.envs.len()
+            )));
+        }
+        let d = self.obs_dim();
+        for (i, (env, s)) in self.envs.iter_mut().zip(states).enumerate() {
+            env.restore(s)?;
+            self.obs[i * d..(i + 1) * d].copy_from_slice(env.observation());
+        }
+        Ok(())
+    }
+
     /// Number of environments.
     pub fn len(&self) -> usize {
         self.envs.len()

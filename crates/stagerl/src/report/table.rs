@@ -351,6 +351,7 @@ pub fn algo_title(a: Algo) -> &'static str {
         Algo::Sac => "SAC",
         Algo::Ddpg => "DDPG",
         Algo::Td3 => "TD3",
+        Algo::Ppo => "PPO",
     }
 }
 

@@ -26,6 +26,7 @@
 
 pub mod eval;
 pub mod final_eval;
+mod on_policy;
 pub mod replace;
 
 use serde::{Deserialize, Serialize};
@@ -33,7 +34,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use crate::agent::{self, Agent, AgentConfig, UpdateStats};
+use crate::agent::{self, Agent, AgentConfig, Learner, OffPolicy, UpdateStats};
 use crate::checkpoint::Checkpoint;
 use crate::config::Config;
 use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
@@ -133,6 +134,19 @@ struct LoopState {
     /// Hindsight relabelling (`agent.her`): the episode under way and the goal sampler.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     her: Option<HerState>,
+    /// PPO's environments and rollout ([`on_policy`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    on_policy: Option<on_policy::OnPolicyState>,
+}
+
+/// How an episode ended, as its `episodes.csv` row needs it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+struct EpisodeEnd {
+    /// Eq. 16's `R_episode`.
+    reward: f64,
+    steps: u32,
+    success: bool,
+    final_distance_m: f64,
 }
 
 /// An environment step taken whose updates are not all done yet (see [`LoopState`]); once they
@@ -179,6 +193,7 @@ struct Trainer {
     state: LoopState,
     eval_csv: String,
     relabeller: Relabeller,
+    on_policy: Option<on_policy::OnPolicy>,
 }
 
 impl Trainer {
@@ -205,11 +220,17 @@ impl Trainer {
             step_under_way: None,
             eval_due: false,
             her: cfg.agent.her.map(|_| HerState::new(Rng::derived(seed, 4))),
+            on_policy: None,
         };
+        let on_policy =
+            if cfg.agent.algo.is_off_policy() { None } else { Some(on_policy::OnPolicy::new(cfg, &env)?) };
+        // PPO keeps no replay buffer.
+        let capacity = if on_policy.is_none() { cfg.agent.buffer_size } else { 1 };
         Ok(Trainer {
             hash: config_hash(cfg),
             eval_env: env.clone(),
-            buffer: ReplayBuffer::new(cfg.agent.buffer_size, od, ad)?,
+            buffer: ReplayBuffer::new(capacity, od, ad)?,
+            on_policy,
             batch: Batch::new(cfg.agent.batch_size, od, ad),
             cfg: cfg.clone(),
             dir,
@@ -229,6 +250,9 @@ impl Trainer {
         self.state.replay_pos = self.buffer.position();
         for (name, data) in self.buffer.arrays() {
             ck.put_tensor(name, &[data.len()], data);
+        }
+        if let Some(op) = &self.on_policy {
+            self.state.on_policy = Some(op.save(&mut ck));
         }
         ck.put_json("train_state", &self.state);
         ck.put_meta("eval_csv", self.eval_csv.clone());
@@ -294,6 +318,17 @@ impl Trainer {
             [data[0], data[1], data[2], data[3], data[4]],
         )?;
         t.env.restore(&t.state.env)?;
+        match (&mut t.on_policy, &t.state.on_policy) {
+            (Some(op), Some(s)) => op.restore(ck, s)?,
+            (None, None) => {}
+            _ => {
+                return Err(Error::InvalidInput(format!(
+                    "{}: its training state does not match the run's algorithm ({})",
+                    path.display(),
+                    cfg.agent.algo
+                )))
+            }
+        }
         t.eval_csv = ck.meta("eval_csv")?.to_string();
         Ok(t)
     }
@@ -349,10 +384,10 @@ impl Trainer {
             return Err(self.stopped(e, wall()));
         }
         while self.state.episode < episodes {
-            let Some(last) = self.collect_episode(&mut scratch, &mut last_stats, &stop_requested)? else {
+            let Some(end) = self.next_episode(&mut scratch, &mut last_stats, &stop_requested)? else {
                 return Err(self.interrupted(wall()));
             };
-            let record = self.end_episode(&last, wall(), &mut logs, last_stats.as_ref())?;
+            let record = self.end_episode(&end, wall(), &mut logs, last_stats.as_ref())?;
             self.state.eval_due = self.cfg.train.is_eval_point(record.episode);
             let eval = match self.periodic_eval(&mut logs.tb, opts.stop) {
                 Ok(eval) => eval,
@@ -406,6 +441,36 @@ impl Trainer {
         }
     }
 
+    /// The next episode to log: the off-policy agents collect one ([`Trainer::collect_episode`]),
+    /// PPO steps its environments until one ends ([`on_policy`]). `None` when a stop request
+    /// left it unfinished.
+    fn next_episode(
+        &mut self,
+        scratch: &mut Scratch,
+        last_stats: &mut Option<UpdateStats>,
+        stop_requested: &dyn Fn() -> bool,
+    ) -> Result<Option<EpisodeEnd>> {
+        if let Some(op) = &mut self.on_policy {
+            let Learner::OnPolicy(ppo) = self.agent.learner() else {
+                return Err(Error::InvalidInput(format!(
+                    "agent.algo = {}: not an on-policy agent",
+                    self.cfg.agent.algo
+                )));
+            };
+            return op.next_episode(ppo, &mut self.state, last_stats, stop_requested);
+        }
+        let Some(last) = self.collect_episode(scratch, last_stats, stop_requested)? else {
+            return Ok(None);
+        };
+        self.relabel_episode();
+        Ok(Some(EpisodeEnd {
+            reward: self.state.episode_reward,
+            steps: self.env.steps(),
+            success: last.terminated,
+            final_distance_m: f64::from_bits(last.final_distance_m_bits),
+        }))
+    }
+
     /// Collect a step at a time until the episode under way (or a new one) ends: the eq. 16
     /// rollout of the exploring agent, storing every transition and updating after each step
     /// (first the updates left of a step a stop interrupted). `None` when a stop request left
@@ -417,8 +482,14 @@ impl Trainer {
         stop_requested: &dyn Fn() -> bool,
     ) -> Result<Option<StepUnderWay>> {
         let steps = self.env.steps();
+        let Learner::OffPolicy(agent) = self.agent.learner() else {
+            return Err(Error::InvalidInput(format!(
+                "agent.algo = {}: not an off-policy agent",
+                self.cfg.agent.algo
+            )));
+        };
         let mut collector = Collector {
-            agent: self.agent.as_mut(),
+            agent,
             buffer: &mut self.buffer,
             batch: &mut self.batch,
             state: &mut self.state,
@@ -454,7 +525,7 @@ impl Trainer {
     /// End an episode: check the networks, count it, write its row and its TensorBoard scalars.
     fn end_episode(
         &mut self,
-        last: &StepUnderWay,
+        end: &EpisodeEnd,
         wall_s: f64,
         logs: &mut Logs,
         stats: Option<&UpdateStats>,
@@ -466,15 +537,14 @@ impl Trainer {
                 self.env.steps()
             )));
         }
-        self.relabel_episode();
         self.state.in_episode = false;
         self.state.episode += 1;
         let record = EpisodeRecord {
             episode: self.state.episode,
-            reward: self.state.episode_reward,
-            steps: self.env.steps(),
-            success: last.terminated,
-            final_distance_m: f64::from_bits(last.final_distance_m_bits),
+            reward: end.reward,
+            steps: end.steps,
+            success: end.success,
+            final_distance_m: end.final_distance_m,
             env_steps: self.state.env_steps,
             wall_s,
         };
@@ -589,7 +659,7 @@ struct Logs {
 /// Algorithm 1 at each step of a training episode: explore (uniform actions before
 /// `learning_starts`, then the agent's exploring policy), store the transition, update.
 struct Collector<'a> {
-    agent: &'a mut dyn Agent,
+    agent: &'a mut dyn OffPolicy,
     buffer: &'a mut ReplayBuffer,
     batch: &'a mut Batch,
     state: &'a mut LoopState,

@@ -1,0 +1,199 @@
+//! The on-policy side of the training loop (PPO): `num_envs` environments stepped together
+//! ([`VecEnv`], same-step autoreset), their steps recorded into a [`Rollout`], an update when it
+//! is full, and the episodes they end handed to the loop one at a time, so that the episode
+//! log, the periodic evaluations, the best checkpoint and the stops are those of every agent.
+//!
+//! Everything it holds (the environments mid-episode, the rollout so far, the episodes ended but
+//! not yet logged) is saved in `latest.safetensors`, so a resumed PPO run is bit-identical to an
+//! uninterrupted one, as the off-policy runs are. A stop is honoured between environment steps
+//! (one update, milliseconds at the default sizes, runs to its end).
+
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+use super::{EpisodeEnd, LoopState};
+use crate::agent::ppo::{Ppo, Rollout};
+use crate::agent::UpdateStats;
+use crate::checkpoint::Checkpoint;
+use crate::config::Config;
+use crate::env::{EnvState, ReachEnv, VecEnv};
+use crate::rng::Rng;
+use crate::{Error, Result};
+
+/// The saved state of [`OnPolicy`] (with the rollout's arrays as tensors).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(super) struct OnPolicyState {
+    envs: Vec<EnvState>,
+    /// Each environment's episode under way: reward so far (eq. 16) and steps.
+    episode_reward: Vec<f64>,
+    episode_steps: Vec<u32>,
+    /// Episodes ended, not yet handed to the loop.
+    ended: Vec<EpisodeEnd>,
+    /// Steps recorded in the rollout.
+    rollout_steps: usize,
+}
+
+/// PPO's environments and rollout.
+pub(super) struct OnPolicy {
+    vec: VecEnv,
+    rollout: Rollout,
+    episode_reward: Vec<f64>,
+    episode_steps: Vec<u32>,
+    ended: VecDeque<EpisodeEnd>,
+    gamma: f64,
+    anneal_lr: bool,
+    episodes: u64,
+    // Scratch.
+    actions: Vec<f32>,
+    logp: Vec<f32>,
+    values: Vec<f32>,
+    final_values: Vec<f32>,
+}
+
+impl OnPolicy {
+    /// The environments of run `cfg` (the arm, task and reward of `env`), their targets drawn
+    /// from the run's seed.
+    pub(super) fn new(cfg: &Config, env: &ReachEnv) -> Result<OnPolicy> {
+        let p = cfg.agent.ppo();
+        let seed = Rng::derived(cfg.train.seed, 5).next_u64();
+        let vec = VecEnv::new(
+            p.num_envs,
+            env.chain().clone(),
+            env.task().clone(),
+            env.reward_config().clone(),
+            seed,
+        )?;
+        let (n, ad) = (p.num_envs, env.act_dim());
+        Ok(OnPolicy {
+            rollout: Rollout::new(&p, env.obs_dim(), ad),
+            vec,
+            episode_reward: vec![0.0; n],
+            episode_steps: vec![0; n],
+            ended: VecDeque::new(),
+            gamma: cfg.agent.gamma,
+            anneal_lr: p.anneal_lr,
+            episodes: cfg.train.episodes,
+            actions: vec![0.0; n * ad],
+            logp: vec![0.0; n],
+            values: vec![0.0; n],
+            final_values: vec![0.0; n],
+        })
+    }
+
+    /// The next ended episode, stepping the environments (and updating) until one ends; `None`
+    /// when `stop_requested` says so first.
+    pub(super) fn next_episode(
+        &mut self,
+        ppo: &mut Ppo,
+        st: &mut LoopState,
+        last_stats: &mut Option<UpdateStats>,
+        stop_requested: &dyn Fn() -> bool,
+    ) -> Result<Option<EpisodeEnd>> {
+        loop {
+            if let Some(e) = self.ended.pop_front() {
+                return Ok(Some(e));
+            }
+            if stop_requested() {
+                return Ok(None);
+            }
+            self.step(ppo, st, last_stats)?;
+        }
+    }
+
+    /// One step of every environment, recorded; the update when the rollout is full.
+    fn step(
+        &mut self,
+        ppo: &mut Ppo,
+        st: &mut LoopState,
+        last_stats: &mut Option<UpdateStats>,
+    ) -> Result<()> {
+        let n = self.vec.len();
+        ppo.act_batch(self.vec.observations(), n, &mut self.actions, &mut self.logp, &mut self.values);
+        if let Some(i) = self.actions.iter().position(|a| !a.is_finite()) {
+            return Err(Error::NumericalFault(format!(
+                "the policy's action value {i} = {} at episode {} (update {}); the last good checkpoint is left in place",
+                self.actions[i],
+                st.episode + 1,
+                st.updates
+            )));
+        }
+        self.rollout.record_step(self.vec.observations(), &self.actions, &self.logp, &self.values);
+        self.vec.step(&self.actions)?;
+        // A time limit is bootstrapped through: gamma V(s_final) joins the reward.
+        if self.vec.truncated().iter().any(|&t| t) {
+            ppo.values(self.vec.final_observations(), n, &mut self.final_values);
+        }
+        for i in 0..n {
+            let (r, term, trunc) = (self.vec.rewards()[i], self.vec.terminated()[i], self.vec.truncated()[i]);
+            self.episode_reward[i] += r;
+            self.episode_steps[i] += 1;
+            let boot = if trunc { self.gamma * f64::from(self.final_values[i]) } else { 0.0 };
+            self.rollout.record_outcome(i, r + boot, term || trunc);
+            if term || trunc {
+                self.ended.push_back(EpisodeEnd {
+                    reward: self.episode_reward[i],
+                    steps: self.episode_steps[i],
+                    success: term,
+                    final_distance_m: self.vec.last_steps()[i].terms.distance,
+                });
+                self.episode_reward[i] = 0.0;
+                self.episode_steps[i] = 0;
+            }
+        }
+        self.rollout.t += 1;
+        st.env_steps += n as u64;
+        if self.rollout.is_full() {
+            ppo.values(self.vec.observations(), n, &mut self.values);
+            if self.anneal_lr {
+                ppo.set_lr_fraction((1.0 - st.episode as f64 / self.episodes.max(1) as f64).max(0.0));
+            }
+            let stats = ppo.update(&mut self.rollout, &self.values);
+            self.rollout.t = 0;
+            st.updates += stats.steps;
+            for (what, v) in [("value loss", stats.value_loss), ("policy loss", stats.policy_loss)] {
+                if !v.is_finite() {
+                    return Err(Error::NumericalFault(format!(
+                        "{what} = {v} at episode {} (update {}); the last good checkpoint is left in place",
+                        st.episode + 1,
+                        st.updates
+                    )));
+                }
+            }
+            *last_stats = Some(stats.into());
+        }
+        Ok(())
+    }
+
+    /// Write the rollout's arrays to `ck` and return the rest of the state.
+    pub(super) fn save(&self, ck: &mut Checkpoint) -> OnPolicyState {
+        for (name, data) in Rollout::ARRAY_NAMES.iter().zip(self.rollout.arrays()) {
+            ck.put_tensor(name, &[data.len()], data);
+        }
+        OnPolicyState {
+            envs: self.vec.states(),
+            episode_reward: self.episode_reward.clone(),
+            episode_steps: self.episode_steps.clone(),
+            ended: self.ended.iter().copied().collect(),
+            rollout_steps: self.rollout.t,
+        }
+    }
+
+    /// Restore what [`OnPolicy::save`] wrote.
+    pub(super) fn restore(&mut self, ck: &Checkpoint, s: &OnPolicyState) -> Result<()> {
+        let n = self.vec.len();
+        if s.episode_reward.len() != n || s.episode_steps.len() != n {
+            return Err(Error::InvalidInput(format!(
+                "PPO state for {} environments, the config has agent.ppo.num_envs = {n}",
+                s.episode_reward.len()
+            )));
+        }
+        self.vec.restore(&s.envs)?;
+        let data: Vec<&[f32]> =
+            Rollout::ARRAY_NAMES.iter().map(|name| ck.tensor(name).map(|(_, d)| d)).collect::<Result<_>>()?;
+        self.rollout.restore(s.rollout_steps, [data[0], data[1], data[2], data[3], data[4], data[5]])?;
+        self.episode_reward.copy_from_slice(&s.episode_reward);
+        self.episode_steps.copy_from_slice(&s.episode_steps);
+        self.ended = s.ended.iter().copied().collect();
+        Ok(())
+    }
+}
