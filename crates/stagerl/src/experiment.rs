@@ -127,16 +127,17 @@ pub enum RunStatus {
 }
 
 /// The presets bundled with the library (the files in `configs/`), by name.
-pub const BUNDLED_PRESETS: [(&str, &str); 5] = [
+pub const BUNDLED_PRESETS: [(&str, &str); 6] = [
     ("smoke", include_str!("../../../configs/smoke.toml")),
     ("quick", include_str!("../../../configs/quick.toml")),
     ("tuned", include_str!("../../../configs/tuned.toml")),
     ("paper", include_str!("../../../configs/paper.toml")),
     ("learners", include_str!("../../../configs/learners.toml")),
+    ("learners-long", include_str!("../../../configs/learners-long.toml")),
 ];
 
 impl Preset {
-    /// A bundled preset by name (`smoke`, `quick`, `tuned`, `paper`, `learners`), else the preset file at that path;
+    /// A bundled preset by name (`smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long`), else the preset file at that path;
     /// with the preset's text (written to the sweep directory as `preset.toml`).
     pub fn resolve(name_or_path: &str) -> Result<(Preset, String)> {
         if let Some((_, text)) = BUNDLED_PRESETS.iter().find(|(n, _)| *n == name_or_path) {
@@ -660,15 +661,21 @@ mod tests {
 
     #[test]
     fn bundled_presets_parse() {
-        for (name, _) in BUNDLED_PRESETS {
+        for (name, _) in BUNDLED_PRESETS.iter().filter(|(n, _)| !n.starts_with("learners")) {
             let (p, _) = Preset::resolve(name).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(p.sweep.algorithms, vec![Algo::Ddpg, Algo::Sac], "{name}");
-            // The paper's presets cover its five rewards; `learners` the sparse one and SAR.
-            let rewards = if name == "learners" { 2 } else { 5 };
-            assert_eq!(p.sweep.rewards.len(), rewards, "{name}");
+            // The paper's presets cover its five rewards.
+            assert_eq!(p.sweep.rewards.len(), 5, "{name}");
         }
+        // DDPG and SAC with and without HER, PPO once: 2 x 3 x 2 x 3 + 3 x 3.
         let (learners, _) = Preset::resolve("learners").unwrap();
-        assert_eq!((learners.runs().len(), learners.base.train.episodes), (24, 5000));
+        assert_eq!((learners.runs().len(), learners.base.train.episodes), (45, 5000));
+        assert!(learners
+            .runs()
+            .iter()
+            .all(|r| r.config.agent.algo.is_off_policy() || r.config.agent.her.is_none()));
+        let (long, _) = Preset::resolve("learners-long").unwrap();
+        assert_eq!((long.runs().len(), long.base.train.episodes), (6, 30000));
         let (paper, _) = Preset::resolve("paper").unwrap();
         assert_eq!(
             (paper.sweep.seeds.len(), paper.base.train.episodes, paper.sweep.eval_trials),

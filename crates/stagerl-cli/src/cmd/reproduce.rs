@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// `smoke`, `quick`, `tuned`, `paper`, `learners` (bundled, see configs/), or a path to a preset TOML file.
+    /// `smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long` (bundled, see configs/), or a path to a preset TOML file.
     #[arg(long)]
     preset: String,
     /// Output directory: one run directory per algorithm x reward x seed.

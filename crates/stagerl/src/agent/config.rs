@@ -187,10 +187,9 @@ impl Default for SacConfig {
 
 /// `[agent.ppo]`: PPO's rollouts and clipped update (defaults: CleanRL's
 /// `ppo_continuous_action` where the task allows; see each field). PPO uses the shared `hidden`
-/// (tanh units, as CleanRL), `actor_lr` and `critic_lr` (default 3e-4), `gamma` and
-/// `max_grad_norm` (one global norm over all its parameters, as CleanRL's 0.5 when set); the
-/// replay settings (`batch_size`, `buffer_size`, `learning_starts`, `updates_per_step`, `tau`)
-/// are the off-policy agents' and unused.
+/// (tanh units, as CleanRL), `actor_lr` and `critic_lr` (default 3e-4) and `gamma`; the shared
+/// `max_grad_norm` (per network) and the replay settings (`batch_size`, `buffer_size`,
+/// `learning_starts`, `updates_per_step`, `tau`) are the off-policy agents' and unused.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PpoConfig {
@@ -219,6 +218,9 @@ pub struct PpoConfig {
     pub anneal_lr: bool,
     /// Initial log standard deviation of the (state-independent) Gaussian policy.
     pub init_log_std: f64,
+    /// Clip the gradient of all PPO's parameters together to this L2 norm (CleanRL: 0.5); 0
+    /// disables.
+    pub max_grad_norm: f64,
 }
 
 impl Default for PpoConfig {
@@ -236,6 +238,7 @@ impl Default for PpoConfig {
             norm_adv: true,
             anneal_lr: true,
             init_log_std: 0.0,
+            max_grad_norm: 0.5,
         }
     }
 }
@@ -522,6 +525,7 @@ fn validate_ppo(p: &PpoConfig) -> Result<()> {
     positive("agent.ppo.clip_coef", p.clip_coef)?;
     non_negative("agent.ppo.ent_coef", p.ent_coef)?;
     non_negative("agent.ppo.vf_coef", p.vf_coef)?;
+    non_negative("agent.ppo.max_grad_norm", p.max_grad_norm)?;
     if !(p.init_log_std.is_finite() && (-20.0..=2.0).contains(&p.init_log_std)) {
         return Err(Error::config("agent.ppo.init_log_std", p.init_log_std, "a number in [-20, 2]"));
     }

@@ -18,7 +18,7 @@
 //!    (`clip_vloss`; else `1/2 mean (V - R)^2`);
 //! 4. entropy of the diagonal Gaussian `H = sum_j (log sigma_j + 1/2 log(2 pi e))`;
 //! 5. one Adam step (eps 1e-5) on `L_pi - ent_coef H + vf_coef L_V`, the gradient clipped to
-//!    one global norm over every parameter (`max_grad_norm` > 0).
+//!    one global norm over every parameter (`[agent.ppo] max_grad_norm` > 0).
 
 use super::parts::learned_parts;
 use super::{sizes, Agent, AgentConfig, Algo, Learner, PpoConfig, UpdateStats};
@@ -269,10 +269,10 @@ impl Ppo {
         self.actor.backward(&self.d_mean);
         self.critic.zero_grad();
         self.critic.backward(&self.d_v);
-        if self.cfg.max_grad_norm > 0.0 {
+        if self.p.max_grad_norm > 0.0 {
             let sq = |g: &[f32]| g.iter().map(|&x| f64::from(x) * f64::from(x)).sum::<f64>();
             let norm = (sq(self.actor.grads()) + sq(self.critic.grads()) + sq(&self.log_std_grad)).sqrt();
-            let coef = self.cfg.max_grad_norm / (norm + 1e-6);
+            let coef = self.p.max_grad_norm / (norm + 1e-6);
             if coef < 1.0 {
                 let c = coef as f32;
                 self.actor.grads_mut().iter_mut().for_each(|g| *g *= c);
