@@ -23,6 +23,16 @@ fn sigkill_then_resume_with_her_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-her", &config);
 }
 
+/// The same with PPO (small rollouts, so that kills land between updates and inside rollouts).
+#[test]
+fn sigkill_then_resume_with_ppo_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[agent.ppo]\nnum_envs = 4\nnum_steps = 16\n",
+        CONFIG.replace("[agent]\n", "[agent]\nalgo = \"ppo\"\n")
+    );
+    sigkills_then_resume("resume-kill-ppo", &config);
+}
+
 fn sigkills_then_resume(name: &str, config: &str) {
     let root = scratch(name);
     let cfg = root.join("c.toml");

@@ -31,7 +31,22 @@ fn sigterm_then_resume_with_her_gives_the_uninterrupted_run() {
     sigterms_then_resume("resume-sigterm-her", &config, 89);
 }
 
+/// PPO: the environments mid-episode, the rollout so far and the episodes ended but not yet
+/// logged are all part of the saved state.
+#[test]
+fn sigterm_then_resume_with_ppo_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}\n[agent.ppo]\nnum_envs = 4\nnum_steps = 32\n",
+        CONFIG.replace("[agent]\n", "[agent]\nalgo = \"ppo\"\n").replace("episodes = 160", "episodes = 400")
+    );
+    sigterms_then_resume_n("resume-sigterm-ppo", &config, 90, 400);
+}
+
 fn sigterms_then_resume(name: &str, config: &str, seed: u64) {
+    sigterms_then_resume_n(name, config, seed, EPISODES)
+}
+
+fn sigterms_then_resume_n(name: &str, config: &str, seed: u64, episodes: u64) {
     let root = scratch(name);
     let cfg = root.join("c.toml");
     std::fs::write(&cfg, config).unwrap();
@@ -75,6 +90,12 @@ fn sigterms_then_resume(name: &str, config: &str, seed: u64) {
     let out = run(&["train", "--resume", &s(&cut), "--eval-trials", "0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    assert_same_run(&full, &cut, EPISODES as usize, 4, &format!("after SIGTERMs after episodes {stops:?}"));
+    assert_same_run(
+        &full,
+        &cut,
+        episodes as usize,
+        (episodes / 40) as usize,
+        &format!("after SIGTERMs after episodes {stops:?}"),
+    );
     std::fs::remove_dir_all(&root).ok();
 }

@@ -81,7 +81,7 @@ pub fn assert_same_run(full: &Path, cut: &Path, episodes: usize, evals: usize, w
     let ck =
         |d: &Path| stagerl::checkpoint::Checkpoint::load(&d.join("checkpoints/final.safetensors")).unwrap();
     let (a, b) = (ck(full), ck(cut));
-    assert!(a.tensor_names().count() > 20);
+    assert!(a.tensor_names().count() > 15);
     assert!(a.same_contents(&b), "final networks or metadata differ {what}");
 }
 
