@@ -43,7 +43,7 @@ def run_cli(stagerl_bin, *args, stdin=None):
     return p.stdout
 
 
-@pytest.fixture(scope="module", params=["ddpg", "td3", "sac"])
+@pytest.fixture(scope="module", params=["ddpg", "td3", "sac", "ppo"])
 def exported(request, stagerl_bin, tmp_path_factory):
     """A tiny trained run of the algorithm, its exported model and the model's session."""
     d = tmp_path_factory.mktemp(f"onnx-{request.param}")

@@ -515,7 +515,7 @@ mod tests {
         for t in 0..3 {
             assert!((f64::from(r.adv[2 * t]) - a0[t]).abs() < 1e-6, "env 0 step {t}");
             assert!((f64::from(r.adv[2 * t + 1]) - a1[t]).abs() < 1e-6, "env 1 step {t}");
-            assert!((r.returns[2 * t] - (r.adv[2 * t] + values[t][0] as f32)).abs() < 1e-6);
+            assert!((r.returns[2 * t] - (r.adv[2 * t] + values[t][0])).abs() < 1e-6);
         }
     }
 
