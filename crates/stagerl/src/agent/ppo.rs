@@ -184,87 +184,103 @@ impl Ppo {
 
     /// Steps 2-5 on the rollout rows `self.idx[rows]`.
     fn minibatch(&mut self, r: &Rollout, rows: std::ops::Range<usize>) -> PpoStats {
+        self.gather(r, rows.clone());
+        let inv_b = 1.0 / rows.len() as f64;
+        let (policy_loss, approx_kl, clipped) = self.policy_gradients(r, rows.clone());
+        // 4. The entropy bonus: dH/d log sigma_j = 1, the same for every row.
+        let entropy: f64 = self.log_std.iter().map(|&l| f64::from(l) + HALF_LOG_2PI + 0.5).sum();
+        for g in &mut self.log_std_grad {
+            *g -= self.p.ent_coef as f32;
+        }
+        let value_loss = self.value_gradients(r, rows);
+        self.apply_gradients();
+        PpoStats { policy_loss, value_loss, entropy, approx_kl, clip_fraction: clipped as f64 * inv_b, steps: 1 }
+    }
+
+    /// The minibatch's observations, actions and (normalised, `norm_adv`) advantages.
+    fn gather(&mut self, r: &Rollout, rows: std::ops::Range<usize>) {
         let (od, ad, b) = (self.obs_dim, self.act_dim, rows.len());
-        let eps = self.p.clip_coef;
         self.mb_obs.clear();
         self.mb_act.clear();
         self.mb_adv.clear();
-        for &k in &self.idx[rows.clone()] {
+        for &k in &self.idx[rows] {
             self.mb_obs.extend_from_slice(&r.obs[k * od..(k + 1) * od]);
             self.mb_act.extend_from_slice(&r.actions[k * ad..(k + 1) * ad]);
             self.mb_adv.push(r.adv[k]);
         }
         if self.p.norm_adv && b > 1 {
             let mean = self.mb_adv.iter().map(|&a| f64::from(a)).sum::<f64>() / b as f64;
-            let var =
-                self.mb_adv.iter().map(|&a| (f64::from(a) - mean).powi(2)).sum::<f64>() / (b - 1) as f64;
+            let var = self.mb_adv.iter().map(|&a| (f64::from(a) - mean).powi(2)).sum::<f64>() / (b - 1) as f64;
             let sd = var.sqrt() + 1e-8;
             self.mb_adv.iter_mut().for_each(|a| *a = ((f64::from(*a) - mean) / sd) as f32);
         }
-        // 2. The policy loss and its gradients (w.r.t. the mean and log sigma).
+    }
+
+    /// Step 2: the policy loss and its gradients (w.r.t. the mean, into `d_mean`, and log sigma);
+    /// returns (loss, approximate KL, clipped samples).
+    fn policy_gradients(&mut self, r: &Rollout, rows: std::ops::Range<usize>) -> (f64, f64, usize) {
+        let (ad, b, eps) = (self.act_dim, rows.len(), self.p.clip_coef);
+        let inv_b = 1.0 / b as f64;
         self.d_mean.resize(b * ad, 0.0);
         self.log_std_grad.fill(0.0);
-        let inv_b = 1.0 / b as f64;
         let (mut pg, mut kl, mut clipped) = (0.0, 0.0, 0usize);
-        {
-            let mean = self.actor.forward(&self.mb_obs, b);
-            for (row, &k) in self.idx[rows.clone()].iter().enumerate() {
-                let mut logp = 0.0f64;
-                for j in 0..ad {
-                    let ls = f64::from(self.log_std[j]);
-                    let z = (f64::from(self.mb_act[row * ad + j]) - f64::from(mean[row * ad + j])) / ls.exp();
-                    logp += -0.5 * z * z - ls - HALF_LOG_2PI;
-                }
-                let log_ratio = logp - f64::from(r.logp[k]);
-                let ratio = log_ratio.exp();
-                let adv = f64::from(self.mb_adv[row]);
-                let (l1, l2) = (-adv * ratio, -adv * ratio.clamp(1.0 - eps, 1.0 + eps));
-                pg += l1.max(l2) * inv_b;
-                kl += ((ratio - 1.0) - log_ratio) * inv_b;
-                let inside = (1.0 - eps..=1.0 + eps).contains(&ratio);
-                clipped += usize::from(!inside);
-                // dL/dlogp = dL/drho * rho; the clipped branch has no gradient outside the range.
-                let d_logp = if l1 >= l2 || inside { -adv * ratio * inv_b } else { 0.0 };
-                for j in 0..ad {
-                    let ls = f64::from(self.log_std[j]);
-                    let z = (f64::from(self.mb_act[row * ad + j]) - f64::from(mean[row * ad + j])) / ls.exp();
-                    // d logp / d mean = z / sigma; d logp / d log sigma = z^2 - 1.
-                    self.d_mean[row * ad + j] = (d_logp * z / ls.exp()) as f32;
-                    self.log_std_grad[j] += (d_logp * (z * z - 1.0)) as f32;
-                }
+        let mean = self.actor.forward(&self.mb_obs, b);
+        for (row, &k) in self.idx[rows].iter().enumerate() {
+            let z = |j: usize| {
+                let sigma = f64::from(self.log_std[j]).exp();
+                ((f64::from(self.mb_act[row * ad + j]) - f64::from(mean[row * ad + j])) / sigma, sigma)
+            };
+            let logp: f64 = (0..ad).map(|j| -0.5 * z(j).0 * z(j).0 - f64::from(self.log_std[j]) - HALF_LOG_2PI).sum();
+            let log_ratio = logp - f64::from(r.logp[k]);
+            let ratio = log_ratio.exp();
+            let adv = f64::from(self.mb_adv[row]);
+            let (l1, l2) = (-adv * ratio, -adv * ratio.clamp(1.0 - eps, 1.0 + eps));
+            pg += l1.max(l2) * inv_b;
+            kl += ((ratio - 1.0) - log_ratio) * inv_b;
+            let inside = (1.0 - eps..=1.0 + eps).contains(&ratio);
+            clipped += usize::from(!inside);
+            // dL/dlogp = dL/drho * rho; the clipped branch has no gradient outside the range.
+            let d_logp = if l1 >= l2 || inside { -adv * ratio * inv_b } else { 0.0 };
+            for j in 0..ad {
+                // d logp / d mean = z / sigma; d logp / d log sigma = z^2 - 1.
+                let (z, sigma) = z(j);
+                self.d_mean[row * ad + j] = (d_logp * z / sigma) as f32;
+                self.log_std_grad[j] += (d_logp * (z * z - 1.0)) as f32;
             }
         }
-        // 4. The entropy bonus: dH/d log sigma_j = 1, the same for every row.
-        let entropy: f64 = self.log_std.iter().map(|&l| f64::from(l) + HALF_LOG_2PI + 0.5).sum();
-        for g in &mut self.log_std_grad {
-            *g -= self.p.ent_coef as f32;
-        }
-        // 3. The value loss and its gradient.
+        (pg, kl, clipped)
+    }
+
+    /// Step 3: the value loss, its gradient (times `vf_coef`) into `d_v`.
+    fn value_gradients(&mut self, r: &Rollout, rows: std::ops::Range<usize>) -> f64 {
+        let (b, eps) = (rows.len(), self.p.clip_coef);
+        let inv_b = 1.0 / b as f64;
         self.d_v.resize(b, 0.0);
         let mut vloss = 0.0;
-        {
-            let v = self.critic.forward(&self.mb_obs, b);
-            for (row, &k) in self.idx[rows].iter().enumerate() {
-                let (v, v_old, ret) = (f64::from(v[row]), f64::from(r.values[k]), f64::from(r.returns[k]));
-                let unclipped = (v - ret).powi(2);
-                let delta = (v - v_old).clamp(-eps, eps);
-                let clipped_v = v_old + delta;
-                let clipped_l = (clipped_v - ret).powi(2);
-                let grad = if !self.p.clip_vloss || unclipped >= clipped_l {
-                    vloss += 0.5 * unclipped * inv_b;
-                    v - ret
+        let v = self.critic.forward(&self.mb_obs, b);
+        for (row, &k) in self.idx[rows].iter().enumerate() {
+            let (v, v_old, ret) = (f64::from(v[row]), f64::from(r.values[k]), f64::from(r.returns[k]));
+            let unclipped = (v - ret).powi(2);
+            let clipped_v = v_old + (v - v_old).clamp(-eps, eps);
+            let clipped = (clipped_v - ret).powi(2);
+            let grad = if !self.p.clip_vloss || unclipped >= clipped {
+                vloss += 0.5 * unclipped * inv_b;
+                v - ret
+            } else {
+                vloss += 0.5 * clipped * inv_b;
+                if (v - v_old).abs() < eps {
+                    clipped_v - ret
                 } else {
-                    vloss += 0.5 * clipped_l * inv_b;
-                    if (v - v_old).abs() < eps {
-                        clipped_v - ret
-                    } else {
-                        0.0
-                    }
-                };
-                self.d_v[row] = (self.p.vf_coef * grad * inv_b) as f32;
-            }
+                    0.0
+                }
+            };
+            self.d_v[row] = (self.p.vf_coef * grad * inv_b) as f32;
         }
-        // 5. Backward, one global clip, Adam.
+        vloss
+    }
+
+    /// Step 5: backward through both networks, one global clip, Adam.
+    fn apply_gradients(&mut self) {
         self.actor.zero_grad();
         self.actor.backward(&self.d_mean);
         self.critic.zero_grad();
@@ -285,14 +301,6 @@ impl Ppo {
         let (p, g) = self.critic.params_and_grads();
         self.critic_opt.step(p, g);
         self.log_std_opt.step(&mut self.log_std, &self.log_std_grad);
-        PpoStats {
-            policy_loss: pg,
-            value_loss: vloss,
-            entropy,
-            approx_kl: kl,
-            clip_fraction: clipped as f64 * inv_b,
-            steps: 1,
-        }
     }
 }
 
