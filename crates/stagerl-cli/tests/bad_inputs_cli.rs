@@ -31,7 +31,9 @@ const GOOD_REWARD: &str =
 #[rustfmt::skip]
 const ARGS: &[Case] = &[
     // Unknown algorithm or reward, bad numbers.
-    Case { args: &["train", "--algo", "ppo"], stdin: "", expect: &["ppo", "ddpg, td3, sac"] },
+    Case { args: &["train", "--algo", "a2c"], stdin: "", expect: &["a2c", "ddpg, td3, sac, ppo"] },
+    Case { args: &["train", "--algo", "ppo", "--her", "future"], stdin: "", expect: &["agent.her", "ppo"] },
+    Case { args: &["train", "--her", "sometimes"], stdin: "", expect: &["sometimes", "future, final, episode"] },
     Case { args: &["train", "--reward", "sparse"], stdin: "", expect: &["sparse", "basic, posture, stride, har, sar"] },
     Case { args: &["train", "--episodes=-5"], stdin: "", expect: &["--episodes", "-5"] },
     Case { args: &["train", "--episodes", "-5"], stdin: "", expect: &["-5"] },
@@ -72,7 +74,7 @@ const ARGS: &[Case] = &[
     Case { args: &["bench", "env", "--steps=-1"], stdin: "", expect: &["--steps", "-1"] },
     Case { args: &["bench", "update", "--hidden", "0"], stdin: "", expect: &["agent.hidden"] },
     Case { args: &["bench", "update", "--batch", "0"], stdin: "", expect: &["agent.batch_size"] },
-    Case { args: &["bench", "update", "--algo", "ppo"], stdin: "", expect: &["ppo"] },
+    Case { args: &["bench", "update", "--algo", "ppo"], stdin: "", expect: &["ppo", "off-policy"] },
     // Unbounded resources: refused before allocating, with the estimate.
     Case { args: &["train", "--config", "$DIR/huge_hidden.toml", "--out", "$DIR/out/hh"], stdin: "", expect: &["agent.hidden", "would need about 60.8 GiB"] },
     Case { args: &["train", "--config", "$DIR/huge_replay.toml", "--out", "$DIR/out/hr"], stdin: "", expect: &["agent.buffer_size", "replay buffer 14.9"] },

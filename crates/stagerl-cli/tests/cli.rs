@@ -254,10 +254,10 @@ fn unwritable_output_directory_is_refused_before_training() {
 
 #[test]
 fn help_lists_the_allowed_values_of_every_enumerated_option() {
-    let algos = "[possible values: ddpg, td3, sac]";
+    let algos = "[possible values: ddpg, td3, sac, ppo]";
     let rewards = "[possible values: basic, posture, stride, har, sar]";
     for (args, wanted) in [
-        (&["train", "--help"][..], &[algos, rewards][..]),
+        (&["train", "--help"][..], &[algos, rewards, "[possible values: future, final, episode]"][..]),
         (&["reward", "--help"], &[rewards]),
         (&["bench", "update", "--help"], &[algos]),
         (&["bench", "env", "--help"], &[rewards]),

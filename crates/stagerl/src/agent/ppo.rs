@@ -194,7 +194,14 @@ impl Ppo {
         }
         let value_loss = self.value_gradients(r, rows);
         self.apply_gradients();
-        PpoStats { policy_loss, value_loss, entropy, approx_kl, clip_fraction: clipped as f64 * inv_b, steps: 1 }
+        PpoStats {
+            policy_loss,
+            value_loss,
+            entropy,
+            approx_kl,
+            clip_fraction: clipped as f64 * inv_b,
+            steps: 1,
+        }
     }
 
     /// The minibatch's observations, actions and (normalised, `norm_adv`) advantages.
@@ -210,7 +217,8 @@ impl Ppo {
         }
         if self.p.norm_adv && b > 1 {
             let mean = self.mb_adv.iter().map(|&a| f64::from(a)).sum::<f64>() / b as f64;
-            let var = self.mb_adv.iter().map(|&a| (f64::from(a) - mean).powi(2)).sum::<f64>() / (b - 1) as f64;
+            let var =
+                self.mb_adv.iter().map(|&a| (f64::from(a) - mean).powi(2)).sum::<f64>() / (b - 1) as f64;
             let sd = var.sqrt() + 1e-8;
             self.mb_adv.iter_mut().for_each(|a| *a = ((f64::from(*a) - mean) / sd) as f32);
         }
@@ -230,7 +238,8 @@ impl Ppo {
                 let sigma = f64::from(self.log_std[j]).exp();
                 ((f64::from(self.mb_act[row * ad + j]) - f64::from(mean[row * ad + j])) / sigma, sigma)
             };
-            let logp: f64 = (0..ad).map(|j| -0.5 * z(j).0 * z(j).0 - f64::from(self.log_std[j]) - HALF_LOG_2PI).sum();
+            let logp: f64 =
+                (0..ad).map(|j| -0.5 * z(j).0 * z(j).0 - f64::from(self.log_std[j]) - HALF_LOG_2PI).sum();
             let log_ratio = logp - f64::from(r.logp[k]);
             let ratio = log_ratio.exp();
             let adv = f64::from(self.mb_adv[row]);

@@ -59,11 +59,16 @@ pub fn variant_label(cfg: &Config) -> String {
     let base = flat_config(&defaults);
     let this = flat_config(cfg);
     let keys: std::collections::BTreeSet<&String> = base.keys().chain(this.keys()).collect();
-    let diffs: Vec<String> = keys
+    // Hindsight relabelling is named as such, first.
+    let her = cfg.agent.her.map(|h| format!("HER ({}, k={})", h.strategy.name(), h.k));
+    let diffs: Vec<String> = her
         .into_iter()
-        .filter(|k| !IGNORED_KEYS.contains(&k.as_str()))
-        .filter(|k| base.get(*k) != this.get(*k))
-        .map(|k| format!("{k}={}", this.get(k).map(String::as_str).unwrap_or("(unset)")))
+        .chain(
+            keys.into_iter()
+                .filter(|k| !IGNORED_KEYS.contains(&k.as_str()) && !k.starts_with("agent.her."))
+                .filter(|k| base.get(*k) != this.get(*k))
+                .map(|k| format!("{k}={}", this.get(k).map(String::as_str).unwrap_or("(unset)"))),
+        )
         .collect();
     if diffs.is_empty() {
         "defaults".into()
@@ -160,7 +165,7 @@ pub fn group_runs(runs: Vec<RunData>, include_incomplete: bool) -> Vec<Group> {
 }
 
 /// The algorithms in Table 1's order (the paper's SAC and DDPG, then ours).
-pub const ALGO_ORDER: [Algo; 3] = [Algo::Sac, Algo::Ddpg, Algo::Td3];
+pub const ALGO_ORDER: [Algo; 4] = [Algo::Sac, Algo::Ddpg, Algo::Td3, Algo::Ppo];
 
 /// One run's indicators.
 #[derive(Clone, Debug, Serialize)]
@@ -772,6 +777,8 @@ mod tests {
         c.agent.gamma = 0.99;
         c.train.episodes = 1500;
         assert_eq!(variant_label(&c), "agent.gamma=0.99, train.episodes=1500");
+        c.agent.her = Some(crate::her::HerConfig::default());
+        assert_eq!(variant_label(&c), "HER (future, k=4), agent.gamma=0.99, train.episodes=1500");
     }
 
     #[test]
