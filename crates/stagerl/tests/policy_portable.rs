@@ -156,7 +156,8 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
                 let ee = env.ee_pose().position;
                 let obs = p.observation(&q, [ee.x, ee.y, ee.z], t);
                 assert_eq!(obs, env.observation(), "observation of trial {trial}");
-                let mine = p.action(&obs);
+                // Step 4 clips the action to [-1, 1] (PPO's mean can leave it; a tanh output cannot).
+                let mine: Vec<f32> = p.action(&obs).iter().map(|a| a.clamp(-1.0, 1.0)).collect();
                 agent.predict(env.observation(), &mut action);
                 for (a, b) in mine.iter().zip(&action) {
                     worst = worst.max(f64::from((a - b).abs()));
