@@ -175,7 +175,7 @@ fn report_of_synthetic_runs() {
     write_run(&root.join("sweep/ddpg-posture-2"), Algo::Ddpg, RewardFunction::Posture, 2, 300.0, 250, true);
     // An unreadable config, and a run whose episodes.csv is malformed.
     std::fs::create_dir_all(root.join("broken")).unwrap();
-    std::fs::write(root.join("broken/config.toml"), "[agent]\nalgo = \"ppo\"\n").unwrap();
+    std::fs::write(root.join("broken/config.toml"), "[agent]\nalgo = \"a2c\"\n").unwrap();
     std::fs::write(root.join("broken/episodes.csv"), "").unwrap();
     write_run(&root.join("bad-csv"), Algo::Sac, RewardFunction::Har, 1, 100.0, 10, false);
     std::fs::write(root.join("bad-csv/episodes.csv"), "episode,reward\n1,2\n").unwrap();
