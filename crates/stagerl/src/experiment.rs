@@ -218,11 +218,10 @@ impl Preset {
         let mut out = Vec::new();
         for &algo in &self.sweep.algorithms {
             for &reward in &self.sweep.rewards {
-                for &her in &variants {
-                    // Relabelling is for the off-policy agents: PPO runs once, without.
-                    if her.is_some() && !algo.is_off_policy() {
-                        continue;
-                    }
+                // Relabelling is for the off-policy agents: PPO runs once, without.
+                let algo_variants: &[Option<HerConfig>] =
+                    if algo.is_off_policy() { &variants } else { &[None] };
+                for &her in algo_variants {
                     for &seed in &self.sweep.seeds {
                         let mut config = self.base.clone();
                         config.agent = self.base.agent.for_algo(algo);
@@ -649,6 +648,16 @@ mod tests {
                 "sac-sar-her-future-seed2"
             ]
         );
+        // PPO in the same sweep runs once per reward and seed, without relabelling, also when
+        // only `[agent.her]` asks for it.
+        let with_ppo = text.replace("[\"sac\"]", "[\"sac\", \"ppo\"]");
+        for t in [with_ppo.clone(), with_ppo.replace("her = [\"off\", \"future\"]\n", "")] {
+            let runs = Preset::from_toml_str(&t, Path::new("t.toml")).unwrap().runs();
+            let ppo: Vec<&str> =
+                runs.iter().filter(|r| r.config.agent.algo == Algo::Ppo).map(|r| r.name.as_str()).collect();
+            assert_eq!(ppo, ["ppo-basic-seed1", "ppo-basic-seed2", "ppo-sar-seed1", "ppo-sar-seed2"], "{t}");
+            assert!(runs.iter().all(|r| r.config.validate().is_ok()));
+        }
         let her = p.runs()[2].config.agent.her.unwrap();
         assert_eq!((her.strategy, her.k), (crate::her::HerStrategy::Future, 2));
         assert_eq!(p.runs()[0].config.agent.her, None);

@@ -49,6 +49,9 @@ pub struct Ppo {
     d_mean: Vec<f32>,
     d_v: Vec<f32>,
     eps: Vec<f32>,
+    /// sigma_j = exp(log sigma_j) of a minibatch, and z_j of one of its rows.
+    sigma: Vec<f64>,
+    z: Vec<f64>,
 }
 
 /// What one PPO update measured (the means over its minibatches).
@@ -98,6 +101,8 @@ impl Ppo {
             d_mean: Vec::new(),
             d_v: Vec::new(),
             eps: Vec::new(),
+            sigma: Vec::new(),
+            z: Vec::new(),
         }
     }
 
@@ -231,15 +236,20 @@ impl Ppo {
         let inv_b = 1.0 / b as f64;
         self.d_mean.resize(b * ad, 0.0);
         self.log_std_grad.fill(0.0);
+        self.sigma.clear();
+        self.sigma.extend(self.log_std.iter().map(|&l| f64::from(l).exp()));
+        self.z.resize(ad, 0.0);
         let (mut pg, mut kl, mut clipped) = (0.0, 0.0, 0usize);
         let mean = self.actor.forward(&self.mb_obs, b);
         for (row, &k) in self.idx[rows].iter().enumerate() {
-            let z = |j: usize| {
-                let sigma = f64::from(self.log_std[j]).exp();
-                ((f64::from(self.mb_act[row * ad + j]) - f64::from(mean[row * ad + j])) / sigma, sigma)
-            };
-            let logp: f64 =
-                (0..ad).map(|j| -0.5 * z(j).0 * z(j).0 - f64::from(self.log_std[j]) - HALF_LOG_2PI).sum();
+            // z_j = (a_j - mean_j) / sigma_j, once per row.
+            for j in 0..ad {
+                self.z[j] =
+                    (f64::from(self.mb_act[row * ad + j]) - f64::from(mean[row * ad + j])) / self.sigma[j];
+            }
+            let logp: f64 = (0..ad)
+                .map(|j| -0.5 * self.z[j] * self.z[j] - f64::from(self.log_std[j]) - HALF_LOG_2PI)
+                .sum();
             let log_ratio = logp - f64::from(r.logp[k]);
             let ratio = log_ratio.exp();
             let adv = f64::from(self.mb_adv[row]);
@@ -252,7 +262,7 @@ impl Ppo {
             let d_logp = if l1 >= l2 || inside { -adv * ratio * inv_b } else { 0.0 };
             for j in 0..ad {
                 // d logp / d mean = z / sigma; d logp / d log sigma = z^2 - 1.
-                let (z, sigma) = z(j);
+                let (z, sigma) = (self.z[j], self.sigma[j]);
                 self.d_mean[row * ad + j] = (d_logp * z / sigma) as f32;
                 self.log_std_grad[j] += (d_logp * (z * z - 1.0)) as f32;
             }
