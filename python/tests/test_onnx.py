@@ -8,8 +8,9 @@ ONNX checker.
   q += v * dt clamped to the limits) on the 100 targets of a `stagerl eval` reaches exactly the
   targets that evaluation reached.
 
-Each algorithm is covered: DDPG and TD3 (the actor's tanh output) and SAC (tanh of the
-mean half). The runs are tiny (trained here in a few seconds): parity needs no good policy, and
+Each algorithm is covered: DDPG and TD3 (the actor's tanh output), SAC (tanh of the
+mean half), PPO (the linear mean, clipped) and PPO with normalised observations (`norm_obs`:
+the model subtracts the running means and divides by the standard deviations first). The runs are tiny (trained here in a few seconds): parity needs no good policy, and
 the rollout comparison holds for any success count; a larger success radius (beta = 0.05 m)
 makes some targets reached.
 """
@@ -43,18 +44,20 @@ def run_cli(stagerl_bin, *args, stdin=None):
     return p.stdout
 
 
-@pytest.fixture(scope="module", params=["ddpg", "td3", "sac", "ppo"])
+@pytest.fixture(scope="module", params=["ddpg", "td3", "sac", "ppo", "ppo-norm"])
 def exported(request, stagerl_bin, tmp_path_factory):
     """A tiny trained run of the algorithm, its exported model and the model's session."""
     d = tmp_path_factory.mktemp(f"onnx-{request.param}")
-    (d / "tiny.toml").write_text(TINY)
+    algo, norm = request.param.split("-")[0], request.param.endswith("-norm")
+    (d / "tiny.toml").write_text(TINY + ("[agent.ppo]\nnorm_obs = { clip = 10.0 }\n" if norm else ""))
     run = d / "run"
-    run_cli(stagerl_bin, "train", "--config", str(d / "tiny.toml"), "--algo", request.param,
+    run_cli(stagerl_bin, "train", "--config", str(d / "tiny.toml"), "--algo", algo,
             "--episodes", "150", "--seed", "5", "--eval-trials", "10", "--out", str(run))
     model = d / "policy.onnx"
     run_cli(stagerl_bin, "export", "--run", str(run), "--out", str(model))
     session = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
-    return request.param, run, model, session
+    assert ("obs_norm.mean" in [i.name for i in onnx.load(str(model)).graph.initializer]) == norm
+    return algo, run, model, session
 
 
 def policy_of(run: pathlib.Path) -> dict:

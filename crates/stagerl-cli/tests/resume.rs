@@ -23,11 +23,13 @@ fn sigkill_then_resume_with_her_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-her", &config);
 }
 
-/// The same with PPO (small rollouts, so that kills land between updates and inside rollouts).
+/// The same with PPO (small rollouts, so that kills land between updates and inside rollouts),
+/// with observation normalisation, whose running statistics must survive the kills too (the
+/// SIGTERM test runs PPO without it).
 #[test]
 fn sigkill_then_resume_with_ppo_gives_the_uninterrupted_run() {
     let config = format!(
-        "{}[agent.ppo]\nnum_envs = 4\nnum_steps = 16\n",
+        "{}[agent.ppo]\nnum_envs = 4\nnum_steps = 16\nnorm_obs = {{ clip = 5.0 }}\n",
         CONFIG.replace("[agent]\n", "[agent]\nalgo = \"ppo\"\n")
     );
     sigkills_then_resume("resume-kill-ppo", &config);

@@ -6,7 +6,9 @@
 //! 1. observation (f32, `observation.dim` values, in the order of `observation.layout`):
 //!    `q / pi` (one per joint, q in radians), the end-effector position (3, metres, base frame),
 //!    the target (3, metres), `obs_delta_scale * (target - end effector)` (3) and
-//!    `obs_delta_scale * |target - end effector|` (1);
+//!    `obs_delta_scale * |target - end effector|` (1); when `observation.normalization` is
+//!    present (PPO with `norm_obs`), each value is then normalised in f32,
+//!    `x' = clip((x - mean) / std, -clip, clip)`, with the tensors it names (shape `[dim]`);
 //! 2. the actor: for each entry of `actor.layers` in order, `x <- f(W x + b)` with `W` the tensor
 //!    named `weight` (shape `[out, in]`), `b` the tensor named `bias` and `f` its `activation`
 //!    (`relu`: max(z, 0); `tanh`; `identity`);
@@ -27,8 +29,9 @@ use crate::nn::Activation;
 /// The checkpoint metadata key of the [`PolicySpec`].
 pub const POLICY_KEY: &str = "policy";
 
-/// The version of the [`PolicySpec`] format.
-pub const POLICY_FORMAT_VERSION: u32 = 1;
+/// The version of the [`PolicySpec`] format: 2 when the observation is normalised (a reader of
+/// format 1 would not know to), else 1.
+pub const POLICY_FORMAT_VERSION: u32 = 2;
 
 /// A checkpoint's policy, described for running it anywhere (see the module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -55,6 +58,21 @@ pub struct ObservationSpec {
     pub obs_delta_scale: f64,
     /// The entries in order.
     pub layout: Vec<ObsEntry>,
+    /// The running normalisation the actor's input goes through, if any (format 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub normalization: Option<NormalizationSpec>,
+}
+
+/// `x' = clip((x - mean) / std, -clip, clip)` per observation value, in f32.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NormalizationSpec {
+    /// Name of the f32 tensor of means, shape `[dim]`.
+    pub mean: String,
+    /// Name of the f32 tensor of standard deviations, `sqrt(variance + 1e-8)`, shape `[dim]`.
+    pub std: String,
+    pub clip: f64,
+    /// The rule in words.
+    pub rule_text: String,
 }
 
 /// One block of the observation.
@@ -150,13 +168,24 @@ impl PolicySpec {
                 "a = y: the actor's output, the Gaussian policy's mean (linear; clipped to [-1, 1] in step 4)".into(),
             ),
         };
+        let mut observation = observation_spec(env);
+        observation.normalization = agent.obs_norm().map(|n| NormalizationSpec {
+            mean: crate::agent::obs_norm::MEAN_TENSOR.into(),
+            std: crate::agent::obs_norm::STD_TENSOR.into(),
+            clip: f64::from(n.clip),
+            rule_text: format!(
+                "x[i] = clip((x[i] - mean[i]) / std[i], -{0}, {0}) in f32, the statistics of the \
+                 observations seen in training (running mean; std = sqrt(variance + 1e-8))",
+                n.clip
+            ),
+        });
         PolicySpec {
-            format_version: POLICY_FORMAT_VERSION,
+            format_version: if observation.normalization.is_some() { POLICY_FORMAT_VERSION } else { 1 },
             algorithm: agent.algo().name().into(),
             robot: cfg.robot.urdf.clone(),
             tip_link: chain.tip_link().into(),
             joint_names: chain.joints().iter().map(|j| j.name.clone()).collect(),
-            observation: observation_spec(env),
+            observation,
             actor: ActorSpec { layers },
             action: ActionSpec {
                 dim: n,
@@ -192,5 +221,5 @@ fn observation_spec(env: &ReachEnv) -> ObservationSpec {
             e
         })
         .collect();
-    ObservationSpec { dim: env.obs_dim(), obs_delta_scale: k, layout }
+    ObservationSpec { dim: env.obs_dim(), obs_delta_scale: k, layout, normalization: None }
 }

@@ -1,6 +1,7 @@
 //! The same config and seed give the same run: identical episodes.csv (every column but wall
 //! time) and identical final networks, for every algorithm.
 
+use stagerl::agent::obs_norm::ObsNormConfig;
 use stagerl::agent::{Algo, PpoConfig};
 use stagerl::checkpoint::Checkpoint;
 use stagerl::config::Config;
@@ -19,13 +20,19 @@ fn run_with(
     her: Option<HerConfig>,
     reward: RewardFunction,
 ) -> (Vec<String>, Checkpoint) {
+    run_cfg(algo, seed, tag, |cfg| {
+        cfg.agent.her = her;
+        cfg.reward.function = reward;
+    })
+}
+
+fn run_cfg(algo: Algo, seed: u64, tag: &str, tweak: impl Fn(&mut Config)) -> (Vec<String>, Checkpoint) {
     let mut cfg = Config::default();
     cfg.agent.algo = algo;
-    cfg.agent.her = her;
-    cfg.reward.function = reward;
     // PPO: rollouts small enough for many updates in 40 episodes.
     cfg.agent.ppo =
         (algo == Algo::Ppo).then(|| PpoConfig { num_envs: 4, num_steps: 32, ..PpoConfig::default() });
+    tweak(&mut cfg);
     cfg.agent.hidden = vec![32, 32];
     cfg.agent.batch_size = 64;
     cfg.agent.learning_starts = 300;
@@ -34,11 +41,7 @@ fn run_with(
     cfg.train.eval_every_episodes = 20;
     cfg.train.eval_trials = 5;
     cfg.train.checkpoint_every_episodes = 10;
-    let dir = std::env::temp_dir().join(format!(
-        "stagerl-det-{}-{algo}-{seed}-{tag}-{}",
-        std::process::id(),
-        her.is_some()
-    ));
+    let dir = std::env::temp_dir().join(format!("stagerl-det-{}-{algo}-{seed}-{tag}", std::process::id(),));
     let summary = train(&cfg, &dir, |_| {}).unwrap();
     assert!(summary.updates > 500, "updates happened: {}", summary.updates);
     let text = std::fs::read_to_string(RunDir::new(&dir).episodes()).unwrap();
@@ -88,4 +91,26 @@ fn her_runs_are_deterministic_and_differ_from_plain_runs() {
             "{algo}: relabelling changed nothing"
         );
     }
+}
+
+/// PPO with observation normalisation: deterministic, the statistics saved with the networks
+/// (and they moved from their start), and a run other than the plain one.
+#[test]
+fn ppo_with_observation_normalisation_is_deterministic_and_differs_from_plain_ppo() {
+    let norm = |cfg: &mut Config| {
+        let p = cfg.agent.ppo.as_mut().unwrap();
+        p.norm_obs = Some(ObsNormConfig::default());
+    };
+    let (a, ca) = run_cfg(Algo::Ppo, 5, "norm-a", norm);
+    let (b, cb) = run_cfg(Algo::Ppo, 5, "norm-b", norm);
+    assert_eq!(a, b, "PPO + norm_obs: episodes.csv differs between identical runs");
+    for n in ca.tensor_names() {
+        assert_eq!(ca.tensor(n).unwrap(), cb.tensor(n).unwrap(), "PPO + norm_obs: tensor {n}");
+    }
+    let stats: serde_json::Value = ca.json("obs_norm").unwrap();
+    assert!(stats["count"].as_f64().unwrap() > 1000.0, "statistics merged: {stats}");
+    let (_, std) = ca.tensor("obs_norm.std").unwrap();
+    assert!(std.iter().all(|&s| s.is_finite() && s > 0.0) && std.iter().any(|&s| s < 0.9), "{std:?}");
+    let (plain, _) = run(Algo::Ppo, 5, "norm-plain");
+    assert_ne!(a, plain, "normalisation changed nothing");
 }

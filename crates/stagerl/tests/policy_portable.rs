@@ -5,6 +5,7 @@
 
 use safetensors::SafeTensors;
 use serde_json::Value;
+use stagerl::agent::obs_norm::ObsNormConfig;
 use stagerl::agent::{Algo, PpoConfig};
 use stagerl::config::Config;
 use stagerl::env::ReachEnv;
@@ -75,6 +76,16 @@ impl Portable {
     /// The deterministic action, in [-1, 1].
     fn action(&self, obs: &[f32]) -> Vec<f32> {
         let mut x = obs.to_vec();
+        let norm = &self.spec["observation"]["normalization"];
+        if !norm.is_null() {
+            assert_eq!(self.spec["format_version"], 2, "a normalised observation is format 2");
+            let (_, mean) = &self.tensors[norm["mean"].as_str().unwrap()];
+            let (_, std) = &self.tensors[norm["std"].as_str().unwrap()];
+            let c = norm["clip"].as_f64().unwrap() as f32;
+            for i in 0..x.len() {
+                x[i] = ((x[i] - mean[i]) / std[i]).clamp(-c, c);
+            }
+        }
         for layer in self.spec["actor"]["layers"].as_array().unwrap() {
             let (wshape, w) = &self.tensors[layer["weight"].as_str().unwrap()];
             let (_, b) = &self.tensors[layer["bias"].as_str().unwrap()];
@@ -111,7 +122,7 @@ impl Portable {
     }
 }
 
-fn small_run(dir: &Path, algo: Algo) -> Config {
+fn small_run(dir: &Path, algo: Algo, norm_obs: bool) -> Config {
     let mut cfg = Config::default();
     cfg.agent.algo = algo;
     cfg.agent.hidden = vec![24, 16];
@@ -122,9 +133,14 @@ fn small_run(dir: &Path, algo: Algo) -> Config {
     cfg.train.eval_every_episodes = 2;
     cfg.train.eval_trials = 3;
     cfg.train.checkpoint_every_episodes = 3;
-    // PPO: a rollout that updates within the 4 episodes.
-    cfg.agent.ppo =
-        (algo == Algo::Ppo).then(|| PpoConfig { num_envs: 2, num_steps: 16, ..PpoConfig::default() });
+    // PPO: a rollout that updates within the 4 episodes (and, as asked, normalised observations).
+    let norm_obs = norm_obs.then(ObsNormConfig::default);
+    cfg.agent.ppo = (algo == Algo::Ppo).then(|| PpoConfig {
+        num_envs: 2,
+        num_steps: 16,
+        norm_obs,
+        ..PpoConfig::default()
+    });
     std::fs::remove_dir_all(dir).ok();
     stagerl::train::train(&cfg, dir, |_| {}).unwrap();
     cfg
@@ -133,13 +149,16 @@ fn small_run(dir: &Path, algo: Algo) -> Config {
 #[test]
 fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
     let root = std::env::temp_dir().join(format!("stagerl-portable-{}", std::process::id()));
-    for algo in Algo::ALL {
-        let dir = root.join(algo.name());
-        let cfg = small_run(&dir, algo);
+    let variants = Algo::ALL.into_iter().map(|a| (a, false)).chain([(Algo::Ppo, true)]);
+    for (algo, norm_obs) in variants {
+        let dir = root.join(format!("{algo}-{norm_obs}"));
+        let cfg = small_run(&dir, algo, norm_obs);
         for kind in ["latest", "final", "best"] {
             let path = dir.join("checkpoints").join(format!("{kind}.safetensors"));
             let p = Portable::load(&path);
             assert_eq!(p.spec["algorithm"], algo.name());
+            assert_eq!(p.spec["observation"]["normalization"].is_null(), !norm_obs);
+            assert_eq!(p.spec["format_version"], if norm_obs { 2 } else { 1 });
             let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
             let mut agent = stagerl::train::load_agent(&cfg, &env, &path).unwrap();
             let (lo, hi) = (p.floats(&["action", "lower_limits"]), p.floats(&["action", "upper_limits"]));

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
+use super::obs_norm::ObsNormConfig;
 use crate::her::HerConfig;
 use crate::validate::{at_least_one, finite, non_negative, positive};
 use crate::{Error, Result};
@@ -221,6 +222,11 @@ pub struct PpoConfig {
     /// Clip the gradient of all PPO's parameters together to this L2 norm (CleanRL: 0.5); 0
     /// disables.
     pub max_grad_norm: f64,
+    /// `norm_obs = { clip = 10.0 }`: normalise observations with running statistics
+    /// ([`super::obs_norm`]; CleanRL always does); unset: off (written only when set, so that
+    /// earlier runs' configs keep their hash).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub norm_obs: Option<ObsNormConfig>,
 }
 
 impl Default for PpoConfig {
@@ -239,6 +245,7 @@ impl Default for PpoConfig {
             anneal_lr: true,
             init_log_std: 0.0,
             max_grad_norm: 0.5,
+            norm_obs: None,
         }
     }
 }
@@ -292,7 +299,7 @@ impl PartialEq for AgentConfig {
 }
 
 /// Keys that moved from `[agent]` into an algorithm's section, and where they belong.
-const MOVED_KEYS: [(&str, &str); 21] = [
+const MOVED_KEYS: [(&str, &str); 22] = [
     ("noise", "[agent.ddpg] or [agent.td3]"),
     ("noise_sigma", "[agent.ddpg] or [agent.td3]"),
     ("ou_theta", "[agent.ddpg] or [agent.td3]"),
@@ -314,6 +321,7 @@ const MOVED_KEYS: [(&str, &str); 21] = [
     ("vf_coef", "[agent.ppo]"),
     ("norm_adv", "[agent.ppo]"),
     ("anneal_lr", "[agent.ppo]"),
+    ("norm_obs", "[agent.ppo]"),
 ];
 
 impl AgentConfig {
@@ -528,6 +536,9 @@ fn validate_ppo(p: &PpoConfig) -> Result<()> {
     non_negative("agent.ppo.max_grad_norm", p.max_grad_norm)?;
     if !(p.init_log_std.is_finite() && (-20.0..=2.0).contains(&p.init_log_std)) {
         return Err(Error::config("agent.ppo.init_log_std", p.init_log_std, "a number in [-20, 2]"));
+    }
+    if let Some(n) = &p.norm_obs {
+        n.validate("agent.ppo.norm_obs")?;
     }
     Ok(())
 }

@@ -7,6 +7,7 @@
 mod config;
 pub mod ddpg;
 pub mod noise;
+pub mod obs_norm;
 mod parts;
 pub mod ppo;
 pub mod sac;
@@ -54,6 +55,11 @@ pub trait Agent: Send + Learned {
     fn act(&mut self, obs: &[f32], action: &mut [f32]);
     /// Deterministic action for one observation (evaluation, deployment), in [-1, 1].
     fn predict(&mut self, obs: &[f32], action: &mut [f32]);
+    /// The running observation normalisation the actor's input goes through (PPO with
+    /// `norm_obs`), if any: [`Agent::predict`] applies it; an export must too.
+    fn obs_norm(&self) -> Option<&obs_norm::ObsNorm> {
+        None
+    }
     /// Called at the start of every training episode (resets temporally correlated noise).
     fn begin_episode(&mut self) {}
     /// How it learns: from a replay buffer or from fresh rollouts.

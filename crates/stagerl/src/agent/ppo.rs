@@ -19,7 +19,12 @@
 //! 4. entropy of the diagonal Gaussian `H = sum_j (log sigma_j + 1/2 log(2 pi e))`;
 //! 5. one Adam step (eps 1e-5) on `L_pi - ent_coef H + vf_coef L_V`, the gradient clipped to
 //!    one global norm over every parameter (`[agent.ppo] max_grad_norm` > 0).
+//!
+//! With `norm_obs`, both networks read observations normalised by running statistics
+//! ([`super::obs_norm`]), updated on each batch the policy acts on in training; the rollout
+//! keeps the normalised observations, as CleanRL's does.
 
+use super::obs_norm::ObsNorm;
 use super::parts::learned_parts;
 use super::{sizes, Agent, AgentConfig, Algo, Learner, PpoConfig, UpdateStats};
 use crate::nn::{Activation, Adam, Mlp};
@@ -41,6 +46,10 @@ pub struct Ppo {
     log_std_opt: Adam<f32>,
     critic_opt: Adam<f32>,
     rng: Rng,
+    /// `norm_obs`: the running observation normalisation.
+    obs_norm: Option<ObsNorm>,
+    /// Scratch: one normalised observation (`act`, `predict`).
+    norm_buf: Vec<f32>,
     // Scratch, grown once to the minibatch size.
     idx: Vec<usize>,
     mb_obs: Vec<f32>,
@@ -90,6 +99,8 @@ impl Ppo {
             actor,
             critic,
             rng: Rng::derived(seed, 0x991),
+            obs_norm: p.norm_obs.map(|n| ObsNorm::new(obs_dim, &n)),
+            norm_buf: vec![0.0; obs_dim],
             cfg: cfg.clone(),
             p,
             obs_dim,
@@ -111,8 +122,31 @@ impl Ppo {
         &self.p
     }
 
-    /// Sample an action for each of the `n` observations in `obs` (row-major): `actions`
-    /// unclipped (`n x act_dim`), their log-probabilities and the critic's values.
+    /// The observations the networks read: `raw` itself, or (`norm_obs`) `raw` normalised into
+    /// `buf`, the running statistics first updated with it when `update` (training collection).
+    pub fn normalized<'a>(
+        &mut self,
+        raw: &'a [f32],
+        n: usize,
+        update: bool,
+        buf: &'a mut Vec<f32>,
+    ) -> &'a [f32] {
+        match &mut self.obs_norm {
+            None => raw,
+            Some(norm) => {
+                if update {
+                    norm.update(raw, n);
+                }
+                buf.resize(n * self.obs_dim, 0.0);
+                norm.apply(&raw[..n * self.obs_dim], buf);
+                buf
+            }
+        }
+    }
+
+    /// Sample an action for each of the `n` observations in `obs` (row-major, as
+    /// [`Ppo::normalized`] returns them): `actions` unclipped (`n x act_dim`), their
+    /// log-probabilities and the critic's values.
     pub fn act_batch(
         &mut self,
         obs: &[f32],
@@ -137,7 +171,7 @@ impl Ppo {
         values[..n].copy_from_slice(self.critic.predict(obs, n));
     }
 
-    /// The critic's values of `n` observations.
+    /// The critic's values of `n` observations (as [`Ppo::normalized`] returns them).
     pub fn values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) {
         out[..n].copy_from_slice(self.critic.predict(obs, n));
     }
@@ -333,18 +367,32 @@ impl Agent for Ppo {
     fn actor(&self) -> &Mlp<f32> {
         &self.actor
     }
-    /// A sampled action, clipped to [-1, 1] (training collects through [`Ppo::act_batch`]).
+    /// A sampled action, clipped to [-1, 1] (training collects through [`Ppo::act_batch`]; the
+    /// normalisation's statistics are not updated here).
     fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         let (mut logp, mut value) = ([0.0f32], [0.0f32]);
-        self.act_batch(obs, 1, action, &mut logp, &mut value);
+        let mut buf = std::mem::take(&mut self.norm_buf);
+        let x = self.normalized(obs, 1, false, &mut buf);
+        self.act_batch(x, 1, action, &mut logp, &mut value);
+        self.norm_buf = buf;
         action.iter_mut().for_each(|a| *a = a.clamp(-1.0, 1.0));
     }
-    /// `clip(mean, -1, 1)`.
+    /// `clip(mean, -1, 1)` of the (normalised) observation.
     fn predict(&mut self, obs: &[f32], action: &mut [f32]) {
-        let mean = self.actor.predict(obs, 1);
+        let x = match &self.obs_norm {
+            None => obs,
+            Some(norm) => {
+                norm.apply(obs, &mut self.norm_buf);
+                &self.norm_buf
+            }
+        };
+        let mean = self.actor.predict(x, 1);
         for (a, m) in action.iter_mut().zip(mean) {
             *a = m.clamp(-1.0, 1.0);
         }
+    }
+    fn obs_norm(&self) -> Option<&ObsNorm> {
+        self.obs_norm.as_ref()
     }
     fn learner(&mut self) -> Learner<'_> {
         Learner::OnPolicy(self)
@@ -359,6 +407,11 @@ learned_parts!(Ppo, |s, f| {
     f("critic_opt", P::Adam(r!(s.critic_opt)));
     f("log_std_opt", P::Adam(r!(s.log_std_opt)));
     f("agent_rng", P::State(r!(s.rng)));
+    if let Some(n) = r!(s.obs_norm) {
+        f("obs_norm", P::State(r!(*n)));
+        f(super::obs_norm::MEAN_TENSOR, P::Tensor(r!(n.mean)));
+        f(super::obs_norm::STD_TENSOR, P::Tensor(r!(n.std)));
+    }
 });
 
 /// One rollout: `num_steps` steps of `num_envs` environments, row `t * num_envs + i` for step

@@ -1,5 +1,5 @@
 //! Exporting a trained policy for use outside stagerl: [`onnx`], the actor with the action rule
-//! and the speed-limit scaling inside the graph.
+//! and the speed-limit scaling inside the graph (and the observation's normalisation, if any).
 
 pub mod onnx;
 
@@ -23,6 +23,6 @@ pub fn onnx_of_run(run: &RunDir, checkpoint: Option<&Path>) -> Result<(PathBuf, 
         Err(_) => path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
     };
     let meta = onnx::ModelInfo { config_hash: crate::train::config_hash(&cfg), checkpoint };
-    let bytes = onnx::encode(&spec, agent.actor(), &meta)?;
+    let bytes = onnx::encode(&spec, agent.actor(), agent.obs_norm(), &meta)?;
     Ok((path, bytes))
 }

@@ -2,12 +2,14 @@
 //!
 //! Input `observation` (f32, `[batch, obs_dim]`, the standard layout of [`crate::policy`]),
 //! output `joint_velocity` (f32, `[batch, dof]`, rad/s; m/s for prismatic joints). The graph:
-//! per actor layer `Gemm(x, W, b, transB=1)` then `Relu` or `Tanh` (none for identity); for SAC
+//! for a normalised observation (PPO with `norm_obs`) `Sub` the means, `Div` by the standard
+//! deviations and `Clip`; per actor layer `Gemm(x, W, b, transB=1)` then `Relu` or `Tanh` (none for identity); for SAC
 //! `Slice` of the first `dof` outputs (the Gaussian's mean) and `Tanh`; then `Clip` to [-1, 1]
 //! (the environment's clamp) and `Mul` by the speed limits. The batch dimension is the symbolic
 //! `batch`. `metadata_props` hold the observation layout in words, the action rule, the robot,
 //! the joints, the control period, the config hash and the stagerl version.
 
+use crate::agent::obs_norm::ObsNorm;
 use crate::nn::Mlp;
 use crate::policy::PolicySpec;
 use crate::proto::{put_int, put_len_delimited, put_str};
@@ -111,12 +113,46 @@ fn value_info(name: &str, features: usize, doc: &str) -> Vec<u8> {
     b
 }
 
-/// The nodes and initializers of the actor and the action rule, in graph order.
-fn graph_parts(spec: &PolicySpec, actor: &Mlp<f32>) -> Result<(Vec<Node<'static>>, Vec<Vec<u8>>)> {
+/// The nodes and initializers of the observation's normalisation (if any), the actor and the
+/// action rule, in graph order.
+fn graph_parts(
+    spec: &PolicySpec,
+    actor: &Mlp<f32>,
+    norm: Option<&ObsNorm>,
+) -> Result<(Vec<Node<'static>>, Vec<Vec<u8>>)> {
     let (mut nodes, mut inits) = (Vec::new(), Vec::new());
     let params = actor.params();
     let tensors = actor.tensors();
     let mut x = INPUT.to_string();
+    match (&spec.observation.normalization, norm) {
+        (None, None) => {}
+        (Some(ns), Some(n)) => {
+            // x' = clip((x - mean) / std, -clip, clip): the same f32 operations as training.
+            let d = spec.observation.dim;
+            inits.push(f32_tensor(&ns.mean, &[d], &n.mean));
+            inits.push(f32_tensor(&ns.std, &[d], &n.std));
+            inits.push(f32_tensor("obs_norm.min", &[], &[-n.clip]));
+            inits.push(f32_tensor("obs_norm.max", &[], &[n.clip]));
+            let steps = [
+                ("Sub", vec![x, ns.mean.clone()], "obs_norm.centred"),
+                ("Div", vec!["obs_norm.centred".into(), ns.std.clone()], "obs_norm.scaled"),
+                (
+                    "Clip",
+                    vec!["obs_norm.scaled".into(), "obs_norm.min".into(), "obs_norm.max".into()],
+                    "obs_norm.out",
+                ),
+            ];
+            for (op, inputs, output) in steps {
+                nodes.push(Node { op, inputs, output: output.into(), ints: vec![] });
+            }
+            x = "obs_norm.out".into();
+        }
+        _ => {
+            return Err(Error::InvalidInput(
+                "the policy's description and the agent disagree on the observation's normalisation".into(),
+            ))
+        }
+    }
     for (i, (layer, pair)) in spec.actor.layers.iter().zip(tensors.chunks_exact(2)).enumerate() {
         let (w, b) = (&pair[0], &pair[1]);
         inits.push(f32_tensor(&layer.weight, &w.shape, &params[w.range()]));
@@ -182,6 +218,10 @@ fn metadata(spec: &PolicySpec, info: &ModelInfo) -> Vec<(String, String)> {
     vec![
         ("observation_layout".into(), layout.join("; ")),
         ("observation_dim".into(), spec.observation.dim.to_string()),
+        (
+            "observation_normalization".into(),
+            spec.observation.normalization.as_ref().map_or_else(|| "none".into(), |n| n.rule_text.clone()),
+        ),
         ("action_rule".into(), format!("{}: {}", spec.action.rule, spec.action.rule_text)),
         (
             "output".into(),
@@ -200,7 +240,12 @@ fn metadata(spec: &PolicySpec, info: &ModelInfo) -> Vec<(String, String)> {
 }
 
 /// The ONNX `ModelProto` of `actor` (the network `spec` describes) as bytes.
-pub fn encode(spec: &PolicySpec, actor: &Mlp<f32>, info: &ModelInfo) -> Result<Vec<u8>> {
+pub fn encode(
+    spec: &PolicySpec,
+    actor: &Mlp<f32>,
+    norm: Option<&ObsNorm>,
+    info: &ModelInfo,
+) -> Result<Vec<u8>> {
     if spec.actor.layers.len() != actor.layers().len() {
         return Err(Error::InvalidInput(format!(
             "the policy describes {} actor layers, the actor has {}",
@@ -208,7 +253,7 @@ pub fn encode(spec: &PolicySpec, actor: &Mlp<f32>, info: &ModelInfo) -> Result<V
             actor.layers().len()
         )));
     }
-    let (nodes, inits) = graph_parts(spec, actor)?;
+    let (nodes, inits) = graph_parts(spec, actor, norm)?;
     let mut graph = Vec::new();
     for (i, node) in nodes.iter().enumerate() {
         put_len_delimited(&mut graph, 1, &node.encode(&format!("{}_{i}", node.op)));

@@ -48,6 +48,8 @@ pub(super) struct OnPolicy {
     logp: Vec<f32>,
     values: Vec<f32>,
     final_values: Vec<f32>,
+    /// Normalised observations (`norm_obs`).
+    obs_buf: Vec<f32>,
 }
 
 impl OnPolicy {
@@ -77,6 +79,7 @@ impl OnPolicy {
             logp: vec![0.0; n],
             values: vec![0.0; n],
             final_values: vec![0.0; n],
+            obs_buf: Vec::new(),
         })
     }
 
@@ -108,7 +111,8 @@ impl OnPolicy {
         last_stats: &mut Option<UpdateStats>,
     ) -> Result<()> {
         let n = self.vec.len();
-        ppo.act_batch(self.vec.observations(), n, &mut self.actions, &mut self.logp, &mut self.values);
+        let obs = ppo.normalized(self.vec.observations(), n, true, &mut self.obs_buf);
+        ppo.act_batch(obs, n, &mut self.actions, &mut self.logp, &mut self.values);
         if let Some(i) = self.actions.iter().position(|a| !a.is_finite()) {
             return Err(Error::NumericalFault(format!(
                 "the policy's action value {i} = {} at episode {} (update {}); the last good checkpoint is left in place",
@@ -117,11 +121,12 @@ impl OnPolicy {
                 st.updates
             )));
         }
-        self.rollout.record_step(self.vec.observations(), &self.actions, &self.logp, &self.values);
+        self.rollout.record_step(obs, &self.actions, &self.logp, &self.values);
         self.vec.step(&self.actions)?;
         // A time limit is bootstrapped through: gamma V(s_final) joins the reward.
         if self.vec.truncated().iter().any(|&t| t) {
-            ppo.values(self.vec.final_observations(), n, &mut self.final_values);
+            let obs = ppo.normalized(self.vec.final_observations(), n, false, &mut self.obs_buf);
+            ppo.values(obs, n, &mut self.final_values);
         }
         for i in 0..n {
             let (r, term, trunc) = (self.vec.rewards()[i], self.vec.terminated()[i], self.vec.truncated()[i]);
@@ -143,7 +148,8 @@ impl OnPolicy {
         self.rollout.t += 1;
         st.env_steps += n as u64;
         if self.rollout.is_full() {
-            ppo.values(self.vec.observations(), n, &mut self.values);
+            let obs = ppo.normalized(self.vec.observations(), n, false, &mut self.obs_buf);
+            ppo.values(obs, n, &mut self.values);
             if self.anneal_lr {
                 ppo.set_lr_fraction((1.0 - st.episode as f64 / self.episodes.max(1) as f64).max(0.0));
             }
