@@ -32,6 +32,7 @@
 
 pub mod agent;
 pub mod checkpoint;
+pub mod collision;
 pub mod config;
 pub mod controller;
 pub mod env;

@@ -336,6 +336,21 @@ impl Kinematics {
         m
     }
 
+    /// Each joint's z-aligned frame after its motion, in the root frame (`out.len() >= n`).
+    pub fn segment_frames(&self, q: &[f64], out: &mut [Tf]) {
+        let mut m = from_cols(&self.base);
+        for ((s, &qi), o) in self.steps.iter().zip(q).zip(out.iter_mut()) {
+            let motion = if s.prismatic {
+                [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, qi]
+            } else {
+                let (sn, c) = sin_cos(qi);
+                [c, -sn, 0.0, 0.0, sn, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+            };
+            *o = mul(&m, &motion);
+            m = mul(o, &s.after.map(|v| v[0]));
+        }
+    }
+
     /// The origin of every joint frame (in the root frame, metres), then the tip's: `n + 1`
     /// points, the arm's skeleton.
     pub fn joint_origins(&self, q: &[f64]) -> Vec<[f64; 3]> {

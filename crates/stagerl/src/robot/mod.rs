@@ -48,6 +48,11 @@ pub use urdf::{MAX_LENGTH_M, MAX_URDF_BYTES, MAX_XML_DEPTH};
 /// The bundled UR5 URDF (see `assets/robots/ur5.urdf`).
 pub const UR5_URDF: &str = include_str!("../../../../assets/robots/ur5.urdf");
 
+/// `a * b` of row-major 3 x 4 transforms (rotation, translation in metres).
+pub fn mul_tf(a: &[f64; 12], b: &[f64; 12]) -> [f64; 12] {
+    kin::mul(a, b)
+}
+
 /// An end-effector pose in the chain's base frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pose {
@@ -89,6 +94,39 @@ pub struct JointInfo {
     pub velocity: f64,
 }
 
+/// A collision primitive, in metres (the URDF's `<collision>` geometry; a cylinder is taken as
+/// the capsule of its radius and length).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Shape {
+    /// The points within `radius_m` of the segment from `-half_length_m` to `+half_length_m`
+    /// along the local z axis.
+    Capsule {
+        radius_m: f64,
+        half_length_m: f64,
+    },
+    Sphere {
+        radius_m: f64,
+    },
+    /// A box centred at the origin, half its size along each local axis.
+    Cuboid {
+        half_extents_m: [f64; 3],
+    },
+}
+
+/// One collision shape of a link on the chain, placed in its segment's frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkShape {
+    /// The URDF link it belongs to.
+    pub link: String,
+    /// The frame it moves with: `None` for the root link (and links fixed to it), the base
+    /// frame; `Some(i)` for actuated joint `i`'s frame after its motion ([`Chain::segment_frames`]).
+    pub segment: Option<usize>,
+    /// Its pose in that frame: a row-major 3 x 4 transform (rotation, translation in metres).
+    pub pose: [f64; 12],
+    pub shape: Shape,
+}
+
 /// A serial chain from a root link to a tip link, compiled for fast kinematics.
 #[derive(Clone, Debug)]
 pub struct Chain {
@@ -99,6 +137,8 @@ pub struct Chain {
     base_link: String,
     tip_link: String,
     kin: kin::Kinematics,
+    shapes: Vec<LinkShape>,
+    mesh_links: Vec<String>,
 }
 
 impl Chain {
@@ -137,7 +177,26 @@ impl Chain {
             base_link: c.base_link,
             tip_link: c.tip_link,
             kin: c.kin,
+            shapes: c.shapes,
+            mesh_links: c.mesh_links,
         })
+    }
+
+    /// The collision shapes of the links on the chain, root to tip (see [`LinkShape`]).
+    pub fn collision_shapes(&self) -> &[LinkShape] {
+        &self.shapes
+    }
+
+    /// The links on the chain whose collision geometry is a mesh, which is not used.
+    pub fn mesh_collision_links(&self) -> &[String] {
+        &self.mesh_links
+    }
+
+    /// The frame each actuated joint moves, after its motion, for joint values `q` (one per
+    /// joint, unchecked): `out[i]` is joint `i`'s z-aligned frame in the base frame, a row-major
+    /// 3 x 4 transform (metres). The frames [`LinkShape::segment`] refers to. No allocation.
+    pub fn segment_frames(&self, q: &[f64], out: &mut [[f64; 12]]) {
+        self.kin.segment_frames(q, out)
     }
 
     /// Read and parse a URDF file (see [`Chain::from_urdf_str`]); [`Error::Io`] if it cannot be

@@ -690,3 +690,106 @@ fn joint_origins_are_the_skeleton_of_the_arm() {
     }
     assert!(ur5.joint_origins(&[0.0; 5]).unwrap_err().to_string().contains("expected length 6"));
 }
+
+/// A two-joint arm with collision shapes: joint 1 about z, joint 2 about y (not z, so the
+/// axis-alignment basis matters), shapes on the base, on each link and on a link fixed to link 2.
+const SHAPED_ARM: &str = r#"<robot name="shaped">
+  <link name="base"><collision><origin xyz="0 0 0.05"/><geometry><box size="0.2 0.2 0.1"/></geometry></collision></link>
+  <link name="l1"><collision><origin xyz="0.2 0 0" rpy="0 1.5707963267948966 0"/><geometry><cylinder radius="0.05" length="0.4"/></geometry></collision></link>
+  <link name="l2"><collision><origin xyz="0.1 0 0"/><geometry><sphere radius="0.03"/></geometry></collision>
+    <collision><geometry><mesh filename="package://x/l2.stl"/></geometry></collision></link>
+  <link name="tool"><collision><origin xyz="0 0 0.02"/><geometry><sphere radius="0.01"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.4 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="fix" type="fixed"><parent link="l2"/><child link="tool"/><origin xyz="0.2 0 0"/></joint>
+</robot>"#;
+
+/// World position of shape `k` and the world direction of its local z axis.
+fn shape_world(chain: &Chain, q: &[f64], k: usize) -> ([f64; 3], [f64; 3]) {
+    let mut frames = vec![[0.0; 12]; chain.dof()];
+    chain.segment_frames(q, &mut frames);
+    let s = &chain.collision_shapes()[k];
+    let m = match s.segment {
+        None => s.pose,
+        Some(i) => kin::mul(&frames[i], &s.pose),
+    };
+    ([m[3], m[7], m[11]], [m[2], m[6], m[10]])
+}
+
+#[test]
+fn collision_shapes_are_placed_where_the_urdf_puts_them() {
+    let chain = Chain::from_urdf_str(SHAPED_ARM, None).unwrap();
+    let shapes = chain.collision_shapes();
+    let links: Vec<&str> = shapes.iter().map(|s| s.link.as_str()).collect();
+    assert_eq!(links, ["base", "l1", "l2", "tool"]);
+    assert_eq!(chain.mesh_collision_links(), ["l2"]);
+    assert_eq!(shapes[0].shape, Shape::Cuboid { half_extents_m: [0.1, 0.1, 0.05] });
+    assert_eq!(shapes[1].shape, Shape::Capsule { radius_m: 0.05, half_length_m: 0.2 });
+    assert_eq!((shapes[0].segment, shapes[1].segment, shapes[3].segment), (None, Some(0), Some(1)));
+    let close = |a: [f64; 3], b: [f64; 3]| (0..3).all(|i| (a[i] - b[i]).abs() < 1e-12);
+    for (q1, q2) in [(0.0, 0.0), (FRAC_PI_2, 0.0), (FRAC_PI_2, FRAC_PI_2), (-0.7, 1.1)] {
+        let q = [q1, q2];
+        let (c1, s1) = (q1.cos(), q1.sin());
+        // The base box does not move.
+        assert!(close(shape_world(&chain, &q, 0).0, [0.0, 0.0, 0.05]));
+        // l1's capsule: centred 0.2 m along l1's x, its axis along l1's x.
+        let (p, z) = shape_world(&chain, &q, 1);
+        assert!(close(p, [0.2 * c1, 0.2 * s1, 0.1]), "{p:?}");
+        assert!(close(z, [c1, s1, 0.0]), "{z:?}");
+        // l2's sphere: 0.1 m along l2's x; l2 turns about l1's y by q2 (x -> x cos q2 - z sin q2).
+        let elbow = [0.4 * c1, 0.4 * s1, 0.1];
+        let (c2, s2) = (q2.cos(), q2.sin());
+        let local = |d: f64| [d * c2 * c1, d * c2 * s1, 0.1 - d * s2];
+        let p = shape_world(&chain, &q, 2).0;
+        let want = local(0.1);
+        assert!(close(p, [want[0] + elbow[0] - 0.0, want[1] + elbow[1], want[2]]), "{p:?} vs {want:?}");
+        // The tool's sphere: 0.2 m along l2's x (the fixed joint), then 0.02 m along its z.
+        let p = shape_world(&chain, &q, 3).0;
+        let z_dir = [s2 * c1, s2 * s1, c2];
+        let want = local(0.2);
+        let want = [
+            want[0] + elbow[0] + 0.02 * z_dir[0],
+            want[1] + elbow[1] + 0.02 * z_dir[1],
+            want[2] + 0.02 * z_dir[2],
+        ];
+        assert!(close(p, want), "{p:?} vs {want:?}");
+        // The tool's frame is the chain's tip: segment frame 1 times the folded constant.
+        let tip = chain.fk(&q).position;
+        let t = shape_world(&chain, &q, 3).0;
+        assert!(
+            ((t[0] - 0.02 * z_dir[0] - tip.x).powi(2) + (t[2] - 0.02 * z_dir[2] - tip.z).powi(2)).sqrt()
+                < 1e-12
+        );
+    }
+}
+
+#[test]
+fn segment_frames_agree_with_the_skeleton_and_the_tip() {
+    let chain = Chain::ur5();
+    let mut rng = Rng::new(4);
+    let mut frames = vec![[0.0; 12]; 6];
+    for _ in 0..50 {
+        let q = random_q(&chain, &mut rng);
+        chain.segment_frames(&q, &mut frames);
+        let origins = chain.joint_origins(&q).unwrap();
+        for i in 0..6 {
+            let f = frames[i];
+            assert!((0..3).all(|r| (f[4 * r + 3] - origins[i][r]).abs() < 1e-12), "joint {i}");
+        }
+    }
+}
+
+#[test]
+fn bad_collision_geometry_is_an_error_naming_the_link() {
+    let bad = SHAPED_ARM.replace(r#"<sphere radius="0.03"/>"#, r#"<sphere radius="-1"/>"#);
+    let e = Chain::from_urdf_str(&bad, None).unwrap_err().to_string();
+    assert!(e.contains("`l2`") && e.contains("radius"), "{e}");
+    let bad = SHAPED_ARM.replace(
+        r#"<origin xyz="0.1 0 0"/><geometry><sphere"#,
+        r#"<origin xyz="1e9 0 0"/><geometry><sphere"#,
+    );
+    let e = Chain::from_urdf_str(&bad, None).unwrap_err().to_string();
+    assert!(e.contains("`l2`") && e.contains("collision origin"), "{e}");
+}

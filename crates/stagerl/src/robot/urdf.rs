@@ -5,7 +5,7 @@ use std::collections::{HashMap, HashSet};
 use urdf_rs::JointType;
 
 use super::kin::{self, Kinematics, Step, Tf};
-use super::{JointInfo, JointKind};
+use super::{JointInfo, JointKind, LinkShape, Shape};
 use crate::{Error, Result};
 
 /// A URDF compiled into a serial chain from its root link to a tip link.
@@ -14,6 +14,8 @@ pub(crate) struct Compiled {
     pub base_link: String,
     pub tip_link: String,
     pub kin: Kinematics,
+    pub shapes: Vec<LinkShape>,
+    pub mesh_links: Vec<String>,
 }
 
 /// The largest length (metres) a URDF may hold in a joint origin or a prismatic joint's limits:
@@ -198,7 +200,9 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     let path = tree.path(root, tip)?;
     // A cycle elsewhere in the document (beside the chain) is refused too.
     check_no_cycle(robot, &tree.parent_joint, root)?;
-    fold_chain(&path, root, tip)
+    let mut c = fold_chain(&path, root, tip)?;
+    (c.shapes, c.mesh_links) = link_shapes(robot, &path, root)?;
+    Ok(c)
 }
 
 /// The links and joints of a URDF, checked to form a tree.
@@ -413,5 +417,97 @@ fn fold_chain(path: &[&urdf_rs::Joint], root: &str, tip: &str) -> Result<Compile
         base_link: root.to_string(),
         tip_link: tip.to_string(),
         kin: Kinematics::new(&base, &steps),
+        shapes: Vec::new(),
+        mesh_links: Vec::new(),
     })
+}
+
+/// The collision shapes (`<collision>` elements) of the links on the chain, root to tip, each
+/// placed in its segment's frame: the root link and the links fixed to it in the base frame
+/// (segment `None`), the others in the moving frame of the last actuated joint before them
+/// (segment `Some(i)`: joint `i`'s frame, z-aligned, after its motion). Mirrors the folding of
+/// [`fold_chain`]: after actuated joint `i`, the child link's frame is that moving frame times
+/// the transpose of the joint's axis-alignment basis. Links off the chain have no shapes here.
+/// Also the links with mesh collision shapes, which are not used (listed once each).
+fn link_shapes(
+    robot: &urdf_rs::Robot,
+    path: &[&urdf_rs::Joint],
+    root: &str,
+) -> Result<(Vec<LinkShape>, Vec<String>)> {
+    let link = |name: &str| robot.links.iter().find(|l| l.name == name);
+    let mut out = Vec::new();
+    let mut mesh_links: Vec<String> = Vec::new();
+    let mut segment: Option<usize> = None;
+    let mut frame: Tf = kin::IDENTITY;
+    let mut add = |name: &str, segment: Option<usize>, frame: &Tf| -> Result<()> {
+        for c in link(name).map(|l| l.collision.as_slice()).unwrap_or_default() {
+            let Some(shape) = shape_of(name, &c.geometry)? else {
+                mesh_links.push(name.to_string());
+                continue;
+            };
+            let (xyz, rpy) = (c.origin.xyz.0, c.origin.rpy.0);
+            if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite() || v.abs() > MAX_LENGTH_M) {
+                return Err(urdf_err(format!(
+                    "link `{name}`: a collision origin xyz = {xyz:?}, rpy = {rpy:?} is not finite or beyond +-{MAX_LENGTH_M:e}"
+                )));
+            }
+            out.push(LinkShape {
+                link: name.to_string(),
+                segment,
+                pose: kin::mul(frame, &kin::origin(xyz, rpy)),
+                shape,
+            });
+        }
+        Ok(())
+    };
+    add(root, None, &frame)?;
+    for j in path {
+        let (xyz, rpy) = checked_origin(j)?;
+        match j.joint_type {
+            JointType::Fixed => frame = kin::mul(&frame, &kin::origin(xyz, rpy)),
+            _ => {
+                let axis = j.axis.xyz.0;
+                let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+                let a = kin::basis_for_axis([axis[0] / norm, axis[1] / norm, axis[2] / norm]);
+                segment = Some(segment.map_or(0, |s| s + 1));
+                frame = kin::rotation_transpose(&a);
+            }
+        }
+        add(&j.child.link, segment, &frame)?;
+    }
+    mesh_links.dedup();
+    Ok((out, mesh_links))
+}
+
+/// A URDF geometry as a collision primitive; `None` for a mesh (not used).
+fn shape_of(link: &str, g: &urdf_rs::Geometry) -> Result<Option<Shape>> {
+    let ok = |v: f64| v.is_finite() && v > 0.0 && v <= MAX_LENGTH_M;
+    let bad = |what: &str| {
+        urdf_err(format!(
+            "link `{link}`: collision {what} must be finite, > 0 and at most {MAX_LENGTH_M:e} m"
+        ))
+    };
+    Ok(Some(match g {
+        // A cylinder is taken as the capsule of its radius and length (caps added: a little
+        // conservative at the ends).
+        urdf_rs::Geometry::Cylinder { radius, length } | urdf_rs::Geometry::Capsule { radius, length } => {
+            if !ok(*radius) || !(length.is_finite() && *length >= 0.0 && *length <= MAX_LENGTH_M) {
+                return Err(bad("radius and length"));
+            }
+            Shape::Capsule { radius_m: *radius, half_length_m: length / 2.0 }
+        }
+        urdf_rs::Geometry::Sphere { radius } => {
+            if !ok(*radius) {
+                return Err(bad("radius"));
+            }
+            Shape::Sphere { radius_m: *radius }
+        }
+        urdf_rs::Geometry::Box { size } => {
+            if !size.0.iter().all(|&v| ok(v)) {
+                return Err(bad("box size"));
+            }
+            Shape::Cuboid { half_extents_m: [size.0[0] / 2.0, size.0[1] / 2.0, size.0[2] / 2.0] }
+        }
+        urdf_rs::Geometry::Mesh { .. } => return Ok(None),
+    }))
 }
