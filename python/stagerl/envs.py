@@ -6,7 +6,7 @@ Keyword arguments of ``gymnasium.make("stagerl/Reach-v0", ...)``:
   ``"har"``, ``"sar"`` (default: the config's ``reward.function``, ``"sar"`` by default).
 - ``config``: a TOML config file (path) or a dict with the TOML's sections and fields (e.g.
   ``{"task": {"max_steps": 100}}``); defaults otherwise.
-- ``robot``: ``"ur5"`` (bundled) or a path to a URDF file (overrides ``robot.urdf``).
+- ``robot``: ``"ur5"`` or ``"panda"`` (bundled) or a path to a URDF file (overrides ``robot.urdf``).
 
 Observation (float32): q / pi per joint, end-effector position (m), target (m),
 ``obs_delta_scale * (target - end effector)`` and its norm. Action (float32): one value per joint
@@ -71,9 +71,9 @@ def core_args(reward, config, robot, render_mode) -> dict:
     if render_mode is not None:
         raise ValueError(f"`render_mode` = {render_mode!r} is invalid: stagerl/Reach-v0 renders nothing (None)")
     reward = _str_arg("reward", reward, "one of 'basic', 'posture', 'stride', 'har', 'sar'")
-    robot = _str_arg("robot", robot, "'ur5' or a path to a URDF file")
-    if robot is not None and robot != "ur5" and not os.path.isfile(robot):
-        raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5' or a path to a URDF file)")
+    robot = _str_arg("robot", robot, "'ur5', 'panda' or a path to a URDF file")
+    if robot is not None and robot not in ("ur5", "panda") and not os.path.isfile(robot):
+        raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5', 'panda' or a path to a URDF file)")
     return {"reward": reward, "robot": robot, **_config_args(config)}
 
 

@@ -1,6 +1,6 @@
 """Batched forward kinematics and geometric Jacobians of any URDF serial chain.
 
-``Chain(robot="ur5", tip=None)``: the bundled UR5 or a URDF file (tip: the tip link; default the
+``Chain(robot="ur5", tip=None)``: the bundled UR5 ("ur5"), the bundled Franka Panda ("panda") or a URDF file (tip: the tip link; default the
 URDF's only leaf). ``chain.fk(q)`` takes ``q`` of shape (N, dof) or (dof,) (radians, metres for
 prismatic joints) and returns positions (N, 3) in metres and quaternions (N, 4) as (x, y, z, w)
 with w >= 0, in the root link's frame. ``chain.jacobian(q)`` returns the geometric Jacobians
@@ -25,9 +25,9 @@ class Chain:
         if isinstance(robot, os.PathLike):
             robot = os.fspath(robot)
         if not isinstance(robot, str):
-            raise ValueError(f"`robot` = {robot!r} is invalid: 'ur5' or a path to a URDF file")
-        if robot != "ur5" and not os.path.isfile(robot):
-            raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5' or a path to a URDF file)")
+            raise ValueError(f"`robot` = {robot!r} is invalid: 'ur5', 'panda' or a path to a URDF file")
+        if robot not in ("ur5", "panda") and not os.path.isfile(robot):
+            raise FileNotFoundError(f"`robot` = {robot!r}: no such file (expected 'ur5', 'panda' or a path to a URDF file)")
         if tip is not None and not isinstance(tip, str):
             raise ValueError(f"`tip` = {tip!r} is invalid: a link name or None")
         self._core = _core.Chain(robot, tip)

@@ -5,7 +5,7 @@ use pyo3::prelude::*;
 
 use crate::{bad_arg, contiguous, guard, to_py};
 
-/// A serial chain loaded from `"ur5"` or a URDF file (see `stagerl::robot::Chain`).
+/// A serial chain loaded from `"ur5"`, `"panda"` or a URDF file (see `stagerl::robot::Chain`).
 #[pyclass(module = "stagerl._core", name = "Chain")]
 pub struct Chain {
     chain: stagerl::robot::Chain,

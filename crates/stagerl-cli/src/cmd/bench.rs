@@ -72,6 +72,10 @@ pub struct EnvArgs {
     /// Seed of targets and actions.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// A config whose `[robot]`, `[task]` (obstacles and collision checks included) and
+    /// `[reward]` sections to use (`--reward` overrides the function); unset: the defaults.
+    #[arg(long)]
+    config: Option<std::path::PathBuf>,
 }
 
 pub fn run(b: Bench) -> Result<()> {
@@ -84,7 +88,10 @@ pub fn run(b: Bench) -> Result<()> {
 }
 
 fn env(a: EnvArgs) -> Result<()> {
-    let mut cfg = Config::default();
+    let mut cfg = match &a.config {
+        Some(p) => Config::load(p).with_context(|| format!("reading {}", p.display()))?,
+        None => Config::default(),
+    };
     cfg.reward.function = a.reward;
     let mut env = ReachEnv::from_config(&cfg, a.seed).context("building the environment")?;
     let dim = env.act_dim();
@@ -112,13 +119,17 @@ fn env(a: EnvArgs) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     let sps = a.steps as f64 / secs;
     outln!(
-        "env: {} steps ({} episodes) in {:.3} s, {:.0} steps/s, {:.1} ns/step (single thread, UR5, reward {}, checksum {:.3})",
+        "env: {} steps ({} episodes) in {:.3} s, {:.0} steps/s, {:.1} ns/step (single thread, {}, reward {}, \
+         {} collision shapes, {} obstacles, checksum {:.3})",
         a.steps,
         episodes,
         secs,
         sps,
         1e9 / sps,
+        cfg.robot.urdf,
         a.reward,
+        env.chain().collision_shapes().len(),
+        env.task().obstacles.len(),
         checksum
     )?;
     outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;

@@ -17,7 +17,7 @@ use std::path::Path;
 /// The arm of `fk` and `reward`: `--robot` and `--tip`.
 #[derive(clap::Args)]
 pub struct RobotArgs {
-    /// `ur5` for the bundled arm (6 joints), or a path to a URDF file.
+    /// `ur5` or `panda` for a bundled arm (6 and 7 joints), or a path to a URDF file.
     #[arg(long, default_value = "ur5")]
     pub robot: String,
     /// Tip link of the URDF (default: its only leaf link).

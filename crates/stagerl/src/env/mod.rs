@@ -20,6 +20,7 @@ use nalgebra::Vector3;
 use std::f64::consts::PI;
 use std::sync::Arc;
 
+use crate::collision::{ArmCollider, CollisionKind, Contact};
 use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::rng::Rng;
 use crate::robot::{Chain, Pose};
@@ -35,6 +36,9 @@ pub struct Step {
     pub terminated: bool,
     /// The step limit was hit without reaching the target: not terminal, bootstrap through it.
     pub truncated: bool,
+    /// What the arm touched after the step, if anything ([`ReachEnv::contact`] has the links).
+    /// Recorded only: a collision changes neither the reward nor the episode's end.
+    pub collision: Option<CollisionKind>,
 }
 
 impl Step {
@@ -122,6 +126,9 @@ pub struct ReachEnv {
     steps: u32,
     done: bool,
     obs: Vec<f32>,
+    /// The collision checker, when the arm has collision shapes.
+    collider: Option<ArmCollider>,
+    contact: Option<Contact>,
 }
 
 impl ReachEnv {
@@ -138,7 +145,14 @@ impl ReachEnv {
         let obs_dim = observation_dim(task.observation, n);
         let q = task.home_pose.clone();
         let ee = chain.fk(&q);
+        let collider = (!chain.collision_shapes().is_empty()).then(|| {
+            let mut c = ArmCollider::new(&chain, task.collision);
+            c.set_obstacles(&task.obstacles);
+            c
+        });
         let mut env = ReachEnv {
+            collider,
+            contact: None,
             chain,
             rng: Rng::new(seed),
             joint_vel: vec![0.0; n],
@@ -201,6 +215,7 @@ impl ReachEnv {
     fn begin_episode(&mut self) -> &[f32] {
         self.joint_vel.fill(0.0);
         self.ee = self.chain.fk(&self.q);
+        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
         self.steps = 0;
         self.done = false;
         self.write_observation();
@@ -236,6 +251,7 @@ impl ReachEnv {
             self.q[i] = q_new;
         }
         self.ee = self.chain.fk(&self.q);
+        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
         self.steps += 1;
         let terms = RewardTerms::compute(
             &self.reward,
@@ -252,7 +268,7 @@ impl ReachEnv {
         let truncated = !terminated && self.steps >= self.task.max_steps;
         self.done = terminated || truncated;
         self.write_observation();
-        Ok(Step { terms, terminated, truncated })
+        Ok(Step { terms, terminated, truncated, collision: self.contact.map(|c| c.kind()) })
     }
 
     fn write_observation(&mut self) {
@@ -269,6 +285,12 @@ impl ReachEnv {
             }
         }
         write_target_entries(&self.task, &mut self.obs, self.ee.position, self.target);
+    }
+
+    /// What the arm touches at its current joint positions (checked at every reset and step),
+    /// if anything; [`Contact::describe`] names the links.
+    pub fn contact(&self) -> Option<Contact> {
+        self.contact
     }
 
     /// The current observation.
@@ -355,6 +377,7 @@ impl ReachEnv {
         self.steps = s.steps;
         self.done = s.done;
         self.ee = self.chain.fk(&self.q);
+        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
         self.write_observation();
         Ok(())
     }
@@ -560,5 +583,69 @@ pub(crate) mod tests {
             };
             assert_eq!(t.reward, expect, "{f}");
         }
+    }
+
+    fn panda_env(
+        obstacles: Vec<crate::collision::Obstacle>,
+        checks: Option<crate::collision::Checks>,
+    ) -> ReachEnv {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/robots/panda.urdf");
+        let chain = Arc::new(Chain::from_urdf_file(std::path::Path::new(path), None).unwrap());
+        let task = TaskConfig {
+            home_pose_rad: Some(PANDA_HOME.to_vec()),
+            target_joint_range_rad: Some(vec![0.8, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0]),
+            obstacles,
+            collision: checks,
+            ..TaskConfig::default()
+        };
+        let task = task.resolve(&chain).unwrap();
+        ReachEnv::new(chain, task, RewardConfig::default(), 3).unwrap()
+    }
+
+    const PANDA_HOME: [f64; 7] = {
+        use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
+        [0.0, -FRAC_PI_4, 0.0, -3.0 * FRAC_PI_4, 0.0, FRAC_PI_2, FRAC_PI_4]
+    };
+
+    /// Contacts are found at reset and after each step, named, and recorded in the step; they
+    /// change nothing else: with the checks off, the same steps give the same bits.
+    #[test]
+    fn collisions_are_recorded_and_change_nothing_else() {
+        use crate::collision::{Checks, CollisionKind, Contact, Obstacle};
+        let mut env = panda_env(Vec::new(), None);
+        env.reset();
+        assert_eq!(env.contact(), None, "the home pose is clear");
+        // A pose with the flange below the floor (shoulder forward, elbow open).
+        let low = [0.0, 1.7, 0.0, -0.5, 0.0, 1.57, 0.0];
+        let target = Vector3::new(0.5, 0.0, 0.3);
+        env.reset_to(&low, target).unwrap();
+        let c = env.contact().expect("a contact below the floor");
+        assert_eq!(c.kind(), CollisionKind::Floor);
+        assert!(c.describe(env.chain()).contains("with the floor"), "{}", c.describe(env.chain()));
+        let step = env.step(&[0.0; 7]).unwrap();
+        assert_eq!(step.collision, Some(CollisionKind::Floor));
+        // An obstacle at the tool of the home pose.
+        let tool = env.chain().fk(&PANDA_HOME).position;
+        let ball = Obstacle::sphere(0.05, [tool.x, tool.y, tool.z]);
+        let mut env = panda_env(vec![ball], None);
+        env.reset();
+        assert!(matches!(env.contact(), Some(Contact::Obstacle { obstacle: 0, .. })));
+        // Recording changes nothing: the same random steps with all checks off.
+        let mut on = panda_env(Vec::new(), None);
+        let mut off = panda_env(Vec::new(), Some(Checks { floor: false, self_collision: false }));
+        let (mut rng, mut seen) = (Rng::new(9), 0);
+        for _ in 0..20 {
+            assert_eq!(on.reset(), off.reset());
+            while !on.is_done() {
+                let a: Vec<f32> = (0..7).map(|_| rng.uniform_range(-1.0, 1.0) as f32).collect();
+                let (x, y) = (on.step(&a).unwrap(), off.step(&a).unwrap());
+                assert_eq!(x.terms, y.terms);
+                assert_eq!((x.terminated, x.truncated), (y.terminated, y.truncated));
+                assert_eq!(on.observation(), off.observation());
+                assert_eq!(y.collision, None);
+                seen += usize::from(x.collision.is_some());
+            }
+        }
+        assert!(seen > 0, "random motion touched something at least once");
     }
 }

@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 
+use crate::collision::{Checks, Obstacle};
 use crate::rng::Rng;
 use crate::robot::{Chain, JointKind};
 use crate::{Error, Result};
@@ -42,6 +43,15 @@ pub struct TaskConfig {
     /// joint velocities; a factor of 10 puts the last centimetre on the scale of the other inputs.
     /// At most [`MAX_OBS_DELTA_SCALE`]: the scaled entries are stored as f32.
     pub obs_delta_scale: f64,
+    /// `[[task.obstacles]]`: boxes (`shape = "cuboid"`, `half_extents_m`) and spheres
+    /// (`shape = "sphere"`, `radius_m`) at `position_m` (base frame, metres), optionally turned by
+    /// `rotation_xyzw`. The arm's contacts with them are recorded ([`crate::collision`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub obstacles: Vec<Obstacle>,
+    /// `[task.collision]`: which contacts are looked for (`floor`, `self_collision`); unset:
+    /// both. Contacts are recorded; they change nothing in the episode (the paper's task).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub collision: Option<Checks>,
 }
 
 impl Default for TaskConfig {
@@ -54,9 +64,14 @@ impl Default for TaskConfig {
             target_min_z_m: 0.05,
             observation: ObservationKind::Standard,
             obs_delta_scale: 10.0,
+            obstacles: Vec::new(),
+            collision: None,
         }
     }
 }
+
+/// Most `[[task.obstacles]]`.
+pub const MAX_OBSTACLES: usize = 256;
 
 /// The UR5 home pose of the design notes, radians.
 pub const UR5_HOME_POSE_RAD: [f64; 6] = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0];
@@ -79,6 +94,8 @@ pub struct ResolvedTask {
     pub obs_delta_scale: f64,
     /// Fraction of target draws accepted by the height test, estimated from 2000 seeded draws.
     pub target_acceptance: f64,
+    pub obstacles: Vec<Obstacle>,
+    pub collision: Checks,
 }
 
 fn check_finite(field: &str, v: f64) -> Result<()> {
@@ -105,6 +122,16 @@ impl TaskConfig {
                 self.obs_delta_scale,
                 format!("a number in (0, {MAX_OBS_DELTA_SCALE:e}]"),
             ));
+        }
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(Error::config(
+                "task.obstacles",
+                format!("{} obstacles", self.obstacles.len()),
+                format!("at most {MAX_OBSTACLES}"),
+            ));
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            o.validate(&format!("task.obstacles[{i}]"))?;
         }
         Ok(())
     }
@@ -171,6 +198,8 @@ impl TaskConfig {
             observation: self.observation,
             obs_delta_scale: self.obs_delta_scale,
             target_acceptance: 0.0,
+            obstacles: self.obstacles.clone(),
+            collision: self.collision.unwrap_or_default(),
         };
         // Estimate how often a draw passes the height test; refuse a distribution the arm
         // cannot (or almost never) reach.

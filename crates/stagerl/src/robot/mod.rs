@@ -20,7 +20,7 @@ use crate::{Error, Result};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RobotConfig {
-    /// `"ur5"` for the bundled UR5, or a path to a URDF file.
+    /// `"ur5"` or `"panda"` for a bundled arm, or a path to a URDF file.
     pub urdf: String,
     /// Tip link of the chain; unset takes the URDF's only leaf link.
     pub tip: Option<String>,
@@ -47,6 +47,10 @@ pub use urdf::{MAX_LENGTH_M, MAX_URDF_BYTES, MAX_XML_DEPTH};
 
 /// The bundled UR5 URDF (see `assets/robots/ur5.urdf`).
 pub const UR5_URDF: &str = include_str!("../../../../assets/robots/ur5.urdf");
+
+/// The bundled Franka Emika Panda URDF (see `assets/robots/panda.urdf`), tip `panda_link8`
+/// (the flange).
+pub const PANDA_URDF: &str = include_str!("../../../../assets/robots/panda.urdf");
 
 /// `a * b` of row-major 3 x 4 transforms (rotation, translation in metres).
 pub fn mul_tf(a: &[f64; 12], b: &[f64; 12]) -> [f64; 12] {
@@ -147,11 +151,13 @@ impl Chain {
         Chain::from_urdf_str(UR5_URDF, Some("tool0")).expect("the bundled UR5 URDF compiles")
     }
 
-    /// `"ur5"` for the bundled arm, otherwise a path to a URDF file. `tip` as in
+    /// `"ur5"` or `"panda"` for a bundled arm, otherwise a path to a URDF file. `tip` as in
     /// [`Chain::from_urdf_str`].
     pub fn load(robot: &str, tip: Option<&str>) -> Result<Chain> {
         if robot == "ur5" {
             Chain::from_urdf_str(UR5_URDF, tip)
+        } else if robot == "panda" {
+            Chain::from_urdf_str(PANDA_URDF, tip)
         } else {
             Chain::from_urdf_file(Path::new(robot), tip)
         }

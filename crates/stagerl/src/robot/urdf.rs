@@ -491,7 +491,7 @@ fn shape_of(link: &str, g: &urdf_rs::Geometry) -> Result<Option<Shape>> {
         // A cylinder is taken as the capsule of its radius and length (caps added: a little
         // conservative at the ends).
         urdf_rs::Geometry::Cylinder { radius, length } | urdf_rs::Geometry::Capsule { radius, length } => {
-            if !ok(*radius) || !(length.is_finite() && *length >= 0.0 && *length <= MAX_LENGTH_M) {
+            if !(ok(*radius) && length.is_finite() && *length >= 0.0 && *length <= MAX_LENGTH_M) {
                 return Err(bad("radius and length"));
             }
             Shape::Capsule { radius_m: *radius, half_length_m: length / 2.0 }
