@@ -205,14 +205,6 @@ impl Obstacle {
             p[2],
         ]
     }
-
-    fn pose(&self) -> Pose3 {
-        let t = Vec3::new(self.position_m[0] as f32, self.position_m[1] as f32, self.position_m[2] as f32);
-        let r = self.rotation_xyzw.map_or(Rot3::IDENTITY, |[x, y, z, w]| {
-            Rot3::from_xyzw(x as f32, y as f32, z as f32, w as f32).normalize()
-        });
-        Pose3::from_parts(t, r)
-    }
 }
 
 /// A parry primitive (a concrete type, so that the collider is `Clone`).
@@ -369,9 +361,8 @@ impl ArmCollider {
         self.obstacles = obstacles
             .iter()
             .map(|o| {
-                let (pose, prim) = (o.pose(), o.primitive());
-                let m = o.transform();
-                (pose, Prim::of(&prim), Geo::of(&prim, &m))
+                let (prim, m) = (o.primitive(), o.transform());
+                (pose3(&m), Prim::of(&prim), Geo::of(&prim, &m))
             })
             .collect();
     }

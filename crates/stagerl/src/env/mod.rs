@@ -215,7 +215,7 @@ impl ReachEnv {
     fn begin_episode(&mut self) -> &[f32] {
         self.joint_vel.fill(0.0);
         self.ee = self.chain.fk(&self.q);
-        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
+        self.check_contact();
         self.steps = 0;
         self.done = false;
         self.write_observation();
@@ -251,7 +251,7 @@ impl ReachEnv {
             self.q[i] = q_new;
         }
         self.ee = self.chain.fk(&self.q);
-        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
+        self.check_contact();
         self.steps += 1;
         let terms = RewardTerms::compute(
             &self.reward,
@@ -269,6 +269,11 @@ impl ReachEnv {
         self.done = terminated || truncated;
         self.write_observation();
         Ok(Step { terms, terminated, truncated, collision: self.contact.map(|c| c.kind()) })
+    }
+
+    /// Look for the arm's contacts at its current joint positions ([`ReachEnv::contact`]).
+    fn check_contact(&mut self) {
+        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
     }
 
     fn write_observation(&mut self) {
@@ -377,7 +382,7 @@ impl ReachEnv {
         self.steps = s.steps;
         self.done = s.done;
         self.ee = self.chain.fk(&self.q);
-        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
+        self.check_contact();
         self.write_observation();
         Ok(())
     }

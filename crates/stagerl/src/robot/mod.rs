@@ -100,8 +100,7 @@ pub struct JointInfo {
 
 /// A collision primitive, in metres (the URDF's `<collision>` geometry; a cylinder is taken as
 /// the capsule of its radius and length).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Shape {
     /// The points within `radius_m` of the segment from `-half_length_m` to `+half_length_m`
     /// along the local z axis.

@@ -200,9 +200,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     let path = tree.path(root, tip)?;
     // A cycle elsewhere in the document (beside the chain) is refused too.
     check_no_cycle(robot, &tree.parent_joint, root)?;
-    let mut c = fold_chain(&path, root, tip)?;
-    (c.shapes, c.mesh_links) = link_shapes(robot, &path, root)?;
-    Ok(c)
+    fold_chain(robot, &path, root, tip)
 }
 
 /// The links and joints of a URDF, checked to form a tree.
@@ -382,26 +380,35 @@ fn actuated(j: &urdf_rs::Joint, root: &str, tip: &str) -> Result<Option<Actuated
 }
 
 /// Compile the joints of `path`: fold fixed joints and the axis-alignment rotations into the
-/// constants of the kinematics.
-fn fold_chain(path: &[&urdf_rs::Joint], root: &str, tip: &str) -> Result<Compiled> {
+/// constants of the kinematics, and place the collision shapes of the links on the path.
+///
+/// `pending` is, after each joint, the frame of that joint's child link in its segment's frame
+/// (the root's frame before the first actuated joint; after actuated joint `i`, its moving
+/// z-aligned frame, in which the child link's frame is the transpose of the axis-alignment
+/// basis): the constant folded into the kinematics, and where the link's shapes sit.
+fn fold_chain(robot: &urdf_rs::Robot, path: &[&urdf_rs::Joint], root: &str, tip: &str) -> Result<Compiled> {
     let mut joints = Vec::new();
     let mut steps = Vec::new();
     let mut base: Option<Tf> = None;
     let mut pending: Tf = kin::IDENTITY;
+    let (mut shapes, mut mesh_links) = (Vec::new(), Vec::new());
+    add_link_shapes(robot, root, None, &pending, &mut shapes, &mut mesh_links)?;
     for j in path {
         let (xyz, rpy) = checked_origin(j)?;
         pending = kin::mul(&pending, &kin::origin(xyz, rpy));
-        let Some((kind, axis, (lower, upper, velocity))) = actuated(j, root, tip)? else { continue };
-        joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity });
-
-        let a = kin::basis_for_axis(axis);
-        let before = kin::mul(&pending, &a);
-        match steps.last_mut() {
-            None => base = Some(before),
-            Some(Step { after, .. }) => *after = before,
+        if let Some((kind, axis, (lower, upper, velocity))) = actuated(j, root, tip)? {
+            joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity });
+            let a = kin::basis_for_axis(axis);
+            let before = kin::mul(&pending, &a);
+            match steps.last_mut() {
+                None => base = Some(before),
+                Some(Step { after, .. }) => *after = before,
+            }
+            steps.push(Step { prismatic: kind == JointKind::Prismatic, after: kin::IDENTITY });
+            pending = kin::rotation_transpose(&a);
         }
-        steps.push(Step { prismatic: kind == JointKind::Prismatic, after: kin::IDENTITY });
-        pending = kin::rotation_transpose(&a);
+        let segment = steps.len().checked_sub(1);
+        add_link_shapes(robot, &j.child.link, segment, &pending, &mut shapes, &mut mesh_links)?;
     }
     let Some(base) = base else {
         return Err(urdf_err(format!(
@@ -411,72 +418,49 @@ fn fold_chain(path: &[&urdf_rs::Joint], root: &str, tip: &str) -> Result<Compile
     if let Some(last) = steps.last_mut() {
         last.after = pending;
     }
+    mesh_links.dedup();
 
     Ok(Compiled {
         joints,
         base_link: root.to_string(),
         tip_link: tip.to_string(),
         kin: Kinematics::new(&base, &steps),
-        shapes: Vec::new(),
-        mesh_links: Vec::new(),
+        shapes,
+        mesh_links,
     })
 }
 
-/// The collision shapes (`<collision>` elements) of the links on the chain, root to tip, each
-/// placed in its segment's frame: the root link and the links fixed to it in the base frame
-/// (segment `None`), the others in the moving frame of the last actuated joint before them
-/// (segment `Some(i)`: joint `i`'s frame, z-aligned, after its motion). Mirrors the folding of
-/// [`fold_chain`]: after actuated joint `i`, the child link's frame is that moving frame times
-/// the transpose of the joint's axis-alignment basis. Links off the chain have no shapes here.
-/// Also the links with mesh collision shapes, which are not used (listed once each).
-fn link_shapes(
+/// The collision shapes (`<collision>` elements) of link `name`, placed at `frame` (the link's
+/// frame in its segment's: see [`super::LinkShape`]) into `out`; a link with a mesh goes into
+/// `mesh_links` (meshes are not used).
+fn add_link_shapes(
     robot: &urdf_rs::Robot,
-    path: &[&urdf_rs::Joint],
-    root: &str,
-) -> Result<(Vec<LinkShape>, Vec<String>)> {
-    let link = |name: &str| robot.links.iter().find(|l| l.name == name);
-    let mut out = Vec::new();
-    let mut mesh_links: Vec<String> = Vec::new();
-    let mut segment: Option<usize> = None;
-    let mut frame: Tf = kin::IDENTITY;
-    let mut add = |name: &str, segment: Option<usize>, frame: &Tf| -> Result<()> {
-        for c in link(name).map(|l| l.collision.as_slice()).unwrap_or_default() {
-            let Some(shape) = shape_of(name, &c.geometry)? else {
-                mesh_links.push(name.to_string());
-                continue;
-            };
-            let (xyz, rpy) = (c.origin.xyz.0, c.origin.rpy.0);
-            if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite() || v.abs() > MAX_LENGTH_M) {
-                return Err(urdf_err(format!(
-                    "link `{name}`: a collision origin xyz = {xyz:?}, rpy = {rpy:?} is not finite or beyond +-{MAX_LENGTH_M:e}"
-                )));
-            }
-            out.push(LinkShape {
-                link: name.to_string(),
-                segment,
-                pose: kin::mul(frame, &kin::origin(xyz, rpy)),
-                shape,
-            });
+    name: &str,
+    segment: Option<usize>,
+    frame: &Tf,
+    out: &mut Vec<LinkShape>,
+    mesh_links: &mut Vec<String>,
+) -> Result<()> {
+    let link = robot.links.iter().find(|l| l.name == name);
+    for c in link.map(|l| l.collision.as_slice()).unwrap_or_default() {
+        let Some(shape) = shape_of(name, &c.geometry)? else {
+            mesh_links.push(name.to_string());
+            continue;
+        };
+        let (xyz, rpy) = (c.origin.xyz.0, c.origin.rpy.0);
+        if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite() || v.abs() > MAX_LENGTH_M) {
+            return Err(urdf_err(format!(
+                "link `{name}`: a collision origin xyz = {xyz:?}, rpy = {rpy:?} is not finite or beyond +-{MAX_LENGTH_M:e}"
+            )));
         }
-        Ok(())
-    };
-    add(root, None, &frame)?;
-    for j in path {
-        let (xyz, rpy) = checked_origin(j)?;
-        match j.joint_type {
-            JointType::Fixed => frame = kin::mul(&frame, &kin::origin(xyz, rpy)),
-            _ => {
-                let axis = j.axis.xyz.0;
-                let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-                let a = kin::basis_for_axis([axis[0] / norm, axis[1] / norm, axis[2] / norm]);
-                segment = Some(segment.map_or(0, |s| s + 1));
-                frame = kin::rotation_transpose(&a);
-            }
-        }
-        add(&j.child.link, segment, &frame)?;
+        out.push(LinkShape {
+            link: name.to_string(),
+            segment,
+            pose: kin::mul(frame, &kin::origin(xyz, rpy)),
+            shape,
+        });
     }
-    mesh_links.dedup();
-    Ok((out, mesh_links))
+    Ok(())
 }
 
 /// A URDF geometry as a collision primitive; `None` for a mesh (not used).
