@@ -184,6 +184,33 @@ impl Obstacle {
         Ok(())
     }
 
+    /// Half its size along each of its axes, metres (a sphere's radius three times).
+    pub fn half_size_m(&self) -> [f64; 3] {
+        match self.primitive() {
+            Shape::Sphere { radius_m } => [radius_m; 3],
+            Shape::Cuboid { half_extents_m } => half_extents_m,
+            Shape::Capsule { radius_m, half_length_m } => [radius_m, radius_m, half_length_m + radius_m],
+        }
+    }
+
+    /// Distance from point `p` (metres, base frame) to the obstacle's surface, metres; negative
+    /// inside (a box's: the depth to its nearest face).
+    pub fn distance_to_point_m(&self, p: [f64; 3]) -> f64 {
+        let m = self.transform();
+        let d = [p[0] - m[3], p[1] - m[7], p[2] - m[11]];
+        // Into the obstacle's frame: the transposed rotation.
+        let local = [0, 1, 2].map(|c| m[c] * d[0] + m[4 + c] * d[1] + m[8 + c] * d[2]);
+        match self.primitive() {
+            Shape::Sphere { radius_m } => local.iter().map(|x| x * x).sum::<f64>().sqrt() - radius_m,
+            _ => {
+                let h = self.half_size_m();
+                let q = [0, 1, 2].map(|k| local[k].abs() - h[k]);
+                let outside = q.iter().map(|x| x.max(0.0).powi(2)).sum::<f64>().sqrt();
+                outside + q[0].max(q[1]).max(q[2]).min(0.0)
+            }
+        }
+    }
+
     /// Its pose as a row-major 3 x 4 transform (metres).
     fn transform(&self) -> [f64; 12] {
         let p = self.position_m;
@@ -357,14 +384,53 @@ impl ArmCollider {
     }
 
     /// The obstacles later checks test against (validated ones: see [`Obstacle::validate`]).
+    /// Allocates only when there are more than ever before.
     pub fn set_obstacles(&mut self, obstacles: &[Obstacle]) {
-        self.obstacles = obstacles
-            .iter()
-            .map(|o| {
-                let (prim, m) = (o.primitive(), o.transform());
-                (pose3(&m), Prim::of(&prim), Geo::of(&prim, &m))
-            })
-            .collect();
+        self.obstacles.clear();
+        self.obstacles.extend(obstacles.iter().map(Self::prepare));
+    }
+
+    fn prepare(o: &Obstacle) -> (Pose3, Prim, Geo) {
+        let (prim, m) = (o.primitive(), o.transform());
+        (pose3(&m), Prim::of(&prim), Geo::of(&prim, &m))
+    }
+
+    /// Put the arm's shapes where joint values `q` take them.
+    fn place(&mut self, chain: &Chain, q: &[f64]) {
+        chain.segment_frames(q, &mut self.frames);
+        for (k, s) in self.shapes.iter().enumerate() {
+            self.world[k] = match s.segment {
+                -1 => s.local,
+                i => crate::robot::mul_tf(&self.frames[i as usize], &s.local),
+            };
+            self.geo[k] = Geo::of(&s.shape, &self.world[k]);
+        }
+    }
+
+    /// The first placed arm shape (index into `shapes`) that overlaps an obstacle.
+    fn hit_obstacle(&self, (pose, shape, geo): &(Pose3, Prim, Geo)) -> Option<usize> {
+        (0..self.shapes.len()).find(|&k| {
+            let g = &self.geo[k];
+            g.bounds_overlap(geo)
+                && match (&self.shapes[k].shape, geo.round) {
+                    // Capsules and spheres against a sphere: a segment's distance to a point.
+                    (Shape::Capsule { .. } | Shape::Sphere { .. }, true) => {
+                        let d2 = point_segment_distance2(geo.a, g.a, g.b);
+                        d2 < (g.radius + geo.radius).powi(2)
+                    }
+                    _ => overlap(&pose3(&self.world[k]), self.shapes[k].parry.shape(), pose, shape.shape()),
+                }
+        })
+    }
+
+    /// Whether the arm at joint values `q` touches obstacle `o` (whatever the checks and the
+    /// obstacles set): the test random obstacles are placed with. No allocation.
+    pub fn touches(&mut self, chain: &Chain, q: &[f64], o: &Obstacle) -> bool {
+        if self.shapes.is_empty() {
+            return false;
+        }
+        self.place(chain, q);
+        self.hit_obstacle(&Self::prepare(o)).is_some()
     }
 
     /// The first contact of the arm at joint values `q` (one per joint) with the floor, itself
@@ -375,14 +441,7 @@ impl ArmCollider {
         {
             return None;
         }
-        chain.segment_frames(q, &mut self.frames);
-        for (k, s) in self.shapes.iter().enumerate() {
-            self.world[k] = match s.segment {
-                -1 => s.local,
-                i => crate::robot::mul_tf(&self.frames[i as usize], &s.local),
-            };
-            self.geo[k] = Geo::of(&s.shape, &self.world[k]);
-        }
+        self.place(chain, q);
         if self.checks.floor {
             for (k, s) in self.shapes.iter().enumerate() {
                 if s.segment >= 0 && lowest_z(&s.shape, &self.world[k]) < 0.0 {
@@ -398,23 +457,9 @@ impl ArmCollider {
                 }
             }
         }
-        for (i, (pose, shape, geo)) in self.obstacles.iter().enumerate() {
-            for k in 0..self.shapes.len() {
-                let g = &self.geo[k];
-                if !g.bounds_overlap(geo) {
-                    continue;
-                }
-                let hit = match (&self.shapes[k].shape, geo.round) {
-                    // Capsules and spheres against a sphere: a segment's distance to a point.
-                    (Shape::Capsule { .. } | Shape::Sphere { .. }, true) => {
-                        let d2 = point_segment_distance2(geo.a, g.a, g.b);
-                        d2 < (g.radius + geo.radius).powi(2)
-                    }
-                    _ => overlap(&pose3(&self.world[k]), self.shapes[k].parry.shape(), pose, shape.shape()),
-                };
-                if hit {
-                    return Some(Contact::Obstacle { shape: self.shapes[k].index, obstacle: i });
-                }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            if let Some(k) = self.hit_obstacle(o) {
+                return Some(Contact::Obstacle { shape: self.shapes[k].index, obstacle: i });
             }
         }
         None

@@ -67,7 +67,7 @@ impl Config {
     /// The memory a run of this config needs for an arm of `dof` joints, estimated before anything
     /// is allocated (in f64: absurd sizes do not overflow).
     pub fn estimated_memory(&self, dof: usize) -> MemoryEstimate {
-        let obs = crate::env::observation_dim(self.task.observation, dof) as f64;
+        let obs = crate::env::observation_dim(self.task.observation, dof, self.task.obstacle_slots()) as f64;
         let act = dof as f64;
         let f32_bytes = 4.0;
         let widths: Vec<f64> = self.agent.hidden.iter().map(|&h| h as f64).collect();
@@ -163,6 +163,7 @@ impl Config {
         }
         self.task.validate()?;
         self.reward.validate()?;
+        crate::env::check_collision_settings(self.task.on_collision, &self.reward)?;
         self.agent.validate_values()?;
         self.train.validate()?;
         self.check_memory(ESTIMATE_DOF)

@@ -89,7 +89,7 @@ mod tests {
                 let s = env.step(&action).unwrap();
                 ret += s.total();
                 if s.done() {
-                    successes += u32::from(s.terminated);
+                    successes += u32::from(s.reached());
                     steps += env.steps();
                     break;
                 }

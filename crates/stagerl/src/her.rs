@@ -23,7 +23,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::env::{write_target_entries, ResolvedTask, Transition};
+use crate::env::{collision_outcome, write_target_entries, ResolvedTask, Transition};
 use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::rng::Rng;
 use crate::{Error, Result};
@@ -117,6 +117,9 @@ pub struct EpisodeLog {
     quat: Vec<f64>,
     /// Joint velocities applied in each step (rad/s).
     joint_vel: Vec<f64>,
+    /// Each step ended in contact (absent in checkpoints of older versions: no contact).
+    #[serde(default)]
+    contact: Vec<bool>,
 }
 
 impl EpisodeLog {
@@ -129,6 +132,7 @@ impl EpisodeLog {
         for v in [&mut self.ee, &mut self.quat, &mut self.joint_vel] {
             v.clear();
         }
+        self.contact.clear();
     }
 
     /// Record a step of the episode (after the environment took it).
@@ -140,6 +144,7 @@ impl EpisodeLog {
         self.ee.extend_from_slice(pose.position.as_slice());
         self.quat.extend_from_slice(&pose.quaternion_xyzw());
         self.joint_vel.extend_from_slice(t.env.joint_velocities());
+        self.contact.push(t.step.collision.is_some());
     }
 
     /// Steps recorded.
@@ -149,6 +154,10 @@ impl EpisodeLog {
 
     pub fn is_empty(&self) -> bool {
         self.ee.is_empty()
+    }
+
+    fn contact_after(&self, t: usize) -> bool {
+        self.contact.get(t).copied().unwrap_or(false)
     }
 
     fn ee_after(&self, t: usize) -> Vector3<f64> {
@@ -189,7 +198,8 @@ pub struct Relabelled<'a> {
     pub next_obs: &'a [f32],
     /// Every reward term for `goal`; `terms.total` is the stored reward.
     pub terms: RewardTerms,
-    /// `goal` was reached: a terminal transition.
+    /// `goal` was reached, or the step ended in a contact that ends episodes
+    /// (`task.on_collision = "terminate"`): a terminal transition.
     pub terminal: bool,
 }
 
@@ -236,7 +246,7 @@ impl Relabeller {
                 self.next_obs.extend_from_slice(&log.next_obs[t * od..(t + 1) * od]);
                 write_target_entries(task, &mut self.next_obs, after, goal);
                 let q = &log.quat[4 * t..4 * t + 4];
-                let terms = RewardTerms::compute(
+                let mut terms = RewardTerms::compute(
                     reward,
                     task.dt_s,
                     &RewardInput {
@@ -247,13 +257,15 @@ impl Relabeller {
                         prev_ee_pos: Some(before),
                     },
                 );
+                let (ended_by_contact, penalty) = collision_outcome(task, reward, log.contact_after(t));
+                terms.total -= penalty;
                 sink(&Relabelled {
                     step: t,
                     goal,
                     obs: &self.obs,
                     action: &log.action[t * ad..(t + 1) * ad],
                     next_obs: &self.next_obs,
-                    terminal: terms.reached,
+                    terminal: terms.reached || ended_by_contact,
                     terms,
                 });
             }
@@ -349,6 +361,44 @@ mod tests {
                 assert_eq!(bonus, terminal as f64 * reward.success_bonus);
             }
         }
+    }
+
+    /// With `task.on_collision = "terminate"`, the step that ends in contact is terminal for
+    /// every substituted goal and loses the penalty, as the environment's own step does.
+    #[test]
+    fn a_contact_that_ends_the_episode_is_terminal_for_every_goal() {
+        use crate::collision::Obstacle;
+        let chain = Arc::new(crate::robot::Chain::ur5());
+        let tool = chain.fk(&crate::env::task::UR5_HOME_POSE_RAD).position;
+        let task = crate::env::TaskConfig {
+            obstacles: vec![Obstacle::sphere(0.12, [tool.x + 0.2, tool.y, tool.z - 0.1])],
+            on_collision: crate::env::OnCollision::Terminate,
+            ..Default::default()
+        };
+        let task = task.resolve(&chain).unwrap();
+        let reward = RewardConfig { collision_penalty: Some(7.5), ..RewardConfig::default() };
+        let mut e = ReachEnv::new(chain, task.clone(), reward.clone(), 5).unwrap();
+        let mut fresh = e.clone();
+        // The first random episode that runs into the obstacle after a few steps.
+        let (log, qs) = (0..300)
+            .map(|seed| episode(&mut e, seed))
+            .find(|(log, _)| log.len() >= 3 && log.contact_after(log.len() - 1))
+            .expect("some random episode runs into the obstacle");
+        let last = log.len() - 1;
+        let cfg = HerConfig { strategy: HerStrategy::Future, k: 4 };
+        let mut ended = 0;
+        Relabeller::default().relabel(&cfg, &task, &reward, &log, &mut Rng::new(1), |x| {
+            fresh.reset_to(&qs[x.step], x.goal).unwrap();
+            let s = fresh.step(x.action).unwrap();
+            assert_eq!(s.total().to_bits(), x.terms.total.to_bits(), "step {}", x.step);
+            assert_eq!(s.terminated, x.terminal, "step {}", x.step);
+            if x.step == last {
+                assert!(x.terminal && s.collision.is_some());
+                assert_eq!(x.terms.total, x.terms.reward + x.terms.bonus - 7.5);
+                ended += 1;
+            }
+        });
+        assert_eq!(ended, 4, "every copy of the last step");
     }
 
     #[test]

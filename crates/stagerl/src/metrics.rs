@@ -314,6 +314,10 @@ pub struct EvalSummary {
     pub median_final_distance_m: f64,
     /// Mean final distance, metres.
     pub mean_final_distance_m: f64,
+    /// Fraction of trials with at least one step in contact (floor, self, obstacle), in [0, 1];
+    /// `None` when a trial's file predates contact recording.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub collision_rate: Option<f64>,
 }
 
 impl EvalSummary {
@@ -335,6 +339,11 @@ impl EvalSummary {
             success_rate: ok.len() as f64 / trials.len() as f64,
             median_final_distance_m: median,
             mean_final_distance_m: mean(&d)?,
+            collision_rate: trials
+                .iter()
+                .map(|t| t.collision_steps.map(|c| u32::from(c > 0)))
+                .sum::<Option<u32>>()
+                .map(|n| f64::from(n) / trials.len() as f64),
         })
     }
 }
@@ -466,6 +475,7 @@ mod tests {
     #[test]
     fn train_and_eval_metrics_by_hand() {
         let rec = |episode, reward, steps, success| EpisodeRecord {
+            collision_steps: None,
             episode,
             reward,
             steps,
@@ -486,6 +496,7 @@ mod tests {
         assert!(train_metrics(&rs, 5).is_none());
 
         let t = |trial, reward, steps, success| TrialRecord {
+            collision_steps: None,
             trial,
             reward,
             steps,

@@ -62,6 +62,9 @@ pub struct PlanSummary {
     pub path_length_m: f64,
     /// Sum over steps and joints of `|q[k+1] - q[k]|`, radians.
     pub joint_travel_rad: f64,
+    /// Steps that ended with the arm in contact (floor, itself, an obstacle): 0 for a
+    /// collision-free plan.
+    pub collision_steps: u32,
 }
 
 /// A planned trajectory: `rows()` states, stored by column.
@@ -141,6 +144,7 @@ impl Plan {
                 episode_reward: 0.0,
                 path_length_m: 0.0,
                 joint_travel_rad: 0.0,
+                collision_steps: 0,
             },
             warning: None,
         };
@@ -388,10 +392,11 @@ impl Planner {
         let Outcome::Finished { reward, last } = outcome else {
             return Err(Error::InvalidInput("the plan's rollout stopped before the episode ended".into()));
         };
-        plan.summary.reached = last.terminated;
+        plan.summary.reached = last.reached();
         plan.summary.steps = self.env.steps();
         plan.summary.final_distance = self.env.distance();
         plan.summary.episode_reward = reward;
+        plan.summary.collision_steps = self.env.collision_steps();
         plan.warning = warning;
         Ok(plan)
     }

@@ -106,6 +106,11 @@ pub struct RewardConfig {
     /// makes the direction reward `phi / 2 pi` in [0, 1/2], which tells moving away from moving
     /// towards when used with [`DirectionSource::Displacement`].
     pub direction_fold: bool,
+    /// Subtracted from the step's reward when a contact ends the episode
+    /// (`task.on_collision = "terminate"`), a magnitude >= 0. Our extension: the paper has no
+    /// collision term. Unset: 0 (and left out of a written config).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub collision_penalty: Option<f64>,
 }
 
 impl Default for RewardConfig {
@@ -120,6 +125,7 @@ impl Default for RewardConfig {
             sar_scale_m: 1.0,
             direction: DirectionSource::Quaternion,
             direction_fold: true,
+            collision_penalty: None,
         }
     }
 }
@@ -134,6 +140,9 @@ impl RewardConfig {
         non_negative("reward.sar_sigma1", self.sar_sigma1)?;
         non_negative("reward.sar_sigma2", self.sar_sigma2)?;
         positive("reward.sar_scale_m", self.sar_scale_m)?;
+        if let Some(p) = self.collision_penalty {
+            non_negative("reward.collision_penalty", p)?;
+        }
         Ok(())
     }
 }
@@ -216,7 +225,8 @@ pub struct RewardTerms {
     pub reward: f64,
     /// The success bonus when reached, else 0.
     pub bonus: f64,
-    /// `reward + bonus`: what the agent receives.
+    /// `reward + bonus`: what the agent receives. (The environment takes
+    /// `reward.collision_penalty` off it when a contact ends the episode.)
     pub total: f64,
 }
 

@@ -38,7 +38,20 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn stepping_and_resetting_allocate_nothing() {
-    let cfg = stagerl::config::Config::default();
+    no_allocation_in(stagerl::config::Config::default());
+}
+
+/// With random obstacles, observed, and contacts ending episodes, too.
+#[test]
+fn random_obstacles_allocate_nothing() {
+    let mut cfg = stagerl::config::Config::default();
+    cfg.task.random_obstacles = Some(stagerl::env::task::RandomObstacles::default());
+    cfg.task.observe_obstacles = true;
+    cfg.task.on_collision = stagerl::env::OnCollision::Terminate;
+    no_allocation_in(cfg);
+}
+
+fn no_allocation_in(cfg: stagerl::config::Config) {
     let mut env = stagerl::env::ReachEnv::from_config(&cfg, 1).unwrap();
     let mut venv = stagerl::env::VecEnv::from_config(4, &cfg, 1).unwrap();
     let actions: Vec<f32> = (0..4 * 6).map(|i| ((i * 7919) % 200) as f32 / 100.0 - 1.0).collect();
@@ -85,7 +98,7 @@ fn rollouts_allocate_nothing() {
             panic!("nothing stops these rollouts")
         };
         assert!(last.done());
-        reached += usize::from(last.terminated);
+        reached += usize::from(last.reached());
         (observed, total) = (observed + sum, total + reward);
     }
     let after = allocs();

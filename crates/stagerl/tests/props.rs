@@ -122,6 +122,7 @@ fn reward_config() -> impl Strategy<Value = RewardConfig> {
                     sar_scale_m,
                     direction,
                     direction_fold: fold,
+                    collision_penalty: None,
                 }
             },
         )

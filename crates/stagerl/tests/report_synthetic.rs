@@ -58,6 +58,7 @@ fn write_run(
             final_distance_m: if success { 0.008 } else { 0.2 },
             env_steps,
             wall_s: e as f64 * 0.01,
+            collision_steps: Some(u32::from(!success)),
         })
         .unwrap();
         run.rewards.push(r);
@@ -85,6 +86,8 @@ fn write_run(
                     start_distance_m: 0.4,
                     final_distance_m: if success { 0.005 } else { 0.05 },
                     target: [-0.3, 0.1, 0.4],
+                    // A few trials touch something (one in eight, at random).
+                    collision_steps: Some(if rng.below(8) == 0 { 1 + rng.below(3) as u32 } else { 0 }),
                 }
             })
             .collect();
@@ -255,13 +258,22 @@ fn report_of_synthetic_runs() {
     let ev = |run: &Run| {
         let t = run.trials.as_ref().unwrap();
         let ok: Vec<f64> = t.iter().filter(|t| t.success).map(|t| f64::from(t.steps)).collect();
-        (mean(&t.iter().map(|t| t.reward).collect::<Vec<_>>()), mean(&ok), ok.len() as f64 / t.len() as f64)
+        let hit = t.iter().filter(|t| t.collision_steps.unwrap() > 0).count() as f64;
+        (
+            mean(&t.iter().map(|t| t.reward).collect::<Vec<_>>()),
+            mean(&ok),
+            ok.len() as f64 / t.len() as f64,
+            hit / t.len() as f64,
+        )
     };
     let (e1, e2) = (ev(&a1), ev(&a2));
     close(&sar["eval_reward"]["mean"], mean(&[e1.0, e2.0]));
     close(&sar["eval_steps"]["mean"], mean(&[e1.1, e2.1]));
     close(&sar["success_rate"]["mean"], mean(&[e1.2, e2.2]));
     close(&sar["success_rate"]["std"], std(&[e1.2, e2.2]));
+    assert!(e1.3 > 0.0 || e2.3 > 0.0, "the synthetic trials touch something");
+    close(&sar["collision_rate"]["mean"], mean(&[e1.3, e2.3]));
+    close(&sar["collision_rate"]["std"], std(&[e1.3, e2.3]));
 
     let posture = group("ddpg", "posture");
     assert_eq!(posture["seeds"].as_u64(), Some(1));
@@ -297,6 +309,10 @@ fn report_of_synthetic_runs() {
     assert!(
         row.contains(&format!("{:.1} ± {:.1} %", 100.0 * mean(&[e1.2, e2.2]), 100.0 * std(&[e1.2, e2.2]))),
         "{row}"
+    );
+    assert!(
+        row.contains(&format!("{:.1} ± {:.1} % |", 100.0 * mean(&[e1.3, e2.3]), 100.0 * std(&[e1.3, e2.3]))),
+        "the collision rate is the last value column: {row}"
     );
     assert!(md.contains("| DDPG | Stride | ours | 0 | — | not run |"), "{md}");
     assert!(md.contains("ddpg-posture-2 (seed 2) excluded: incomplete"), "{md}");

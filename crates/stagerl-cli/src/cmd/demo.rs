@@ -68,7 +68,13 @@ pub fn run(args: Args) -> Result<()> {
         if let Outcome::Finished { reward, last } = outcome {
             outln!(
                 "{} after {} steps, episode reward (eq. 16) {reward:.4}",
-                if last.terminated { "reached" } else { "truncated" },
+                if last.reached() {
+                    "reached"
+                } else if last.terminated {
+                    "collided"
+                } else {
+                    "truncated"
+                },
                 env.steps()
             )?;
         }

@@ -25,19 +25,21 @@ use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::rng::Rng;
 use crate::robot::{Chain, Pose};
 use crate::{Error, Result};
-pub use task::{ObservationKind, ResolvedTask, TaskConfig};
+pub use task::{ObservationKind, OnCollision, ResolvedTask, TaskConfig};
 
 /// The outcome of one step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Step {
     /// Every reward term; `terms.total` is what the agent receives.
     pub terms: RewardTerms,
-    /// The target was reached: a terminal state.
+    /// A terminal state: the target was reached, or (with `task.on_collision = "terminate"`)
+    /// the arm touched something. Success is [`Step::reached`].
     pub terminated: bool,
     /// The step limit was hit without reaching the target: not terminal, bootstrap through it.
     pub truncated: bool,
     /// What the arm touched after the step, if anything ([`ReachEnv::contact`] has the links).
-    /// Recorded only: a collision changes neither the reward nor the episode's end.
+    /// With `task.on_collision = "record"` (the default) it changes nothing else; with
+    /// `"terminate"` it ends the episode and `terms.total` has `reward.collision_penalty` taken off.
     pub collision: Option<CollisionKind>,
 }
 
@@ -50,24 +52,53 @@ impl Step {
     pub fn done(&self) -> bool {
         self.terminated || self.truncated
     }
+    /// The target was reached (`D_PT < beta`): the episode is a success.
+    pub fn reached(&self) -> bool {
+        self.terms.reached
+    }
 }
 
-/// Number of observation values for an arm with `dof` joints.
-pub fn observation_dim(kind: ObservationKind, dof: usize) -> usize {
+/// Whether a step that ended in contact (`collided`) ends the episode, and the reward it then
+/// loses (`reward.collision_penalty`, 0 when unset). One rule for the environment and for
+/// hindsight relabelling.
+#[inline]
+pub fn collision_outcome(task: &ResolvedTask, reward: &RewardConfig, collided: bool) -> (bool, f64) {
+    match (collided, task.on_collision) {
+        (true, OnCollision::Terminate) => (true, reward.collision_penalty.unwrap_or(0.0)),
+        _ => (false, 0.0),
+    }
+}
+
+/// Check that `task.on_collision` and `reward.collision_penalty` fit together: the penalty is
+/// only ever applied when a contact ends the episode.
+pub fn check_collision_settings(on_collision: OnCollision, reward: &RewardConfig) -> Result<()> {
+    match (on_collision, reward.collision_penalty) {
+        (OnCollision::Record, Some(p)) => Err(Error::config(
+            "reward.collision_penalty",
+            p,
+            "unset while task.on_collision = \"record\": the penalty applies only when a contact \
+             ends the episode (set task.on_collision = \"terminate\")",
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Number of observation values for an arm with `dof` joints and `obstacle_slots` observed
+/// obstacles ([`TaskConfig::observe_obstacles`]).
+pub fn observation_dim(kind: ObservationKind, dof: usize, obstacle_slots: usize) -> usize {
     match kind {
-        ObservationKind::Standard => dof + 10,
+        ObservationKind::Standard => dof + 10 + task::OBSTACLE_OBS_LEN * obstacle_slots,
     }
 }
 
 /// Write the observation entries that depend on the target (metres, base frame) for an
-/// end-effector at `ee` (metres): for the standard observation of a `dof`-joint arm (`obs` of
-/// `dof + 10` values), the target (at `dof + 3..dof + 6`), `obs_delta_scale x (target - ee)`
-/// and its norm. The environment writes its own observations with it, and hindsight relabelling
+/// end-effector at `ee` (metres): for the standard observation of a `dof`-joint arm, the target
+/// (at `dof + 3..dof + 6`), `obs_delta_scale x (target - ee)` and its norm. The environment writes its own observations with it, and hindsight relabelling
 /// ([`crate::her`]) writes those of a substituted goal, so both are the same bits.
 pub fn write_target_entries(task: &ResolvedTask, obs: &mut [f32], ee: Vector3<f64>, target: Vector3<f64>) {
     match task.observation {
         ObservationKind::Standard => {
-            let n = obs.len() - 10;
+            let n = task.home_pose.len();
             let d = (target - ee) * task.obs_delta_scale;
             for k in 0..3 {
                 obs[n + 3 + k] = target[k] as f32;
@@ -109,6 +140,12 @@ pub struct EnvState {
     pub target: [f64; 3],
     pub steps: u32,
     pub done: bool,
+    /// Steps of this episode that ended in contact.
+    #[serde(default)]
+    pub collision_steps: u32,
+    /// The episode's random obstacles (`[task.random_obstacles]`), after the fixed ones.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub random_obstacles: Vec<crate::collision::Obstacle>,
 }
 
 /// The reaching environment.
@@ -125,24 +162,43 @@ pub struct ReachEnv {
     target: Vector3<f64>,
     steps: u32,
     done: bool,
+    /// Steps of this episode that ended in contact.
+    collision_steps: u32,
     obs: Vec<f32>,
     /// The collision checker, when the arm has collision shapes.
     collider: Option<ArmCollider>,
     contact: Option<Contact>,
+    /// The episode's obstacles: the fixed ones, then the random ones.
+    obstacles: Vec<crate::collision::Obstacle>,
 }
 
 impl ReachEnv {
     /// An environment for `chain`, seeded; call [`ReachEnv::reset`] before stepping.
     pub fn new(chain: Arc<Chain>, task: ResolvedTask, reward: RewardConfig, seed: u64) -> Result<ReachEnv> {
         reward.validate()?;
+        check_collision_settings(task.on_collision, &reward)?;
         let n = chain.dof();
+        if task.on_collision == OnCollision::Terminate && chain.collision_shapes().is_empty() {
+            return Err(Error::config(
+                "task.on_collision",
+                "\"terminate\"",
+                format!(
+                    "\"record\" for this arm: no link of `{}` to `{}` has a collision shape (box, \
+                     sphere or cylinder), so no contact can end an episode",
+                    chain.base_link(),
+                    chain.tip_link()
+                ),
+            ));
+        }
         if task.home_pose.len() != n || task.target_joint_range.len() != n {
             return Err(Error::InvalidInput(format!(
                 "the task was resolved for {} joints, the arm has {n}",
                 task.home_pose.len()
             )));
         }
-        let obs_dim = observation_dim(task.observation, n);
+        let obs_dim = observation_dim(task.observation, n, task.obstacle_slots());
+        let mut obstacles = Vec::with_capacity(task.max_obstacles());
+        obstacles.extend(task.obstacles.iter().cloned());
         let q = task.home_pose.clone();
         let ee = chain.fk(&q);
         let collider = (!chain.collision_shapes().is_empty()).then(|| {
@@ -153,6 +209,7 @@ impl ReachEnv {
         let mut env = ReachEnv {
             collider,
             contact: None,
+            obstacles,
             chain,
             rng: Rng::new(seed),
             joint_vel: vec![0.0; n],
@@ -161,6 +218,7 @@ impl ReachEnv {
             target: ee.position,
             steps: 0,
             done: true,
+            collision_steps: 0,
             obs: vec![0.0; obs_dim],
             q,
             task,
@@ -213,10 +271,25 @@ impl ReachEnv {
     }
 
     fn begin_episode(&mut self) -> &[f32] {
+        if self.task.random_obstacles.is_some() {
+            let collider = self.collider.as_mut();
+            self.task.place_obstacles(
+                &self.chain,
+                collider,
+                &self.q,
+                self.target,
+                &mut self.rng,
+                &mut self.obstacles,
+            );
+            if let Some(c) = &mut self.collider {
+                c.set_obstacles(&self.obstacles);
+            }
+        }
         self.joint_vel.fill(0.0);
         self.ee = self.chain.fk(&self.q);
         self.check_contact();
         self.steps = 0;
+        self.collision_steps = 0;
         self.done = false;
         self.write_observation();
         &self.obs
@@ -253,7 +326,8 @@ impl ReachEnv {
         self.ee = self.chain.fk(&self.q);
         self.check_contact();
         self.steps += 1;
-        let terms = RewardTerms::compute(
+        self.collision_steps += u32::from(self.contact.is_some());
+        let mut terms = RewardTerms::compute(
             &self.reward,
             dt,
             &RewardInput {
@@ -264,7 +338,9 @@ impl ReachEnv {
                 prev_ee_pos: Some(prev_ee),
             },
         );
-        let terminated = terms.reached;
+        let (ended_by_contact, penalty) = collision_outcome(&self.task, &self.reward, self.contact.is_some());
+        terms.total -= penalty;
+        let terminated = terms.reached || ended_by_contact;
         let truncated = !terminated && self.steps >= self.task.max_steps;
         self.done = terminated || truncated;
         self.write_observation();
@@ -287,9 +363,24 @@ impl ReachEnv {
                 for k in 0..3 {
                     self.obs[n + k] = p[k] as f32;
                 }
+                let slots = &mut self.obs[n + 10..];
+                slots.fill(0.0);
+                for (o, slot) in self.obstacles.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN)) {
+                    let (p, h) = (o.position_m, o.half_size_m());
+                    for k in 0..3 {
+                        slot[k] = p[k] as f32;
+                        slot[3 + k] = h[k] as f32;
+                    }
+                    slot[6] = f32::from(u8::from(o.shape == crate::collision::ObstacleShape::Sphere));
+                }
             }
         }
         write_target_entries(&self.task, &mut self.obs, self.ee.position, self.target);
+    }
+
+    /// The obstacles of this episode: the fixed ones, then the random ones.
+    pub fn obstacles(&self) -> &[crate::collision::Obstacle] {
+        &self.obstacles
     }
 
     /// What the arm touches at its current joint positions (checked at every reset and step),
@@ -334,6 +425,10 @@ impl ReachEnv {
     pub fn steps(&self) -> u32 {
         self.steps
     }
+    /// Steps of this episode that ended in contact ([`ReachEnv::contact`]).
+    pub fn collision_steps(&self) -> u32 {
+        self.collision_steps
+    }
     /// The episode has ended.
     pub fn is_done(&self) -> bool {
         self.done
@@ -359,6 +454,8 @@ impl ReachEnv {
             target: [self.target.x, self.target.y, self.target.z],
             steps: self.steps,
             done: self.done,
+            collision_steps: self.collision_steps,
+            random_obstacles: self.obstacles[self.task.obstacles.len()..].to_vec(),
         }
     }
 
@@ -375,12 +472,28 @@ impl ReachEnv {
         if !finite {
             return Err(Error::InvalidInput("environment state holds a non-finite value".into()));
         }
+        let max = self.task.max_obstacles() - self.task.obstacles.len();
+        if s.random_obstacles.len() > max {
+            return Err(Error::InvalidInput(format!(
+                "environment state with {} random obstacles, the task allows {max}",
+                s.random_obstacles.len()
+            )));
+        }
+        for (i, o) in s.random_obstacles.iter().enumerate() {
+            o.validate(&format!("environment state: random obstacle {i}"))?;
+        }
         self.rng = s.rng.clone();
         self.q.copy_from_slice(&s.q);
         self.joint_vel.copy_from_slice(&s.joint_vel);
         self.target = Vector3::from(s.target);
         self.steps = s.steps;
         self.done = s.done;
+        self.collision_steps = s.collision_steps;
+        self.obstacles.truncate(self.task.obstacles.len());
+        self.obstacles.extend(s.random_obstacles.iter().cloned());
+        if let Some(c) = &mut self.collider {
+            c.set_obstacles(&self.obstacles);
+        }
         self.ee = self.chain.fk(&self.q);
         self.check_contact();
         self.write_observation();
@@ -594,6 +707,15 @@ pub(crate) mod tests {
         obstacles: Vec<crate::collision::Obstacle>,
         checks: Option<crate::collision::Checks>,
     ) -> ReachEnv {
+        panda_env_with(obstacles, checks, OnCollision::Record, None)
+    }
+
+    fn panda_env_with(
+        obstacles: Vec<crate::collision::Obstacle>,
+        checks: Option<crate::collision::Checks>,
+        on_collision: OnCollision,
+        collision_penalty: Option<f64>,
+    ) -> ReachEnv {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/robots/panda.urdf");
         let chain = Arc::new(Chain::from_urdf_file(std::path::Path::new(path), None).unwrap());
         let task = TaskConfig {
@@ -601,10 +723,11 @@ pub(crate) mod tests {
             target_joint_range_rad: Some(vec![0.8, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0]),
             obstacles,
             collision: checks,
+            on_collision,
             ..TaskConfig::default()
         };
         let task = task.resolve(&chain).unwrap();
-        ReachEnv::new(chain, task, RewardConfig::default(), 3).unwrap()
+        ReachEnv::new(chain, task, RewardConfig { collision_penalty, ..RewardConfig::default() }, 3).unwrap()
     }
 
     const PANDA_HOME: [f64; 7] = {
@@ -652,5 +775,167 @@ pub(crate) mod tests {
             }
         }
         assert!(seen > 0, "random motion touched something at least once");
+    }
+
+    /// `task.on_collision = "terminate"`: the first step that ends in contact ends the episode,
+    /// not as a success, with the penalty taken off what the agent receives; the count of
+    /// contact steps is kept per episode. With `"record"` the same steps go on.
+    #[test]
+    fn terminate_on_collision_ends_the_episode_with_the_penalty() {
+        let low = [0.0, 1.7, 0.0, -0.5, 0.0, 1.57, 0.0];
+        let target = Vector3::new(0.5, 0.0, 0.3);
+        let mut rec = panda_env(Vec::new(), None);
+        let mut term = panda_env_with(Vec::new(), None, OnCollision::Terminate, Some(5.0));
+        rec.reset_to(&low, target).unwrap();
+        term.reset_to(&low, target).unwrap();
+        let (a, b) = (rec.step(&[0.0; 7]).unwrap(), term.step(&[0.0; 7]).unwrap());
+        assert_eq!(a.collision, Some(CollisionKind::Floor));
+        assert!(!a.done() && rec.collision_steps() == 1);
+        assert!(b.terminated && !b.truncated && !b.reached() && term.is_done());
+        assert_eq!(b.terms.reward, a.terms.reward);
+        assert_eq!(b.total(), a.total() - 5.0);
+        assert_eq!(term.collision_steps(), 1);
+        // The count goes on in record mode and starts again with each episode.
+        rec.step(&[0.0; 7]).unwrap();
+        assert_eq!(rec.collision_steps(), 2);
+        assert_eq!(rec.state().collision_steps, 2);
+        rec.reset();
+        assert_eq!(rec.collision_steps(), 0);
+        // Without a penalty, the episode still ends and loses nothing.
+        let mut free = panda_env_with(Vec::new(), None, OnCollision::Terminate, None);
+        free.reset_to(&low, target).unwrap();
+        let c = free.step(&[0.0; 7]).unwrap();
+        assert!(c.terminated && c.total() == a.total());
+        // Clear of everything, terminate mode runs the same episodes as record mode.
+        let mut x = panda_env(Vec::new(), None);
+        let mut y = panda_env_with(Vec::new(), None, OnCollision::Terminate, Some(5.0));
+        for _ in 0..5 {
+            assert_eq!(x.reset(), y.reset());
+            while !x.is_done() && x.contact().is_none() {
+                let (p, q) = (x.step(&[0.1; 7]).unwrap(), y.step(&[0.1; 7]).unwrap());
+                if p.collision.is_none() {
+                    assert_eq!(p, q);
+                }
+            }
+        }
+    }
+
+    /// The penalty without "terminate", or "terminate" on an arm without collision shapes, is a
+    /// config error naming the field.
+    #[test]
+    fn collision_settings_that_cannot_work_are_errors() {
+        let reward = RewardConfig { collision_penalty: Some(1.0), ..RewardConfig::default() };
+        let e = check_collision_settings(OnCollision::Record, &reward).unwrap_err().to_string();
+        assert!(e.contains("reward.collision_penalty") && e.contains("terminate"), "{e}");
+        assert!(check_collision_settings(OnCollision::Terminate, &reward).is_ok());
+        let bad = RewardConfig { collision_penalty: Some(-1.0), ..RewardConfig::default() };
+        assert!(bad.validate().unwrap_err().to_string().contains("reward.collision_penalty"));
+        let xml = r#"<robot name="bare"><link name="a"/><link name="b"/>
+            <joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+            <origin xyz="0 0 0.3"/><limit lower="-1" upper="1" velocity="1" effort="1"/></joint></robot>"#;
+        let chain = Arc::new(Chain::from_urdf_str(xml, None).unwrap());
+        let task = TaskConfig {
+            home_pose_rad: Some(vec![0.0]),
+            target_joint_range_rad: Some(vec![1.0]),
+            target_min_z_m: 0.0,
+            on_collision: OnCollision::Terminate,
+            ..TaskConfig::default()
+        };
+        let task = task.resolve(&chain).unwrap();
+        let e = ReachEnv::new(chain, task, RewardConfig::default(), 1).unwrap_err().to_string();
+        assert!(e.contains("task.on_collision") && e.contains("collision shape"), "{e}");
+    }
+
+    fn random_obstacles_env(seed: u64, observe: bool) -> ReachEnv {
+        let chain = Arc::new(Chain::ur5());
+        let task = TaskConfig {
+            obstacles: vec![crate::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
+            random_obstacles: Some(task::RandomObstacles { count: [2, 5], ..Default::default() }),
+            observe_obstacles: observe,
+            ..TaskConfig::default()
+        };
+        ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed).unwrap()
+    }
+
+    /// Random obstacles: a count in range each episode, each clear of the start pose and of the
+    /// target, drawn from the seed; observed in their slots; restored with the state.
+    #[test]
+    fn random_obstacles_are_placed_clear_of_the_start_and_the_target() {
+        let mut env = random_obstacles_env(4, true);
+        assert_eq!(env.obs_dim(), 16 + 7 * (1 + 5));
+        let mut checker = ArmCollider::new(env.chain(), crate::collision::Checks::default());
+        let (mut counts, mut hit) = (std::collections::BTreeSet::new(), 0);
+        for _ in 0..200 {
+            env.reset();
+            let (obstacles, n) = (env.obstacles().to_vec(), env.obstacles().len() - 1);
+            assert!((2..=5).contains(&n), "{n} random obstacles");
+            counts.insert(n);
+            assert_eq!(obstacles[0].position_m, [0.0, 0.6, 0.3], "the fixed one first");
+            for o in &obstacles[1..] {
+                assert!(o.distance_to_point_m(env.target().into()) >= 0.05);
+                assert!(!checker.touches(env.chain(), env.joint_positions(), o));
+                assert!(o.position_m.iter().zip([0.6, 0.6, 0.7]).all(|(p, m)| p.abs() <= m));
+            }
+            let obs = env.observation();
+            for (i, o) in obstacles.iter().enumerate() {
+                let slot = &obs[16 + 7 * i..16 + 7 * (i + 1)];
+                assert_eq!(slot[..3], o.position_m.map(|x| x as f32));
+                assert_eq!(slot[3..6], o.half_size_m().map(|x| x as f32));
+                assert_eq!(slot[6], if o.radius_m.is_some() { 1.0 } else { 0.0 });
+            }
+            assert!(obs[16 + 7 * obstacles.len()..].iter().all(|&x| x == 0.0), "empty slots are zeros");
+            while !env.is_done() {
+                hit += usize::from(env.step(&[0.4, 0.3, -0.3, 0.0, 0.0, 0.0]).unwrap().collision.is_some());
+            }
+        }
+        assert_eq!(counts.len(), 4, "every count of 2..=5 occurs: {counts:?}");
+        assert!(hit > 0, "the arm runs into some of them");
+        // The same seed draws the same obstacles; another seed others.
+        let (mut a, mut b, mut c) =
+            (random_obstacles_env(9, false), random_obstacles_env(9, false), random_obstacles_env(10, false));
+        assert_eq!(a.obs_dim(), 16);
+        a.reset();
+        b.reset();
+        c.reset();
+        assert_eq!(a.obstacles(), b.obstacles());
+        assert_ne!(a.obstacles(), c.obstacles());
+        // A state mid-episode restores the episode's obstacles.
+        a.step(&[0.1; 6]).unwrap();
+        let saved = a.state();
+        assert_eq!(saved.random_obstacles, a.obstacles()[1..].to_vec());
+        let mut d = random_obstacles_env(77, false);
+        d.reset();
+        d.restore(&saved).unwrap();
+        assert_eq!(d.obstacles(), a.obstacles());
+        for _ in 0..10 {
+            assert_eq!(
+                a.step(&[0.5, 0.2, 0.1, 0.0, 0.0, 0.0]).unwrap(),
+                d.step(&[0.5, 0.2, 0.1, 0.0, 0.0, 0.0]).unwrap()
+            );
+            if a.is_done() {
+                break;
+            }
+        }
+        let too_many = EnvState { random_obstacles: vec![a.obstacles()[1].clone(); 6], ..saved };
+        assert!(d.restore(&too_many).unwrap_err().to_string().contains("6 random obstacles"));
+    }
+
+    #[test]
+    fn random_obstacle_settings_are_checked() {
+        let bad = |r: task::RandomObstacles, field: &str| {
+            let t = TaskConfig { random_obstacles: Some(r), ..TaskConfig::default() };
+            let e = t.validate().unwrap_err().to_string();
+            assert!(e.contains(field), "{e}");
+        };
+        let d = task::RandomObstacles::default;
+        bad(task::RandomObstacles { count: [3, 2], ..d() }, "task.random_obstacles.count");
+        bad(task::RandomObstacles { count: [0, 33], ..d() }, "task.random_obstacles.count");
+        bad(task::RandomObstacles { shapes: Vec::new(), ..d() }, "task.random_obstacles.shapes");
+        bad(task::RandomObstacles { size_m: [0.0, 0.1], ..d() }, "task.random_obstacles.size_m");
+        bad(task::RandomObstacles { size_m: [0.2, 0.1], ..d() }, "task.random_obstacles.size_m");
+        bad(task::RandomObstacles { region_min_m: [1.0, 0.0, 0.0], ..d() }, "region_min_m");
+        bad(task::RandomObstacles { target_clearance_m: f64::NAN, ..d() }, "target_clearance_m");
+        let e = TaskConfig { observe_obstacles: true, ..TaskConfig::default() }.validate().unwrap_err();
+        assert!(e.to_string().contains("task.observe_obstacles"), "{e}");
     }
 }

@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 
-use crate::collision::{Checks, Obstacle};
+use crate::collision::{ArmCollider, Checks, Obstacle, ObstacleShape};
 use crate::rng::Rng;
 use crate::robot::{Chain, JointKind};
 use crate::{Error, Result};
@@ -52,6 +52,149 @@ pub struct TaskConfig {
     /// both. Contacts are recorded; they change nothing in the episode (the paper's task).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub collision: Option<Checks>,
+    /// What a contact does (`"record"` or `"terminate"`). Default `"record"`: contacts are
+    /// counted and change nothing, the paper's task. `"terminate"` ends the episode at the first
+    /// step that ends in contact, with `reward.collision_penalty` subtracted (our extension: the
+    /// paper has no collision term). Success stays "the target was reached".
+    #[serde(default, skip_serializing_if = "OnCollision::is_record")]
+    pub on_collision: OnCollision,
+    /// `[task.random_obstacles]`: obstacles drawn anew for every episode, after its target
+    /// (from the environment's random stream), beside the fixed `[[task.obstacles]]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub random_obstacles: Option<RandomObstacles>,
+    /// Add the obstacles to the observation: 7 values per obstacle slot (one per fixed obstacle,
+    /// then `random_obstacles.count[1]` slots): centre (3, m), half size along the obstacle's
+    /// axes (3, m; a sphere's radius three times) and 1 for a sphere, 0 for a box; an empty slot
+    /// is all zeros. A box's orientation is not observed (random boxes are axis-aligned).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub observe_obstacles: bool,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+/// Values per obstacle slot of the observation (`task.observe_obstacles`).
+pub const OBSTACLE_OBS_LEN: usize = 7;
+
+/// Most random obstacles per episode.
+pub const MAX_RANDOM_OBSTACLES: u32 = 32;
+
+/// `[task.random_obstacles]`: how many obstacles each episode gets, their shapes, sizes and
+/// region. A candidate is drawn again (up to [`PLACEMENT_TRIES`] times, then the obstacle is left
+/// out of that episode) while it touches the arm at the episode's start pose or comes closer to
+/// the target than `target_clearance_m`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RandomObstacles {
+    /// Obstacles per episode, an integer drawn uniformly from `[count[0], count[1]]`.
+    pub count: [u32; 2],
+    /// The shapes drawn from, uniformly (`"sphere"`, `"cuboid"`).
+    pub shapes: Vec<ObstacleShape>,
+    /// A sphere's radius, or each half extent of an (axis-aligned) box, uniform in this range,
+    /// metres.
+    pub size_m: [f64; 2],
+    /// Centres are uniform in the box from `region_min_m` to `region_max_m` (base frame, metres).
+    pub region_min_m: [f64; 3],
+    pub region_max_m: [f64; 3],
+    /// Least distance from the target to an obstacle's surface, metres.
+    pub target_clearance_m: f64,
+}
+
+/// Candidates drawn for one random obstacle before it is left out of the episode.
+pub const PLACEMENT_TRIES: u32 = 100;
+
+impl Default for RandomObstacles {
+    fn default() -> Self {
+        RandomObstacles {
+            count: [1, 3],
+            shapes: vec![ObstacleShape::Sphere, ObstacleShape::Cuboid],
+            size_m: [0.04, 0.1],
+            region_min_m: [-0.6, -0.6, 0.0],
+            region_max_m: [0.6, 0.6, 0.7],
+            target_clearance_m: 0.05,
+        }
+    }
+}
+
+impl RandomObstacles {
+    fn validate(&self) -> Result<()> {
+        let f = "task.random_obstacles";
+        let [lo, hi] = self.count;
+        if lo > hi || hi > MAX_RANDOM_OBSTACLES {
+            return Err(Error::config(
+                format!("{f}.count"),
+                format!("{:?}", self.count),
+                format!("[min, max] with min <= max <= {MAX_RANDOM_OBSTACLES}"),
+            ));
+        }
+        if self.shapes.is_empty() {
+            return Err(Error::config(format!("{f}.shapes"), "[]", "one or more of \"sphere\", \"cuboid\""));
+        }
+        let [a, b] = self.size_m;
+        if !(a.is_finite() && b.is_finite() && a > 0.0 && a <= b && b <= 10.0) {
+            return Err(Error::config(
+                format!("{f}.size_m"),
+                format!("{:?}", self.size_m),
+                "[min, max] metres with 0 < min <= max <= 10",
+            ));
+        }
+        let (lo, hi) = (self.region_min_m, self.region_max_m);
+        let ok = (0..3).all(|k| {
+            lo[k].is_finite()
+                && hi[k].is_finite()
+                && lo[k] <= hi[k]
+                && hi[k].abs() <= 100.0
+                && lo[k].abs() <= 100.0
+        });
+        if !ok {
+            return Err(Error::config(
+                format!("{f}.region_min_m/region_max_m"),
+                format!("{lo:?} / {hi:?}"),
+                "finite corners within +-100 metres, each min <= its max",
+            ));
+        }
+        if !(self.target_clearance_m.is_finite() && self.target_clearance_m >= 0.0) {
+            return Err(Error::config(
+                format!("{f}.target_clearance_m"),
+                self.target_clearance_m,
+                "a finite number of metres >= 0",
+            ));
+        }
+        Ok(())
+    }
+
+    /// One candidate obstacle from `rng`.
+    fn draw(&self, rng: &mut Rng) -> Obstacle {
+        let shape = self.shapes[rng.below(self.shapes.len() as u64) as usize];
+        let [a, b] = self.size_m;
+        let mut size = || rng.uniform_range(a, b);
+        let (radius, half) = match shape {
+            ObstacleShape::Sphere => (Some(size()), None),
+            ObstacleShape::Cuboid => (None, Some([size(), size(), size()])),
+        };
+        let (lo, hi) = (self.region_min_m, self.region_max_m);
+        let position_m = [0, 1, 2].map(|k| rng.uniform_range(lo[k], hi[k]));
+        Obstacle { shape, half_extents_m: half, radius_m: radius, position_m, rotation_xyzw: None }
+    }
+}
+
+/// `task.on_collision`: what a step that ends in contact does.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OnCollision {
+    /// Count it (episodes.csv's `collision_steps`, the evaluations' collision rate); nothing else.
+    #[default]
+    Record,
+    /// End the episode (terminated, not a success) with `reward.collision_penalty`.
+    Terminate,
+}
+
+impl OnCollision {
+    /// The default (left out of a written config, so that older configs keep their hash).
+    pub fn is_record(&self) -> bool {
+        *self == OnCollision::Record
+    }
 }
 
 impl Default for TaskConfig {
@@ -66,6 +209,9 @@ impl Default for TaskConfig {
             obs_delta_scale: 10.0,
             obstacles: Vec::new(),
             collision: None,
+            on_collision: OnCollision::Record,
+            random_obstacles: None,
+            observe_obstacles: false,
         }
     }
 }
@@ -96,6 +242,9 @@ pub struct ResolvedTask {
     pub target_acceptance: f64,
     pub obstacles: Vec<Obstacle>,
     pub collision: Checks,
+    pub on_collision: OnCollision,
+    pub random_obstacles: Option<RandomObstacles>,
+    pub observe_obstacles: bool,
 }
 
 fn check_finite(field: &str, v: f64) -> Result<()> {
@@ -133,7 +282,22 @@ impl TaskConfig {
         for (i, o) in self.obstacles.iter().enumerate() {
             o.validate(&format!("task.obstacles[{i}]"))?;
         }
+        if let Some(r) = &self.random_obstacles {
+            r.validate()?;
+        }
+        if self.observe_obstacles && self.obstacle_slots() == 0 {
+            return Err(Error::config(
+                "task.observe_obstacles",
+                true,
+                "false when the task has no obstacles ([[task.obstacles]] or [task.random_obstacles])",
+            ));
+        }
         Ok(())
+    }
+
+    /// Obstacle slots of the observation: 0 unless `observe_obstacles`.
+    pub fn obstacle_slots(&self) -> usize {
+        obstacle_slots(self.observe_obstacles, &self.obstacles, &self.random_obstacles)
     }
 
     /// Resolve the per-joint vectors for `chain` and check them against its limits; also check
@@ -200,6 +364,9 @@ impl TaskConfig {
             target_acceptance: 0.0,
             obstacles: self.obstacles.clone(),
             collision: self.collision.unwrap_or_default(),
+            on_collision: self.on_collision,
+            random_obstacles: self.random_obstacles.clone(),
+            observe_obstacles: self.observe_obstacles,
         };
         // Estimate how often a draw passes the height test; refuse a distribution the arm
         // cannot (or almost never) reach.
@@ -227,7 +394,76 @@ impl TaskConfig {
     }
 }
 
+fn obstacle_slots(observe: bool, fixed: &[Obstacle], random: &Option<RandomObstacles>) -> usize {
+    if observe {
+        fixed.len() + random.as_ref().map_or(0, |r| r.count[1] as usize)
+    } else {
+        0
+    }
+}
+
 impl ResolvedTask {
+    /// Obstacle slots of the observation (see [`TaskConfig::observe_obstacles`]).
+    pub fn obstacle_slots(&self) -> usize {
+        obstacle_slots(self.observe_obstacles, &self.obstacles, &self.random_obstacles)
+    }
+
+    /// Most obstacles an episode has (fixed and random).
+    pub fn max_obstacles(&self) -> usize {
+        self.obstacles.len() + self.random_obstacles.as_ref().map_or(0, |r| r.count[1] as usize)
+    }
+
+    /// Draw the episode's random obstacles after the fixed ones into `out` (cleared first, fixed
+    /// ones copied): each clear of the arm at `q` (the start pose) and of `target` by the
+    /// clearance; a placement that fails [`PLACEMENT_TRIES`] times is left out. No allocation
+    /// once `out` has the capacity of [`ResolvedTask::max_obstacles`].
+    pub fn place_obstacles(
+        &self,
+        chain: &Chain,
+        collider: Option<&mut ArmCollider>,
+        q: &[f64],
+        target: nalgebra::Vector3<f64>,
+        rng: &mut Rng,
+        out: &mut Vec<Obstacle>,
+    ) {
+        out.clear();
+        out.extend(self.obstacles.iter().cloned());
+        let Some(r) = &self.random_obstacles else { return };
+        let n = r.count[0] + rng.below(u64::from(r.count[1] - r.count[0]) + 1) as u32;
+        let mut collider = collider;
+        for _ in 0..n {
+            for _ in 0..PLACEMENT_TRIES {
+                let o = r.draw(rng);
+                let clear_of_target = o.distance_to_point_m(target.into()) >= r.target_clearance_m;
+                if clear_of_target && !collider.as_deref_mut().is_some_and(|c| c.touches(chain, q, &o)) {
+                    out.push(o);
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Bounds of the obstacle entries of the observation, per value of one slot (low, high): the
+    /// region and the fixed obstacles' centres, sizes up to the largest, the sphere flag in [0, 1].
+    pub fn obstacle_obs_bounds(&self) -> [(f64, f64); OBSTACLE_OBS_LEN] {
+        let mut b = [(0.0_f64, 0.0_f64); OBSTACLE_OBS_LEN];
+        b[6] = (0.0, 1.0);
+        let mut grow = |p: [f64; 3], h: [f64; 3]| {
+            for k in 0..3 {
+                b[k] = (b[k].0.min(p[k]), b[k].1.max(p[k]));
+                b[3 + k].1 = b[3 + k].1.max(h[k]);
+            }
+        };
+        for o in &self.obstacles {
+            grow(o.position_m, o.half_size_m());
+        }
+        if let Some(r) = &self.random_obstacles {
+            grow(r.region_min_m, [r.size_m[1]; 3]);
+            grow(r.region_max_m, [r.size_m[1]; 3]);
+        }
+        b
+    }
+
     /// One candidate target: FK(home + u * range) with u uniform in [-1, 1]^N, clamped to the
     /// joint limits. `q` is scratch of length N.
     #[inline]

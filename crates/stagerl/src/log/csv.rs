@@ -28,6 +28,9 @@ pub trait CsvRow {
 
 /// A row of a CSV file that is also read back.
 pub trait CsvRecord: CsvRow + Sized {
+    /// Headers of files written before a column was added, still read (their rows lack the
+    /// newer columns, which parse as unknown).
+    const OLDER_HEADERS: &'static [&'static str] = &[];
     /// Parse the fields of one line (split at commas); `None` when malformed.
     fn parse_row(fields: &[&str]) -> Option<Self>;
 }
@@ -63,7 +66,8 @@ pub fn parse_line<R: CsvRecord>(line: &str, origin: &Path) -> Result<R> {
 /// errors.
 pub fn parse_csv<R: CsvRecord>(text: &str, origin: &Path) -> Result<Vec<R>> {
     let mut lines = text.lines();
-    if lines.next().map(str::trim_end) != Some(R::HEADER) {
+    let header = lines.next().map(str::trim_end);
+    if !header.is_some_and(|h| h == R::HEADER || R::OLDER_HEADERS.contains(&h)) {
         return Err(Error::InvalidInput(format!(
             "{}: expected the header {:?}",
             origin.display(),
@@ -102,12 +106,21 @@ pub fn parse_opt_f64(s: &str) -> Option<Option<f64>> {
     }
 }
 
-/// Writes an optional float: nothing for `None`.
-pub struct OptF64(pub Option<f64>);
+/// An optional count: empty for `None`.
+pub fn parse_opt_u32(s: &str) -> Option<Option<u32>> {
+    if s.is_empty() {
+        Some(None)
+    } else {
+        s.parse().ok().map(Some)
+    }
+}
 
-impl std::fmt::Display for OptF64 {
+/// Writes an optional value: nothing for `None`.
+pub struct Opt<T>(pub Option<T>);
+
+impl<T: std::fmt::Display> std::fmt::Display for Opt<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.0 {
+        match &self.0 {
             Some(v) => write!(f, "{v}"),
             None => Ok(()),
         }
@@ -172,29 +185,59 @@ pub struct EpisodeRecord {
     pub final_distance_m: f64,
     /// Environment steps since the run began.
     pub env_steps: u64,
-    /// Seconds since the run began (the only column that differs between identical runs; written
-    /// to the millisecond).
+    /// Steps of the episode that ended in contact (floor, self, obstacle); `None` in files
+    /// written before contacts were recorded (an empty field).
+    pub collision_steps: Option<u32>,
+    /// Seconds since the run began (the only column that differs between identical runs, and
+    /// the last; written to the millisecond).
     pub wall_s: f64,
 }
 
 impl CsvRow for EpisodeRecord {
-    const HEADER: &'static str = "episode,reward,steps,success,final_distance_m,env_steps,wall_s";
+    const HEADER: &'static str =
+        "episode,reward,steps,success,final_distance_m,env_steps,collision_steps,wall_s";
 
     fn write_row(&self, out: &mut String) {
-        let EpisodeRecord { episode, reward, steps, success, final_distance_m: d, env_steps, wall_s } = *self;
-        let success = u8::from(success);
-        let _ = write!(out, "{episode},{reward},{steps},{success},{d},{env_steps},{wall_s:.3}");
+        let EpisodeRecord {
+            episode,
+            reward,
+            steps,
+            success,
+            final_distance_m: d,
+            env_steps,
+            collision_steps,
+            wall_s,
+        } = *self;
+        let (success, collisions) = (u8::from(success), Opt(collision_steps));
+        let _ = write!(out, "{episode},{reward},{steps},{success},{d},{env_steps},{collisions},{wall_s:.3}");
     }
 }
 
 impl CsvRecord for EpisodeRecord {
+    const OLDER_HEADERS: &'static [&'static str] =
+        &["episode,reward,steps,success,final_distance_m,env_steps,wall_s"];
+
     fn parse_row(f: &[&str]) -> Option<EpisodeRecord> {
-        let [episode, reward, steps, success, final_distance_m, env_steps, wall_s] = f else { return None };
+        let (head, collision_steps, wall_s) = match f {
+            [head @ .., c, w] if f.len() == 8 => (head, parse_opt_u32(c)?, w),
+            [head @ .., w] if f.len() == 7 => (head, None, w),
+            _ => return None,
+        };
+        let [episode, reward, steps, success, final_distance_m, env_steps] = head else { return None };
         let (episode, steps, env_steps) =
             (episode.parse().ok()?, steps.parse().ok()?, env_steps.parse().ok()?);
         let (reward, final_distance_m, wall_s) = (num(reward)?, num(final_distance_m)?, num(wall_s)?);
         let success = parse_bool(success)?;
-        Some(EpisodeRecord { episode, reward, steps, success, final_distance_m, env_steps, wall_s })
+        Some(EpisodeRecord {
+            episode,
+            reward,
+            steps,
+            success,
+            final_distance_m,
+            env_steps,
+            collision_steps,
+            wall_s,
+        })
     }
 }
 
@@ -232,7 +275,7 @@ impl CsvRow for EvalPoint {
             mean_steps,
             median_final_distance_m: d,
         } = *self;
-        let mean_steps = OptF64(mean_steps);
+        let mean_steps = Opt(mean_steps);
         let _ = write!(out, "{episode},{env_steps},{success_rate},{mean_reward},{mean_steps},{d}");
     }
 }
@@ -267,27 +310,54 @@ pub struct TrialRecord {
     pub final_distance_m: f64,
     /// The target, metres.
     pub target: [f64; 3],
+    /// Steps of the trial that ended in contact; `None` in files written before contacts were
+    /// recorded.
+    pub collision_steps: Option<u32>,
 }
 
 impl CsvRow for TrialRecord {
-    const HEADER: &'static str =
-        "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m";
+    const HEADER: &'static str = "trial,reward,steps,success,start_distance_m,final_distance_m,\
+                                  target_x_m,target_y_m,target_z_m,collision_steps";
 
     fn write_row(&self, out: &mut String) {
-        let TrialRecord { trial, reward, steps, success, start_distance_m: d0, final_distance_m: d, target } =
-            *self;
-        let ([x, y, z], success) = (target, u8::from(success));
-        let _ = write!(out, "{trial},{reward},{steps},{success},{d0},{d},{x},{y},{z}");
+        let TrialRecord {
+            trial,
+            reward,
+            steps,
+            success,
+            start_distance_m: d0,
+            final_distance_m: d,
+            target,
+            collision_steps,
+        } = *self;
+        let ([x, y, z], success, c) = (target, u8::from(success), Opt(collision_steps));
+        let _ = write!(out, "{trial},{reward},{steps},{success},{d0},{d},{x},{y},{z},{c}");
     }
 }
 
 impl CsvRecord for TrialRecord {
+    const OLDER_HEADERS: &'static [&'static str] =
+        &["trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,target_z_m"];
+
     fn parse_row(f: &[&str]) -> Option<TrialRecord> {
+        let (f, collision_steps) = match f {
+            [head @ .., c] if f.len() == 10 => (head, parse_opt_u32(c)?),
+            _ => (f, None),
+        };
         let [trial, reward, steps, success, start, fin, x, y, z] = f else { return None };
         let (trial, steps, success) = (trial.parse().ok()?, steps.parse().ok()?, parse_bool(success)?);
         let (reward, start_distance_m, final_distance_m) = (num(reward)?, num(start)?, num(fin)?);
         let target = [num(x)?, num(y)?, num(z)?];
-        Some(TrialRecord { trial, reward, steps, success, start_distance_m, final_distance_m, target })
+        Some(TrialRecord {
+            trial,
+            reward,
+            steps,
+            success,
+            start_distance_m,
+            final_distance_m,
+            target,
+            collision_steps,
+        })
     }
 }
 
@@ -319,6 +389,7 @@ mod tests {
                 final_distance_m: 0.1234,
                 env_steps: 50,
                 wall_s: 0.0123,
+                collision_steps: Some(3),
             },
             EpisodeRecord {
                 episode: 2,
@@ -328,6 +399,7 @@ mod tests {
                 final_distance_m: 0.0099,
                 env_steps: 56,
                 wall_s: 0.02,
+                collision_steps: Some(0),
             },
         ];
         let mut w = EpisodeCsv::create(&p).unwrap();
@@ -338,15 +410,35 @@ mod tests {
         let text = std::fs::read_to_string(&p).unwrap();
         assert_eq!(
             text,
-            "episode,reward,steps,success,final_distance_m,env_steps,wall_s\n\
-             1,-12.345678901234,50,0,0.1234,50,0.012\n2,19.4,6,1,0.0099,56,0.020\n"
+            "episode,reward,steps,success,final_distance_m,env_steps,collision_steps,wall_s\n\
+             1,-12.345678901234,50,0,0.1234,50,3,0.012\n2,19.4,6,1,0.0099,56,0,0.020\n"
         );
         let back = read_episodes(&p).unwrap();
         assert_eq!(back.len(), 2);
         assert_eq!(back[0].reward, rows[0].reward);
         assert_eq!(back[1], EpisodeRecord { wall_s: 0.02, ..rows[1] });
         assert!(parse_line::<EpisodeRecord>("1,2,3", &p).is_err());
+        assert!(parse_line::<EpisodeRecord>("1,2,3,1,0.1,3,0.5,x", &p).is_err());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Files written before contacts were recorded read back, the new columns unknown.
+    #[test]
+    fn older_files_without_collision_columns_still_read() {
+        let old =
+            "episode,reward,steps,success,final_distance_m,env_steps,wall_s\n1,-3.5,50,0,0.25,50,0.010\n";
+        let rows = parse_csv::<EpisodeRecord>(old, Path::new("episodes.csv")).unwrap();
+        assert_eq!((rows[0].steps, rows[0].collision_steps, rows[0].final_distance_m), (50, None, 0.25));
+        // Written again, the unknown count is an empty field under the current header.
+        assert!(to_csv(&rows).ends_with("1,-3.5,50,0,0.25,50,,0.010\n"), "{}", to_csv(&rows));
+        let old_trials =
+            "trial,reward,steps,success,start_distance_m,final_distance_m,target_x_m,target_y_m,\
+                          target_z_m\n7,19.5,6,1,0.4,0.008,0.1,0.2,0.3\n";
+        let t = parse_csv::<TrialRecord>(old_trials, Path::new("eval.csv")).unwrap();
+        assert_eq!((t[0].trial, t[0].success, t[0].collision_steps), (7, true, None));
+        let new = TrialRecord { collision_steps: Some(2), ..t[0] };
+        assert_eq!(parse_csv::<TrialRecord>(&to_csv(&[new]), Path::new("e.csv")).unwrap(), vec![new]);
+        assert!(to_csv(&[new]).ends_with(",0.3,2\n"));
     }
 
     #[test]

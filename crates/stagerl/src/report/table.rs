@@ -211,6 +211,9 @@ pub struct GroupSummary {
     pub eval_steps: Option<MeanStd>,
     /// In [0, 1].
     pub success_rate: Option<MeanStd>,
+    /// Fraction of evaluation trials with a contact, in [0, 1] (seeds whose evaluation records
+    /// contacts).
+    pub collision_rate: Option<MeanStd>,
     pub eval_trials: Option<u64>,
     /// Caveats for the reader (partial convergence, missing files, excluded runs).
     pub notes: Vec<String>,
@@ -288,6 +291,7 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
         eval_reward: em(&|e| Some(e.mean_reward)),
         eval_steps: em(&|e| e.mean_steps),
         success_rate: em(&|e| Some(e.success_rate)),
+        collision_rate: em(&|e| e.collision_rate),
         eval_trials,
         excluded: group.excluded.clone(),
         runs,
@@ -391,9 +395,14 @@ fn pair(v: Option<(f64, f64)>, decimals: usize) -> String {
     v.map_or_else(|| DASH.into(), |(m, s)| format!("{m:.decimals$} ± {s:.decimals$}"))
 }
 
+/// A rate in [0, 1] as a percentage cell, mean ± std over seeds.
+fn pct(v: &Option<MeanStd>) -> String {
+    ms(v, 100.0, 1) + if v.is_some() { " %" } else { "" }
+}
+
 /// Markdown cells of our row: E_start, train reward, train steps, V_STDEV, eval reward, eval
-/// steps, success rate.
-fn our_cells(g: &GroupSummary) -> [String; 7] {
+/// steps, success rate, collision rate.
+fn our_cells(g: &GroupSummary) -> [String; 8] {
     let no_conv = g.seeds > 0 && g.converged == 0;
     let train = |v: &Option<MeanStd>, d| if no_conv { "n.c.".to_string() } else { ms(v, 1.0, d) };
     [
@@ -403,14 +412,17 @@ fn our_cells(g: &GroupSummary) -> [String; 7] {
         train(&g.v_stdev, 3),
         ms(&g.eval_reward, 1.0, 3),
         ms(&g.eval_steps, 1.0, 1),
-        ms(&g.success_rate, 100.0, 1) + if g.success_rate.is_some() { " %" } else { "" },
+        pct(&g.success_rate),
+        pct(&g.collision_rate),
     ]
 }
 
-fn paper_cells(p: &PaperRow) -> [String; 7] {
+/// The paper's cells (it reports no collisions: the last is always a dash).
+fn paper_cells(p: &PaperRow) -> [String; 8] {
     if !p.converged() {
         return [
             "did not converge".into(),
+            DASH.into(),
             DASH.into(),
             DASH.into(),
             DASH.into(),
@@ -427,6 +439,7 @@ fn paper_cells(p: &PaperRow) -> [String; 7] {
         opt(p.eval_reward, 1.0, 3),
         opt(p.eval_steps, 1.0, 0),
         p.success_rate.map_or_else(|| DASH.into(), |s| format!("{:.1} %", 100.0 * s)),
+        DASH.into(),
     ]
 }
 
@@ -454,7 +467,7 @@ impl Notes {
     }
 }
 
-const HEADER: &str = "| Method | Reward | Source | Seeds | Episodes | E_start | Train reward R̄ (eq. 17) | Train steps | V_STDEV (eq. 17) | Eval reward | Eval steps | Success rate | Notes |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+const HEADER: &str = "| Method | Reward | Source | Seeds | Episodes | E_start | Train reward R̄ (eq. 17) | Train steps | V_STDEV (eq. 17) | Eval reward | Eval steps | Success rate | Collision rate | Notes |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 
 /// Table 1 as Markdown: for every algorithm and reward function, our row (mean ± std over seeds)
 /// above the paper's; then the other configurations found and every run.
@@ -491,7 +504,10 @@ fn intro_markdown(s: &mut String, groups: &[GroupSummary], criterion: &Convergen
          evaluation reward come from each run's per-trial evaluation CSV. Checkpoint: the evaluation columns \
          evaluate the checkpoint each run's closing evaluation selected, the best periodic evaluation (our \
          addition; else the final one); the final checkpoint, the paper's protocol (\"the trained model\"), \
-         is evaluated on the same targets in \"Best and final checkpoint\" below.\n",
+         is evaluated on the same targets in \"Best and final checkpoint\" below. Collision rate (our addition; \
+         the paper has no collision measure): the fraction of evaluation trials in which the arm touched the \
+         floor, itself or an obstacle at the end of some step; a dash for evaluations recorded before contacts \
+         were.\n",
         groups.len(),
         paper::PAPER_RUNS,
         paper::PAPER_EPISODES,
@@ -589,7 +605,8 @@ fn primary_markdown(s: &mut String, groups: &[GroupSummary], paper_rows: &[Paper
                     );
                 }
                 None => {
-                    let _ = writeln!(s, "| {m} | {r} | ours | 0 | {DASH} | not run |  |  |  |  |  |  |  |");
+                    let _ =
+                        writeln!(s, "| {m} | {r} | ours | 0 | {DASH} | not run |  |  |  |  |  |  |  |  |");
                 }
             }
             if let Some(p) = paper_row {
@@ -616,7 +633,7 @@ fn others_markdown(s: &mut String, groups: &[GroupSummary], notes: &mut Notes) {
         );
         let _ = writeln!(
             s,
-            "| Method | Reward | Configuration | Seeds | Episodes | E_start | Train reward R̄ | Train steps | V_STDEV | Eval reward | Eval steps | Success rate | Notes |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "| Method | Reward | Configuration | Seeds | Episodes | E_start | Train reward R̄ | Train steps | V_STDEV | Eval reward | Eval steps | Success rate | Collision rate | Notes |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for g in others {
             let _ = writeln!(
@@ -639,7 +656,7 @@ fn per_run_markdown(s: &mut String, groups: &[GroupSummary]) {
     let _ = writeln!(s, "\n## Per run\n");
     let _ = writeln!(
         s,
-        "| Run | Method | Reward | Seed | Episodes | Convergence | E_start | R̄ | V_STDEV | Train steps | Tail mean reward | Eval reward | Eval steps | Success rate |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| Run | Method | Reward | Seed | Episodes | Convergence | E_start | R̄ | V_STDEV | Train steps | Tail mean reward | Eval reward | Eval steps | Success rate | Collision rate |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for g in groups {
         for r in &g.runs {
@@ -647,7 +664,7 @@ fn per_run_markdown(s: &mut String, groups: &[GroupSummary]) {
             let e = r.eval.as_ref();
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.3} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.3} | {} | {} | {} | {} |",
                 r.name,
                 algo_title(g.algo),
                 reward_title(g.reward),
@@ -662,6 +679,7 @@ fn per_run_markdown(s: &mut String, groups: &[GroupSummary]) {
                 opt(e.map(|e| e.mean_reward), 1.0, 3),
                 opt(e.and_then(|e| e.mean_steps), 1.0, 1),
                 e.map_or_else(|| DASH.into(), |e| format!("{:.1} % of {}", 100.0 * e.success_rate, e.trials)),
+                opt(e.and_then(|e| e.collision_rate), 100.0, 1),
             );
         }
     }
@@ -689,7 +707,7 @@ fn csv_opt(v: Option<f64>) -> String {
 }
 
 /// The CSV header of [`render_csv`].
-pub const CSV_HEADER: &str = "source,algorithm,reward,configuration,primary,seeds,converged,episodes,e_start,e_start_std,train_reward,train_reward_std,train_steps,train_steps_std,v_stdev,v_stdev_std,eval_reward,eval_reward_std,eval_steps,eval_steps_std,success_rate_pct,success_rate_pct_std,notes";
+pub const CSV_HEADER: &str = "source,algorithm,reward,configuration,primary,seeds,converged,episodes,e_start,e_start_std,train_reward,train_reward_std,train_steps,train_steps_std,v_stdev,v_stdev_std,eval_reward,eval_reward_std,eval_steps,eval_steps_std,success_rate_pct,success_rate_pct_std,collision_rate_pct,collision_rate_pct_std,notes";
 
 /// A row of `table1.csv`: a group of ours (`source = ours`) or a row of the paper
 /// (`source = paper`); empty fields are unknown or not applicable.
@@ -712,7 +730,7 @@ impl CsvRow for Table1Row<'_> {
 fn write_ours(s: &mut String, g: &GroupSummary) {
     let _ = write!(
         s,
-        "ours,{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        "ours,{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
         g.algo,
         g.reward,
         csv_field(&g.variant),
@@ -727,6 +745,7 @@ fn write_ours(s: &mut String, g: &GroupSummary) {
         csv_ms(&g.eval_reward, 1.0),
         csv_ms(&g.eval_steps, 1.0),
         csv_ms(&g.success_rate, 100.0),
+        csv_ms(&g.collision_rate, 100.0),
         csv_field(&g.notes.join("; "))
     );
 }
@@ -736,7 +755,7 @@ fn write_paper(s: &mut String, p: &PaperRow) {
     let (vm, vs) = p.v_stdev.unzip();
     let _ = write!(
         s,
-        "paper,{},{},paper,1,{},{},{},{},,{},{},{},,{},{},{},,{},,{},,{}",
+        "paper,{},{},paper,1,{},{},{},{},,{},{},{},,{},{},{},,{},,{},,,,{}",
         p.algo,
         p.reward,
         paper::PAPER_RUNS,

@@ -111,10 +111,11 @@ fn run_trials(
             trial,
             reward,
             steps: env.steps(),
-            success: last.terminated,
+            success: last.reached(),
             start_distance_m: start,
             final_distance_m: env.distance(),
             target: [target.x, target.y, target.z],
+            collision_steps: Some(env.collision_steps()),
         });
     }
     Ok(records)

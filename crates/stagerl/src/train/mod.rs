@@ -39,7 +39,7 @@ use crate::checkpoint::Checkpoint;
 use crate::config::Config;
 use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
 use crate::her::{HerState, Relabeller};
-use crate::log::csv::{parse_line, push_row, CsvRow};
+use crate::log::csv::{parse_line, push_row, CsvRecord, CsvRow};
 use crate::log::{EpisodeCsv, EpisodeRecord, EvalPoint, EventWriter};
 use crate::replay::{Batch, ReplayBuffer};
 use crate::rng::Rng;
@@ -147,6 +147,9 @@ struct EpisodeEnd {
     steps: u32,
     success: bool,
     final_distance_m: f64,
+    /// Steps that ended in contact (`None` in a checkpoint of an older version).
+    #[serde(default)]
+    collision_steps: Option<u32>,
 }
 
 /// An environment step taken whose updates are not all done yet (see [`LoopState`]); once they
@@ -155,7 +158,9 @@ struct EpisodeEnd {
 struct StepUnderWay {
     /// Updates of this step still to do.
     updates_left: u32,
-    terminated: bool,
+    /// The target was reached (older checkpoints: `terminated`, which meant the same).
+    #[serde(alias = "terminated")]
+    reached: bool,
     done: bool,
     /// D_PT after the step, metres, as `f64::to_bits` (exact through JSON).
     final_distance_m_bits: u64,
@@ -166,7 +171,7 @@ impl StepUnderWay {
     fn of(step: &Step, updates_left: u32) -> StepUnderWay {
         StepUnderWay {
             updates_left,
-            terminated: step.terminated,
+            reached: step.reached(),
             done: step.done(),
             final_distance_m_bits: step.terms.distance.to_bits(),
         }
@@ -339,24 +344,21 @@ impl Trainer {
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
         let keep = self.state.episode as usize;
         let mut lines = text.lines();
-        let mut out = String::new();
-        match lines.next() {
-            Some(h) if h == <EpisodeRecord as CsvRow>::HEADER => out.push_str(h),
-            _ => return Err(Error::InvalidInput(format!("{}: not an episodes.csv", path.display()))),
+        let header = lines.next().unwrap_or_default();
+        if header != EpisodeRecord::HEADER && !EpisodeRecord::OLDER_HEADERS.contains(&header) {
+            return Err(Error::InvalidInput(format!("{}: not an episodes.csv", path.display())));
         }
-        out.push('\n');
-        let rows: Vec<&str> = lines.take(keep).collect();
-        if rows.len() < keep || rows.iter().any(|r| parse_line::<EpisodeRecord>(r, &path).is_err()) {
+        // Rows are written again in this version's layout (a run begun by an older version
+        // gets the newer columns, empty for its earlier rows).
+        let rows: Vec<EpisodeRecord> =
+            lines.take(keep).map_while(|r| parse_line::<EpisodeRecord>(r, &path).ok()).collect();
+        if rows.len() < keep {
             return Err(Error::InvalidInput(format!(
                 "{}: holds fewer complete rows than the checkpoint's {keep} episodes",
                 path.display()
             )));
         }
-        for r in rows {
-            out.push_str(r);
-            out.push('\n');
-        }
-        crate::io::write_atomic(&path, out.as_bytes())?;
+        crate::io::write_atomic(&path, crate::log::csv::to_csv(&rows).as_bytes())?;
         crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
         // The TensorBoard log too: each tag's steps up to the checkpoint, once (but an evaluation
         // still due at the checkpoint's episode, which runs again).
@@ -466,8 +468,9 @@ impl Trainer {
         Ok(Some(EpisodeEnd {
             reward: self.state.episode_reward,
             steps: self.env.steps(),
-            success: last.terminated,
+            success: last.reached,
             final_distance_m: f64::from_bits(last.final_distance_m_bits),
+            collision_steps: Some(self.env.collision_steps()),
         }))
     }
 
@@ -547,6 +550,7 @@ impl Trainer {
             final_distance_m: end.final_distance_m,
             env_steps: self.state.env_steps,
             wall_s,
+            collision_steps: end.collision_steps,
         };
         logs.episodes.write(&record)?;
         let (ep, tb) = (record.episode as i64, &mut logs.tb);
@@ -554,6 +558,9 @@ impl Trainer {
         tb.scalar("train/steps", ep, f64::from(record.steps))?;
         tb.scalar("train/success", ep, f64::from(u8::from(record.success)))?;
         tb.scalar("train/final_distance_m", ep, record.final_distance_m)?;
+        if let Some(c) = record.collision_steps {
+            tb.scalar("train/collision_steps", ep, f64::from(c))?;
+        }
         if let Some(st) = stats {
             tb.scalar("loss/critic", ep, st.critic_loss)?;
             for (tag, v) in

@@ -27,6 +27,9 @@ pub(super) struct OnPolicyState {
     /// Each environment's episode under way: reward so far (eq. 16) and steps.
     episode_reward: Vec<f64>,
     episode_steps: Vec<u32>,
+    /// Steps that ended in contact (empty in a checkpoint of an older version: none counted).
+    #[serde(default)]
+    episode_collisions: Vec<u32>,
     /// Episodes ended, not yet handed to the loop.
     ended: Vec<EpisodeEnd>,
     /// Steps recorded in the rollout.
@@ -39,6 +42,7 @@ pub(super) struct OnPolicy {
     rollout: Rollout,
     episode_reward: Vec<f64>,
     episode_steps: Vec<u32>,
+    episode_collisions: Vec<u32>,
     ended: VecDeque<EpisodeEnd>,
     gamma: f64,
     anneal_lr: bool,
@@ -71,6 +75,7 @@ impl OnPolicy {
             vec,
             episode_reward: vec![0.0; n],
             episode_steps: vec![0; n],
+            episode_collisions: vec![0; n],
             ended: VecDeque::new(),
             gamma: cfg.agent.gamma,
             anneal_lr: p.anneal_lr,
@@ -132,17 +137,20 @@ impl OnPolicy {
             let (r, term, trunc) = (self.vec.rewards()[i], self.vec.terminated()[i], self.vec.truncated()[i]);
             self.episode_reward[i] += r;
             self.episode_steps[i] += 1;
+            self.episode_collisions[i] += u32::from(self.vec.last_steps()[i].collision.is_some());
             let boot = if trunc { self.gamma * f64::from(self.final_values[i]) } else { 0.0 };
             self.rollout.record_outcome(i, r + boot, term || trunc);
             if term || trunc {
                 self.ended.push_back(EpisodeEnd {
                     reward: self.episode_reward[i],
                     steps: self.episode_steps[i],
-                    success: term,
+                    success: self.vec.last_steps()[i].reached(),
                     final_distance_m: self.vec.last_steps()[i].terms.distance,
+                    collision_steps: Some(self.episode_collisions[i]),
                 });
                 self.episode_reward[i] = 0.0;
                 self.episode_steps[i] = 0;
+                self.episode_collisions[i] = 0;
             }
         }
         self.rollout.t += 1;
@@ -179,6 +187,7 @@ impl OnPolicy {
             envs: self.vec.states(),
             episode_reward: self.episode_reward.clone(),
             episode_steps: self.episode_steps.clone(),
+            episode_collisions: self.episode_collisions.clone(),
             ended: self.ended.iter().copied().collect(),
             rollout_steps: self.rollout.t,
         }
@@ -199,6 +208,15 @@ impl OnPolicy {
         self.rollout.restore(s.rollout_steps, [data[0], data[1], data[2], data[3], data[4], data[5]])?;
         self.episode_reward.copy_from_slice(&s.episode_reward);
         self.episode_steps.copy_from_slice(&s.episode_steps);
+        match s.episode_collisions.len() {
+            0 => self.episode_collisions.fill(0),
+            k if k == n => self.episode_collisions.copy_from_slice(&s.episode_collisions),
+            k => {
+                return Err(Error::InvalidInput(format!(
+                    "PPO state counts contacts for {k} environments, the config has agent.ppo.num_envs = {n}"
+                )))
+            }
+        }
         self.ended = s.ended.iter().copied().collect();
         Ok(())
     }
