@@ -6,7 +6,8 @@
 //!
 //! The modules follow the system:
 //! - [`robot`]: serial kinematic chains loaded from URDF (UR5 bundled), forward kinematics and the
-//!   geometric Jacobian.
+//!   geometric Jacobian; [`collision`]: its collision checks in the kinematic simulation;
+//!   [`physics`]: a dynamic (rigid-body) simulation of the arm under velocity motors (rapier3d).
 //! - [`reward`]: the paper's reward functions, eqs. 1-15 and 18, with every term exposed.
 //! - [`env`](mod@env): the random-target reaching task (single and vectorised), its `[task]`
 //!   section, and the one episode rollout of eq. 16 ([`env::rollout()`]).
@@ -46,6 +47,7 @@ pub mod log;
 pub mod math;
 pub mod metrics;
 pub mod nn;
+pub mod physics;
 pub mod plan;
 pub mod policy;
 pub mod proto;

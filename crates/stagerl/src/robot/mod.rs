@@ -96,6 +96,10 @@ pub struct JointInfo {
     pub upper: f64,
     /// Speed limit (rad/s or m/s), positive.
     pub velocity: f64,
+    /// Effort limit (N m for a revolute joint, N for a prismatic one), positive: the URDF's
+    /// `<limit effort>`, or `f64::INFINITY` when the URDF gives none or 0 (unlimited). Only the
+    /// dynamic simulation ([`crate::physics`]) reads it.
+    pub effort: f64,
 }
 
 /// A collision primitive, in metres (the URDF's `<collision>` geometry; a cylinder is taken as
@@ -169,7 +173,8 @@ impl Chain {
     /// an unknown tip, several leaves and no tip given, more than one root, a link with no path to
     /// the root, a joint naming a missing link, a floating/planar/spherical or mimic joint on the
     /// chain, a revolute or prismatic joint without usable limits (finite `lower < upper`,
-    /// `velocity > 0`), a continuous joint without a positive velocity limit, a non-finite origin
+    /// `velocity > 0`), a continuous joint without a positive velocity limit, a negative or NaN
+    /// effort limit (0 or none reads as unlimited, [`JointInfo::effort`]), a non-finite origin
     /// or axis, an origin or prismatic limit beyond [`MAX_LENGTH_M`], a zero axis, a chain
     /// with no actuated joint, or joints forming a cycle anywhere in the document.
     pub fn from_urdf_str(xml: &str, tip: Option<&str>) -> Result<Chain> {

@@ -793,3 +793,27 @@ fn bad_collision_geometry_is_an_error_naming_the_link() {
     let e = Chain::from_urdf_str(&bad, None).unwrap_err().to_string();
     assert!(e.contains("`l2`") && e.contains("collision origin"), "{e}");
 }
+
+#[test]
+fn effort_limits() {
+    // The bundled arms' efforts, N m.
+    let efforts = |c: &Chain| c.joints().iter().map(|j| j.effort).collect::<Vec<_>>();
+    assert_eq!(efforts(&Chain::ur5()), [150.0, 150.0, 150.0, 28.0, 28.0, 28.0]);
+    let panda = Chain::load("panda", None).unwrap();
+    assert_eq!(efforts(&panda), [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0]);
+    // None or 0: unlimited.
+    for limit in [
+        r#"<limit lower="-1" upper="1" velocity="1"/>"#,
+        r#"<limit lower="-1" upper="1" effort="0" velocity="1"/>"#,
+    ] {
+        let xml = robot(&["a", "b"], &[joint("j", "revolute", "a", "b", limit)]);
+        assert_eq!(efforts(&Chain::from_urdf_str(&xml, None).unwrap()), [f64::INFINITY]);
+    }
+    // Negative or NaN: refused, naming the joint.
+    for effort in ["-1", "nan"] {
+        let limit = format!(r#"<limit lower="-1" upper="1" effort="{effort}" velocity="1"/>"#);
+        let xml = robot(&["a", "b"], &[joint("bad", "revolute", "a", "b", &limit)]);
+        let m = urdf_message(Chain::from_urdf_str(&xml, None));
+        assert!(m.contains("joint `bad`") && m.contains("effort"), "{m}");
+    }
+}

@@ -145,6 +145,20 @@ fn checked_origin(j: &urdf_rs::Joint) -> Result<([f64; 3], [f64; 3])> {
     Ok((xyz, rpy))
 }
 
+/// An actuated joint's effort limit (N m or N): the URDF's `<limit effort>`, `+inf` when it is
+/// 0 (urdf-rs reads a missing attribute as 0); an error when negative or NaN.
+fn checked_effort(j: &urdf_rs::Joint) -> Result<f64> {
+    let effort = j.limit.effort;
+    if effort.is_nan() || effort < 0.0 {
+        return Err(urdf_err(format!(
+            "joint `{}` has <limit effort=\"{effort}\">; the effort limit must be >= 0 (0 or \
+             absent: unlimited)",
+            j.name
+        )));
+    }
+    Ok(if effort == 0.0 { f64::INFINITY } else { effort })
+}
+
 /// An actuated joint's (lower, upper, velocity) limits (rad or m, rad/s or m/s): usable, and a
 /// prismatic joint's within [`MAX_LENGTH_M`]. Continuous joints are unbounded.
 fn checked_limits(j: &urdf_rs::Joint, kind: JointKind) -> Result<(f64, f64, f64)> {
@@ -338,11 +352,11 @@ impl<'r> Tree<'r> {
     }
 }
 
-/// An actuated joint's kind, unit axis and limits `(lower, upper, velocity)`.
-type Actuated = (JointKind, [f64; 3], (f64, f64, f64));
+/// An actuated joint's kind, unit axis, limits `(lower, upper, velocity)` and effort limit.
+type Actuated = (JointKind, [f64; 3], (f64, f64, f64), f64);
 
-/// An actuated joint's kind, unit axis and limits (lower, upper, velocity); `None` for a fixed
-/// joint; an error for what the chain cannot hold.
+/// An actuated joint's kind, unit axis, limits (lower, upper, velocity) and effort limit; `None`
+/// for a fixed joint; an error for what the chain cannot hold.
 fn actuated(j: &urdf_rs::Joint, root: &str, tip: &str) -> Result<Option<Actuated>> {
     let kind = match j.joint_type {
         JointType::Fixed => return Ok(None),
@@ -376,7 +390,7 @@ fn actuated(j: &urdf_rs::Joint, root: &str, tip: &str) -> Result<Option<Actuated
     }
     let axis = [axis[0] / norm, axis[1] / norm, axis[2] / norm];
     let (lower, upper, velocity) = checked_limits(j, kind)?;
-    Ok(Some((kind, axis, (lower, upper, velocity))))
+    Ok(Some((kind, axis, (lower, upper, velocity), checked_effort(j)?)))
 }
 
 /// Compile the joints of `path`: fold fixed joints and the axis-alignment rotations into the
@@ -396,8 +410,8 @@ fn fold_chain(robot: &urdf_rs::Robot, path: &[&urdf_rs::Joint], root: &str, tip:
     for j in path {
         let (xyz, rpy) = checked_origin(j)?;
         pending = kin::mul(&pending, &kin::origin(xyz, rpy));
-        if let Some((kind, axis, (lower, upper, velocity))) = actuated(j, root, tip)? {
-            joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity });
+        if let Some((kind, axis, (lower, upper, velocity), effort)) = actuated(j, root, tip)? {
+            joints.push(JointInfo { name: j.name.clone(), kind, lower, upper, velocity, effort });
             let a = kin::basis_for_axis(axis);
             let before = kin::mul(&pending, &a);
             match steps.last_mut() {
