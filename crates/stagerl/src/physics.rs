@@ -122,6 +122,46 @@ pub struct DynamicArm {
     /// The world was built afresh and has not stepped since.
     fresh: bool,
     contact: bool,
+    /// The floor is one of the static colliders.
+    floor: bool,
+}
+
+impl Clone for DynamicArm {
+    /// The same arm in the same state, on a world built afresh (which the next step starts
+    /// from: the same bits as the original's next step, see the module docs).
+    fn clone(&self) -> DynamicArm {
+        let template = self.template.clone();
+        let (world, multibody, _) = template.build();
+        DynamicArm {
+            template,
+            world,
+            multibody,
+            dofs: self.dofs.clone(),
+            q: self.q.clone(),
+            qdot: self.qdot.clone(),
+            disp: self.disp.clone(),
+            q_before: self.q_before.clone(),
+            qdot_before: self.qdot_before.clone(),
+            exact_resume: self.exact_resume,
+            rebuild_every_step: self.rebuild_every_step,
+            dirty: true,
+            fresh: false,
+            contact: self.contact,
+            floor: self.floor,
+        }
+    }
+}
+
+impl std::fmt::Debug for DynamicArm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DynamicArm")
+            .field("q", &self.q)
+            .field("qdot", &self.qdot)
+            .field("contact", &self.contact)
+            .field("floor", &self.floor)
+            .field("static_colliders", &self.template.statics.len())
+            .finish_non_exhaustive()
+    }
 }
 
 impl DynamicArm {
@@ -196,7 +236,16 @@ impl DynamicArm {
             dirty: true,
             fresh: false,
             contact: false,
+            floor,
         })
+    }
+
+    /// Replace the obstacles (validated ones, see [`Obstacle::validate`]): the next step starts
+    /// on a world built afresh with them (and the floor if the arm was built with it).
+    pub fn set_obstacles(&mut self, obstacles: &[Obstacle]) {
+        self.template.statics = static_colliders(obstacles, self.floor);
+        self.rebuild();
+        self.dirty = true;
     }
 
     /// Number of actuated joints (the chain's).

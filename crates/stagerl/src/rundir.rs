@@ -23,6 +23,7 @@
 //!   (as Stable-Baselines3's `EvalCallback`). Test it on other targets than it was chosen on.
 //! - `.stagerl.lock`: the advisory lock of the process writing the run (see `crate::lock`).
 
+use crate::env::Sim;
 use std::path::{Path, PathBuf};
 
 use crate::config::Config;
@@ -102,8 +103,15 @@ impl RunDir {
     /// and the seed, `eval-<checkpoint>-trials<T>-seed<N>.csv`, so that evaluations of other
     /// settings sit side by side and none replaces the closing evaluation a report reads.
     pub fn eval_command(&self, checkpoint: &Path, trials: u32, seed: u64) -> PathBuf {
+        self.eval_command_in(checkpoint, trials, seed, None)
+    }
+    /// [`RunDir::eval_command`] in another simulator than the run's (`stagerl eval --sim`):
+    /// `eval-<checkpoint>-trials<T>-seed<S>-sim-<sim>.csv`, which no report takes for the run's
+    /// own evaluation.
+    pub fn eval_command_in(&self, checkpoint: &Path, trials: u32, seed: u64, sim: Option<Sim>) -> PathBuf {
         let stem = checkpoint.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        self.root.join(format!("eval-{stem}-trials{trials}-seed{seed}.csv"))
+        let sim = sim.map(|s| format!("-sim-{}", s.name())).unwrap_or_default();
+        self.root.join(format!("eval-{stem}-trials{trials}-seed{seed}{sim}.csv"))
     }
     /// The per-trial evaluation on the targets of seed `seed` of older versions: `eval-seed<seed>.csv`.
     pub fn trial_eval(&self, seed: u64) -> PathBuf {
@@ -188,6 +196,10 @@ mod tests {
     #[test]
     fn trial_eval_names_round_trip() {
         let d = RunDir::new(Path::new("/r"));
+        let other = d.eval_command_in(Path::new("c/best.safetensors"), 50, 3, Some(Sim::Dynamic));
+        assert_eq!(other, Path::new("/r/eval-best-trials50-seed3-sim-dynamic.csv"));
+        assert_eq!(trial_eval_kind("eval-best-trials50-seed3-sim-dynamic.csv"), None, "not the run's own");
+        assert_eq!(trial_eval_kind("eval-best-trials50-seed3.csv"), Some((2, 3)));
         assert_eq!(d.trial_eval(1_000_003), Path::new("/r/eval-seed1000003.csv"));
         assert_eq!(d.final_eval(7), Path::new("/r/eval-final-seed7.csv"));
         assert_eq!(d.final_eval_record(7), Path::new("/r/eval-final-seed7.json"));

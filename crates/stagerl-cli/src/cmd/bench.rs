@@ -76,6 +76,9 @@ pub struct EnvArgs {
     /// `[reward]` sections to use (`--reward` overrides the function); unset: the defaults.
     #[arg(long)]
     config: Option<std::path::PathBuf>,
+    /// The simulator (overrides `task.sim`): `kinematic` or `dynamic` (rapier3d).
+    #[arg(long, value_parser = ["kinematic", "dynamic"])]
+    sim: Option<String>,
 }
 
 pub fn run(b: Bench) -> Result<()> {
@@ -93,6 +96,9 @@ fn env(a: EnvArgs) -> Result<()> {
         None => Config::default(),
     };
     cfg.reward.function = a.reward;
+    if let Some(sim) = &a.sim {
+        cfg.task.sim = sim.parse()?;
+    }
     let mut env = ReachEnv::from_config(&cfg, a.seed).context("building the environment")?;
     let dim = env.act_dim();
     // A fixed table of random actions, so the timed loop only steps the environment.
@@ -119,14 +125,15 @@ fn env(a: EnvArgs) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     let sps = a.steps as f64 / secs;
     outln!(
-        "env: {} steps ({} episodes) in {:.3} s, {:.0} steps/s, {:.1} ns/step (single thread, {}, reward {}, \
-         {} collision shapes, {} obstacles, checksum {:.3})",
+        "env: {} steps ({} episodes) in {:.3} s, {:.0} steps/s, {:.1} ns/step (single thread, {}, {} simulation, \
+         reward {}, {} collision shapes, {} obstacles, checksum {:.3})",
         a.steps,
         episodes,
         secs,
         sps,
         1e9 / sps,
         cfg.robot.urdf,
+        cfg.task.sim.name(),
         a.reward,
         env.chain().collision_shapes().len(),
         env.task().obstacles.len(),

@@ -1,4 +1,5 @@
 use anyhow::{Context, Result};
+use stagerl::env::Sim;
 use stagerl::train::{self, EvalSummary, RunDir};
 
 #[derive(clap::Args)]
@@ -11,6 +12,10 @@ pub struct Args {
     /// Seed of the targets.
     #[arg(long, default_value_t = train::eval::DEFAULT_EVAL_SEED)]
     seed: u64,
+    /// Evaluate in this simulator instead of the run's own (`task.sim`): the transfer of a policy
+    /// trained kinematically to the dynamic arm, or back. Its per-trial CSV is named for it.
+    #[arg(long, value_parser = ["kinematic", "dynamic"])]
+    sim: Option<String>,
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
@@ -22,7 +27,13 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     let dir = RunDir::new(&args.run.run);
-    let cfg = dir.load_config().with_context(|| format!("reading the run in {}", args.run.run.display()))?;
+    let mut cfg =
+        dir.load_config().with_context(|| format!("reading the run in {}", args.run.run.display()))?;
+    let trained_in = cfg.task.sim;
+    let sim = args.sim.as_deref().map(str::parse::<Sim>).transpose()?.filter(|s| *s != trained_in);
+    if let Some(s) = sim {
+        cfg.task.sim = s;
+    }
     let loaded = train::eval::load_run_agent(&dir, &cfg, args.run.checkpoint.as_deref())?;
     // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
     // directory untouched).
@@ -38,11 +49,13 @@ pub fn run(args: Args) -> Result<()> {
     };
     // Its own file, named by checkpoint, trials and seed: never the closing evaluation
     // (eval-final-seed<N>.csv) a report reads.
-    let (csv, written) = train::eval::write_command_eval(&dir, &e, args.seed, args.force)?;
+    let (csv, written) = train::eval::write_command_eval(&dir, &e, args.seed, sim, args.force)?;
     if !args.json {
+        let other = sim.map(|s| format!(" in the {} simulation (trained {})", s.name(), trained_in.name()));
         outln!(
-            "{} on {} trials (seed {}), per-trial CSV {} ({written})",
+            "{}{} on {} trials (seed {}), per-trial CSV {} ({written})",
             e.checkpoint.display(),
+            other.unwrap_or_default(),
             args.trials,
             args.seed,
             csv.display()
@@ -59,16 +72,18 @@ pub fn summary_line(s: &EvalSummary, json: bool) -> String {
             "mean_steps": s.mean_steps,
             "trials": s.trials,
             "median_final_distance_m": s.median_final_distance_m,
+            "collision_rate": s.collision_rate,
         })
         .to_string()
     } else {
         format!(
-            "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m",
+            "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m, collisions in {} of the trials",
             100.0 * s.success_rate,
             s.trials,
             s.mean_reward,
             s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into()),
-            s.median_final_distance_m
+            s.median_final_distance_m,
+            s.collision_rate.map_or_else(|| "-".into(), |c| format!("{:.1} %", 100.0 * c))
         )
     }
 }

@@ -21,11 +21,12 @@ use std::f64::consts::PI;
 use std::sync::Arc;
 
 use crate::collision::{ArmCollider, CollisionKind, Contact};
+use crate::physics::DynamicArm;
 use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::rng::Rng;
 use crate::robot::{Chain, Pose};
 use crate::{Error, Result};
-pub use task::{ObservationKind, OnCollision, ResolvedTask, TaskConfig};
+pub use task::{ObservationKind, OnCollision, ResolvedTask, Sim, TaskConfig};
 
 /// The outcome of one step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -146,6 +147,10 @@ pub struct EnvState {
     /// The episode's random obstacles (`[task.random_obstacles]`), after the fixed ones.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub random_obstacles: Vec<crate::collision::Obstacle>,
+    /// With `task.sim = "dynamic"`: the joints' instantaneous velocities (rad/s), which with
+    /// `q` are the simulation's state.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sim_velocities: Vec<f64>,
 }
 
 /// The reaching environment.
@@ -170,6 +175,8 @@ pub struct ReachEnv {
     contact: Option<Contact>,
     /// The episode's obstacles: the fixed ones, then the random ones.
     obstacles: Vec<crate::collision::Obstacle>,
+    /// The rigid-body simulation (`task.sim = "dynamic"`), boxed: it is large.
+    physics: Option<Box<DynamicArm>>,
 }
 
 impl ReachEnv {
@@ -206,10 +213,24 @@ impl ReachEnv {
             c.set_obstacles(&task.obstacles);
             c
         });
+        let physics = match task.sim {
+            Sim::Kinematic => None,
+            Sim::Dynamic => {
+                let arm = DynamicArm::new(
+                    chain.urdf_source(),
+                    &chain,
+                    task.dt_s,
+                    &obstacles,
+                    task.collision.floor,
+                )?;
+                Some(Box::new(arm))
+            }
+        };
         let mut env = ReachEnv {
             collider,
             contact: None,
             obstacles,
+            physics,
             chain,
             rng: Rng::new(seed),
             joint_vel: vec![0.0; n],
@@ -284,8 +305,15 @@ impl ReachEnv {
             if let Some(c) = &mut self.collider {
                 c.set_obstacles(&self.obstacles);
             }
+            if let Some(p) = &mut self.physics {
+                p.set_obstacles(&self.obstacles);
+            }
         }
         self.joint_vel.fill(0.0);
+        if let Some(p) = &mut self.physics {
+            // The start pose was checked against the limits; at rest.
+            p.set_state(&self.q, &self.joint_vel).expect("a checked start pose is a valid state");
+        }
         self.ee = self.chain.fk(&self.q);
         self.check_contact();
         self.steps = 0;
@@ -316,12 +344,47 @@ impl ReachEnv {
         let (lo, hi, vmax) =
             (self.chain.lower_limits(), self.chain.upper_limits(), self.chain.velocity_limits());
         let prev_ee = self.ee.position;
-        for i in 0..n {
-            let command = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
-            let q_old = self.q[i];
-            let q_new = (q_old + command * dt).clamp(lo[i], hi[i]);
-            self.joint_vel[i] = (q_new - q_old) / dt;
-            self.q[i] = q_new;
+        match &mut self.physics {
+            None => {
+                for i in 0..n {
+                    let command = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
+                    let q_old = self.q[i];
+                    let q_new = (q_old + command * dt).clamp(lo[i], hi[i]);
+                    self.joint_vel[i] = (q_new - q_old) / dt;
+                    self.q[i] = q_new;
+                }
+            }
+            Some(p) => {
+                // The command goes to the joints' motors; the velocity that counts is the one
+                // the simulated arm achieved over the step.
+                for i in 0..n {
+                    self.scratch[i] = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
+                }
+                p.step(&self.scratch);
+                p.joint_positions(&mut self.scratch);
+                if let Some(i) = self.scratch.iter().position(|x| !x.is_finite()) {
+                    self.done = true;
+                    return Err(Error::NumericalFault(format!(
+                        "the dynamic simulation gave joint {i} the position {} at step {} of the \
+                         episode; the episode is over",
+                        self.scratch[i],
+                        self.steps + 1
+                    )));
+                }
+                let mut clamped = false;
+                for i in 0..n {
+                    let (q_old, q_new) = (self.q[i], self.scratch[i].clamp(lo[i], hi[i]));
+                    clamped |= q_new != self.scratch[i];
+                    self.joint_vel[i] = (q_new - q_old) / dt;
+                    self.q[i] = q_new;
+                }
+                if clamped {
+                    // A joint a hair past its limit (f32): the simulation continues from the
+                    // clamped pose, as a restored state would.
+                    p.joint_velocities(&mut self.scratch);
+                    p.set_state(&self.q, &self.scratch).expect("clamped joint positions are a valid state");
+                }
+            }
         }
         self.ee = self.chain.fk(&self.q);
         self.check_contact();
@@ -456,6 +519,11 @@ impl ReachEnv {
             done: self.done,
             collision_steps: self.collision_steps,
             random_obstacles: self.obstacles[self.task.obstacles.len()..].to_vec(),
+            sim_velocities: self.physics.as_ref().map_or_else(Vec::new, |p| {
+                let mut v = vec![0.0; self.q.len()];
+                p.joint_velocities(&mut v);
+                v
+            }),
         }
     }
 
@@ -468,7 +536,14 @@ impl ReachEnv {
                 s.q.len()
             )));
         }
-        let finite = s.q.iter().chain(&s.joint_vel).chain(&s.target).all(|x| x.is_finite());
+        if !(s.sim_velocities.is_empty() || s.sim_velocities.len() == n) {
+            return Err(Error::InvalidInput(format!(
+                "environment state with {} simulated joint velocities, the arm has {n} joints",
+                s.sim_velocities.len()
+            )));
+        }
+        let finite =
+            s.q.iter().chain(&s.joint_vel).chain(&s.target).chain(&s.sim_velocities).all(|x| x.is_finite());
         if !finite {
             return Err(Error::InvalidInput("environment state holds a non-finite value".into()));
         }
@@ -493,6 +568,11 @@ impl ReachEnv {
         self.obstacles.extend(s.random_obstacles.iter().cloned());
         if let Some(c) = &mut self.collider {
             c.set_obstacles(&self.obstacles);
+        }
+        if let Some(p) = &mut self.physics {
+            p.set_obstacles(&self.obstacles);
+            let v = if s.sim_velocities.is_empty() { &s.joint_vel } else { &s.sim_velocities };
+            p.set_state(&self.q, v)?;
         }
         self.ee = self.chain.fk(&self.q);
         self.check_contact();
@@ -937,5 +1017,115 @@ pub(crate) mod tests {
         bad(task::RandomObstacles { target_clearance_m: f64::NAN, ..d() }, "target_clearance_m");
         let e = TaskConfig { observe_obstacles: true, ..TaskConfig::default() }.validate().unwrap_err();
         assert!(e.to_string().contains("task.observe_obstacles"), "{e}");
+    }
+
+    fn dynamic_env(seed: u64, obstacles: Vec<crate::collision::Obstacle>) -> ReachEnv {
+        let chain = Arc::new(Chain::ur5());
+        let task = TaskConfig { sim: Sim::Dynamic, obstacles, ..TaskConfig::default() };
+        ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed).unwrap()
+    }
+
+    /// `task.sim = "dynamic"`: the arm holds still on a zero command, tracks a moderate one, and
+    /// the reward sees the velocity achieved; the same seed gives the same episodes.
+    #[test]
+    fn the_dynamic_arm_tracks_commands_and_the_reward_sees_what_it_achieved() {
+        let mut env = dynamic_env(1, Vec::new());
+        env.reset();
+        let home = env.joint_positions().to_vec();
+        for _ in 0..20 {
+            env.step(&[0.0; 6]).unwrap();
+        }
+        let drift = env.joint_positions().iter().zip(&home).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(drift < 0.02, "zero command: drift {drift} rad in 1 s");
+        env.reset();
+        // 0.3 of the speed limit (pi rad/s) on the base and the elbow.
+        let a = [0.3, 0.0, 0.3, 0.0, 0.0, 0.0];
+        let mut s = env.step(&a).unwrap();
+        for _ in 0..3 {
+            s = env.step(&a).unwrap();
+        }
+        let v = env.joint_velocities();
+        for i in [0, 2] {
+            assert!((v[i] - 0.3 * PI).abs() < 0.05 * 0.3 * PI, "joint {i}: {} rad/s", v[i]);
+        }
+        let vv: f64 = v.iter().map(|x| x * x).sum();
+        assert_eq!(s.terms.movement, 0.05 * vv / 6.0, "eq. 9 on the achieved velocity");
+        // The kinematic arm applies the command exactly; the dynamic one does not, quite.
+        let mut k = ur5_env(RewardConfig::default(), 1);
+        k.reset();
+        k.step(&a).unwrap();
+        assert_ne!(k.joint_velocities(), env.joint_velocities());
+        let run = |seed| {
+            let mut e = dynamic_env(seed, Vec::new());
+            let mut out = Vec::new();
+            for _ in 0..2 {
+                e.reset();
+                for k in 0..10 {
+                    let s = e.step(&[0.5, -0.4, 0.3, 0.2 * (k as f32 % 3.0 - 1.0), 0.1, 0.0]).unwrap();
+                    out.push((s.total(), e.joint_positions().to_vec()));
+                }
+            }
+            out
+        };
+        assert_eq!(run(5), run(5));
+    }
+
+    /// A dynamic episode restored from its state mid-way (also into a fresh environment, as a
+    /// resumed run does) continues bit for bit, through contacts with an obstacle and the floor.
+    #[test]
+    fn a_dynamic_state_restores_exactly_through_contacts() {
+        let chain = Chain::ur5();
+        let home = chain.fk(&task::UR5_HOME_POSE_RAD).position;
+        // A box in the way of the base's turn.
+        let wall =
+            crate::collision::Obstacle::cuboid([0.05, 0.3, 0.3], [home.x, home.y + 0.25, home.z], None);
+        let mut a = dynamic_env(3, vec![wall.clone()]);
+        a.reset();
+        let push = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let actions: Vec<[f32; 6]> = (0..30)
+            .map(|k| if k < 15 { [-0.6, 0.2, 0.0, 0.0, 0.0, 0.0] } else { [-0.2, 0.6, -0.4, 0.1, 0.0, 0.0] })
+            .collect();
+        let mut saved = Vec::new();
+        let mut steps = Vec::new();
+        for act in &actions {
+            saved.push(a.state());
+            let st = a.step(act).unwrap();
+            steps.push((st, a.joint_positions().to_vec()));
+            if st.done() {
+                break;
+            }
+        }
+        let contacts = steps.iter().filter(|(s, _)| s.collision.is_some()).count();
+        assert!(contacts >= 3, "the arm pressed into something for a few steps: {contacts}");
+        for from in [1, 8, steps.len() / 2, steps.len() - 2] {
+            let mut b = dynamic_env(99, vec![wall.clone()]);
+            b.reset();
+            b.step(&push).unwrap();
+            b.restore(&saved[from]).unwrap();
+            for (k, act) in actions.iter().enumerate().take(steps.len()).skip(from) {
+                let st = b.step(act).unwrap();
+                assert_eq!((st, b.joint_positions().to_vec()), steps[k], "resumed at {from}, step {k}");
+            }
+        }
+    }
+
+    /// A link without inertial data cannot be simulated: the error names it.
+    #[test]
+    fn the_dynamic_simulation_needs_every_moving_link_s_inertia() {
+        let xml = r#"<robot name="bare"><link name="a"/><link name="b">
+            <collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+            <joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+            <origin xyz="0 0 0.3"/><limit lower="-1" upper="1" velocity="1" effort="1"/></joint></robot>"#;
+        let chain = Arc::new(Chain::from_urdf_str(xml, None).unwrap());
+        let task = TaskConfig {
+            home_pose_rad: Some(vec![0.0]),
+            target_joint_range_rad: Some(vec![1.0]),
+            target_min_z_m: 0.0,
+            sim: Sim::Dynamic,
+            ..TaskConfig::default()
+        };
+        let e = ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), 1);
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("link `b`") && e.contains("inertial"), "{e}");
     }
 }

@@ -68,6 +68,51 @@ pub struct TaskConfig {
     /// is all zeros. A box's orientation is not observed (random boxes are axis-aligned).
     #[serde(default, skip_serializing_if = "is_false")]
     pub observe_obstacles: bool,
+    /// How a joint-velocity command moves the arm: `"kinematic"` (the default: integrated and
+    /// clamped to the limits, no inertia) or `"dynamic"` (a rigid-body simulation, rapier3d:
+    /// velocity motors capped at each joint's URDF effort, gravity, contacts with the floor, the
+    /// obstacles and the arm itself; see [`crate::physics`]). Either way the reward sees the
+    /// velocity actually achieved, `(q_new - q_old) / dt_s`.
+    #[serde(default, skip_serializing_if = "Sim::is_kinematic")]
+    pub sim: Sim,
+}
+
+/// `task.sim`: the simulator.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Sim {
+    /// Joint positions integrated from the commands, clamped to the limits (the paper's V-REP
+    /// scene approximated without inertia): the default.
+    #[default]
+    Kinematic,
+    /// A rigid-body simulation of the arm ([`crate::physics::DynamicArm`]).
+    Dynamic,
+}
+
+impl Sim {
+    /// The default (left out of a written config, so that older configs keep their hash).
+    pub fn is_kinematic(&self) -> bool {
+        *self == Sim::Kinematic
+    }
+
+    /// The name in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sim::Kinematic => "kinematic",
+            Sim::Dynamic => "dynamic",
+        }
+    }
+}
+
+impl std::str::FromStr for Sim {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Sim> {
+        match s {
+            "kinematic" => Ok(Sim::Kinematic),
+            "dynamic" => Ok(Sim::Dynamic),
+            _ => Err(Error::config("task.sim", s, "\"kinematic\" or \"dynamic\"")),
+        }
+    }
 }
 
 fn is_false(b: &bool) -> bool {
@@ -212,6 +257,7 @@ impl Default for TaskConfig {
             on_collision: OnCollision::Record,
             random_obstacles: None,
             observe_obstacles: false,
+            sim: Sim::Kinematic,
         }
     }
 }
@@ -245,6 +291,7 @@ pub struct ResolvedTask {
     pub on_collision: OnCollision,
     pub random_obstacles: Option<RandomObstacles>,
     pub observe_obstacles: bool,
+    pub sim: Sim,
 }
 
 fn check_finite(field: &str, v: f64) -> Result<()> {
@@ -367,6 +414,7 @@ impl TaskConfig {
             on_collision: self.on_collision,
             random_obstacles: self.random_obstacles.clone(),
             observe_obstacles: self.observe_obstacles,
+            sim: self.sim,
         };
         // Estimate how often a draw passes the height test; refuse a distribution the arm
         // cannot (or almost never) reach.

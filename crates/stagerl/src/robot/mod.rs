@@ -146,6 +146,8 @@ pub struct Chain {
     kin: kin::Kinematics,
     shapes: Vec<LinkShape>,
     mesh_links: Vec<String>,
+    /// The URDF text it was compiled from (the dynamic simulation loads it again).
+    urdf: std::sync::Arc<str>,
 }
 
 impl Chain {
@@ -189,7 +191,13 @@ impl Chain {
             kin: c.kin,
             shapes: c.shapes,
             mesh_links: c.mesh_links,
+            urdf: xml.into(),
         })
+    }
+
+    /// The URDF text the chain was compiled from.
+    pub fn urdf_source(&self) -> &str {
+        &self.urdf
     }
 
     /// The collision shapes of the links on the chain, root to tip (see [`LinkShape`]).

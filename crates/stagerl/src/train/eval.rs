@@ -206,9 +206,18 @@ pub use crate::io::Written;
 /// Write the per-trial CSV of an evaluation by `stagerl eval`, its own file
 /// ([`RunDir::eval_command`], never the closing evaluation a report reads), unless it already
 /// holds these results; a file with other results is replaced only with `force`. Returns the file.
-pub fn write_command_eval(run: &RunDir, e: &RunEval, seed: u64, force: bool) -> Result<(PathBuf, Written)> {
+///
+/// `sim`: the simulator, when it is not the run's own (`stagerl eval --sim`); the file is then
+/// [`RunDir::eval_command_in`]'s.
+pub fn write_command_eval(
+    run: &RunDir,
+    e: &RunEval,
+    seed: u64,
+    sim: Option<crate::env::Sim>,
+    force: bool,
+) -> Result<(PathBuf, Written)> {
     let trials = u32::try_from(e.trials.len()).expect("at most MAX_EVAL_TRIALS trials");
-    let csv = run.eval_command(&e.checkpoint, trials, seed);
+    let csv = run.eval_command_in(&e.checkpoint, trials, seed, sim);
     let written = if !csv.exists() {
         Written::New
     } else if read_trials_csv(&csv).ok().as_deref() == Some(&e.trials[..]) {
