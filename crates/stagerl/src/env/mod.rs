@@ -273,7 +273,8 @@ impl ReachEnv {
     }
 
     /// Start a new episode at joint positions `start` (radians, metres for prismatic joints)
-    /// with a given target (metres, base frame); the random stream is untouched.
+    /// with a given target (metres, base frame); the random stream is untouched (but for the
+    /// episode's random obstacles, `[task.random_obstacles]`, which are drawn from it).
     ///
     /// Errors: `start` without one value per joint (the expected count given), a value that is
     /// not finite or outside its joint's limits (the joint, the value and the limits named), a
