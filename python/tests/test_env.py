@@ -68,10 +68,29 @@ def test_info_holds_every_term_and_the_reward_is_the_chosen_one():
         _, info = env.reset(seed=3)
         assert set(info) == {"distance", "is_success"} and info["is_success"] is False
         _, r, term, trunc, info = env.step(np.full(6, 0.1, np.float32))
-        assert list(info) == TERMS + ["is_success"]
+        assert list(info) == TERMS + ["collision", "is_success"]
+        assert info["collision"] == 0.0
         assert r == info["total"] == info[reward] + info["bonus"]
         assert info["reward"] == info[reward]
         assert info["is_success"] == bool(info["reached"]) == term
+
+
+def test_info_reports_a_contact_and_terminate_ends_the_episode_without_success():
+    """A sphere around the arm's shoulder: every step ends in contact; with
+    task.on_collision = "terminate" the first one ends the episode with the penalty."""
+    ball = {"shape": "sphere", "radius_m": 0.2, "position_m": [0.0, 0.0, 0.3]}
+    env = gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball]}})
+    env.reset(seed=1)
+    _, r, term, trunc, info = env.step(np.zeros(6, np.float32))
+    assert info["collision"] == 1.0 and not term and not trunc
+    stop = gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball], "on_collision": "terminate"},
+                                                 "reward": {"collision_penalty": 5.0}})
+    stop.reset(seed=1)
+    _, r2, term2, _, info2 = stop.step(np.zeros(6, np.float32))
+    assert term2 and info2["collision"] == 1.0 and info2["is_success"] is False
+    assert r2 == r - 5.0
+    with pytest.raises(ValueError, match="reward.collision_penalty"):
+        gym.make("stagerl/Reach-v0", config={"reward": {"collision_penalty": 5.0}})
 
 
 def test_truncated_at_the_step_limit_and_step_after_the_end_is_an_error():

@@ -46,8 +46,10 @@ pub(crate) fn build_config(
     Ok(cfg)
 }
 
-/// The info keys of a step, in order: every reward term, then `is_success`.
-pub(crate) const STEP_KEYS: [&str; 17] = [
+/// The info keys of a step, in order: every reward term, then `collision` (1 when the step
+/// ended with the arm in contact with the floor, itself or an obstacle, else 0); `is_success`
+/// follows them in the info.
+pub(crate) const STEP_KEYS: [&str; 18] = [
     "distance",
     "reached",
     "position",
@@ -65,10 +67,11 @@ pub(crate) const STEP_KEYS: [&str; 17] = [
     "reward",
     "bonus",
     "total",
+    "collision",
 ];
 
 /// The values of [`STEP_KEYS`] for a step.
-pub(crate) fn step_values(s: &Step) -> [f64; 17] {
+pub(crate) fn step_values(s: &Step) -> [f64; 18] {
     let t = &s.terms;
     [
         t.distance,
@@ -88,6 +91,7 @@ pub(crate) fn step_values(s: &Step) -> [f64; 17] {
         t.reward,
         t.bonus,
         t.total,
+        f64::from(u8::from(s.collision.is_some())),
     ]
 }
 
