@@ -124,6 +124,8 @@ pub struct DynamicArm {
     contact: bool,
     /// The floor is one of the static colliders.
     floor: bool,
+    /// The static colliders changed since the world was built ([`DynamicArm::set_obstacles`]).
+    stale: bool,
 }
 
 impl Clone for DynamicArm {
@@ -148,6 +150,7 @@ impl Clone for DynamicArm {
             fresh: false,
             contact: self.contact,
             floor: self.floor,
+            stale: false,
         }
     }
 }
@@ -237,6 +240,7 @@ impl DynamicArm {
             fresh: false,
             contact: false,
             floor,
+            stale: false,
         })
     }
 
@@ -244,7 +248,8 @@ impl DynamicArm {
     /// on a world built afresh with them (and the floor if the arm was built with it).
     pub fn set_obstacles(&mut self, obstacles: &[Obstacle]) {
         self.template.statics = static_colliders(obstacles, self.floor);
-        self.rebuild();
+        // Built once, by the next step (which writes the state in anyway).
+        self.stale = true;
         self.dirty = true;
     }
 
@@ -299,7 +304,7 @@ impl DynamicArm {
         let exact = self.exact_resume || self.rebuild_every_step;
         // In exact mode a world with contacts is not reused: the step would likely be redone.
         if self.dirty || self.rebuild_every_step || (exact && self.contact && !self.fresh) {
-            if exact {
+            if exact || self.stale {
                 self.rebuild();
             }
             self.write_state();
@@ -343,6 +348,7 @@ impl DynamicArm {
         self.world = world;
         self.multibody = multibody;
         self.fresh = true;
+        self.stale = false;
     }
 
     /// The joint positions after the last step (or as set), rad or m, chain order, into `out`
@@ -533,6 +539,9 @@ impl DynamicArm {
     /// axis, base frame), with the state written in.
     fn link_frame(&mut self, k: usize, axis: [f32; 3]) -> ([f64; 3], [f64; 3]) {
         if self.dirty {
+            if self.stale {
+                self.rebuild();
+            }
             self.write_state();
             self.dirty = false;
         }

@@ -97,17 +97,8 @@ pub fn parse_bool(s: &str) -> Option<bool> {
     }
 }
 
-/// An optional float: empty for `None`.
-pub fn parse_opt_f64(s: &str) -> Option<Option<f64>> {
-    if s.is_empty() {
-        Some(None)
-    } else {
-        s.parse().ok().map(Some)
-    }
-}
-
-/// An optional count: empty for `None`.
-pub fn parse_opt_u32(s: &str) -> Option<Option<u32>> {
+/// An optional value (a float, a count): empty for `None`; `None` when malformed.
+pub fn parse_opt<T: std::str::FromStr>(s: &str) -> Option<Option<T>> {
     if s.is_empty() {
         Some(None)
     } else {
@@ -219,7 +210,7 @@ impl CsvRecord for EpisodeRecord {
 
     fn parse_row(f: &[&str]) -> Option<EpisodeRecord> {
         let (head, collision_steps, wall_s) = match f {
-            [head @ .., c, w] if f.len() == 8 => (head, parse_opt_u32(c)?, w),
+            [head @ .., c, w] if f.len() == 8 => (head, parse_opt(c)?, w),
             [head @ .., w] if f.len() == 7 => (head, None, w),
             _ => return None,
         };
@@ -285,7 +276,7 @@ impl CsvRecord for EvalPoint {
         let [episode, env_steps, success_rate, mean_reward, mean_steps, median] = f else { return None };
         let (episode, env_steps) = (episode.parse().ok()?, env_steps.parse().ok()?);
         let (success_rate, mean_reward, mean_steps) =
-            (num(success_rate)?, num(mean_reward)?, parse_opt_f64(mean_steps)?);
+            (num(success_rate)?, num(mean_reward)?, parse_opt(mean_steps)?);
         let median_final_distance_m = num(median)?;
         Some(EvalPoint { episode, env_steps, success_rate, mean_reward, mean_steps, median_final_distance_m })
     }
@@ -341,7 +332,7 @@ impl CsvRecord for TrialRecord {
 
     fn parse_row(f: &[&str]) -> Option<TrialRecord> {
         let (f, collision_steps) = match f {
-            [head @ .., c] if f.len() == 10 => (head, parse_opt_u32(c)?),
+            [head @ .., c] if f.len() == 10 => (head, parse_opt(c)?),
             _ => (f, None),
         };
         let [trial, reward, steps, success, start, fin, x, y, z] = f else { return None };
