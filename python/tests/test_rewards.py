@@ -145,6 +145,32 @@ def test_one_row_as_1d_arrays():
     assert abs(r["distance"][0] - 0.5) < 1e-15 and r["reward"][0] == r["stride"][0]
 
 
+def test_a_large_call_equals_small_ones():
+    # 150 000 rows are split over threads (one per core above 65 536 rows) and written into one
+    # buffer whose rows are the result's arrays; 10 000-row calls take the one-thread path, which
+    # test_equals_cli_on_random_rows checks against the CLI.
+    ee, quat, target, vel = random_rows(150_000, seed=7)
+    whole = rewards.compute(ee, quat, target, vel, function="har")
+    for start in range(0, 150_000, 10_000):
+        part = rewards.compute(*(a[start:start + 10_000] for a in (ee, quat, target, vel)), function="har")
+        for k in rewards.KEYS:
+            np.testing.assert_array_equal(whole[k][start:start + 10_000], part[k], err_msg=k)
+    # Each key's array is its own: writing one changes no other.
+    before = {k: whole[k].copy() for k in rewards.KEYS}
+    whole["distance"][:] = -1.0
+    for k in rewards.KEYS:
+        if k != "distance":
+            np.testing.assert_array_equal(whole[k], before[k], err_msg=k)
+
+
+def test_zero_rows_give_empty_arrays():
+    r = rewards.compute(np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)), np.zeros((0, 6)))
+    assert list(r) == list(rewards.KEYS)
+    for k, v in r.items():
+        assert v.shape == (0,), k
+        assert v.dtype == (bool if k == "reached" else np.float64), k
+
+
 def test_any_number_of_joints():
     r = rewards.compute([0.0] * 3, IDENTITY, [0.2, 0.0, 0.0], [1.0, 1.0, 1.0], function="stride")
     assert abs(r["move"][0] - 0.05) < 1e-15

@@ -165,6 +165,7 @@ pub struct RewardInput<'a> {
 impl RewardInput<'_> {
     /// Reject input outside the reward's domain: non-finite values, an empty velocity vector, a
     /// quaternion whose norm is off 1 by more than 1e-6.
+    #[inline]
     pub fn validate(&self) -> Result<()> {
         let finite = |name: &str, v: &[f64]| match v.iter().position(|x| !x.is_finite()) {
             Some(i) => Err(Error::InvalidInput(format!("{name}[{i}] = {} is not finite", v[i]))),
@@ -394,12 +395,39 @@ impl RewardTerms {
         }
     }
 
+    /// Whether every term [`RewardTerms::try_compute`] checks is finite (one pass, no names).
+    #[inline]
+    fn all_finite(&self) -> bool {
+        let t = self;
+        [
+            t.distance,
+            t.position,
+            t.phi,
+            t.direction,
+            t.posture,
+            t.movement,
+            t.stride,
+            t.har,
+            t.alpha1,
+            t.alpha2,
+            t.sar,
+            t.reward,
+            t.total,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+    }
+
     /// [`RewardTerms::compute`] for input from outside: the input is validated, and a term that
     /// overflows to a non-finite value for finite input (an `ee_pos` of 1e200 m squares past
     /// f64's range) is an error naming the term, not a silent infinity or NaN.
+    #[inline]
     pub fn try_compute(cfg: &RewardConfig, dt_s: f64, input: &RewardInput<'_>) -> Result<RewardTerms> {
         input.validate()?;
         let t = RewardTerms::compute(cfg, dt_s, input);
+        if t.all_finite() {
+            return Ok(t);
+        }
         let terms = [
             ("distance", t.distance),
             ("position", t.position),
