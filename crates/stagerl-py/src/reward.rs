@@ -141,6 +141,21 @@ struct Rows<'a> {
     prev: Option<&'a [f64]>,
 }
 
+impl<'a> Rows<'a> {
+    /// Row `i` as the reward's input.
+    #[inline(always)]
+    fn input(&self, i: usize) -> RewardInput<'a> {
+        let v3 = |a: &[f64]| Vector3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
+        RewardInput {
+            ee_pos: v3(self.p),
+            ee_quat: [self.q[4 * i], self.q[4 * i + 1], self.q[4 * i + 2], self.q[4 * i + 3]],
+            target: v3(self.t),
+            joint_vel: &self.v[self.j * i..self.j * (i + 1)],
+            prev_ee_pos: self.prev.map(v3),
+        }
+    }
+}
+
 /// Every row into `cols` (the reported terms but `reached`, in order) and `reached`, on up to
 /// one thread per core for large inputs (each row is computed alone, so the split changes no
 /// value); the first bad row's error.
@@ -171,6 +186,20 @@ fn compute_parallel(
     })
 }
 
+/// The `ValueError` of row `i`, which failed `try_compute`'s checks: its input built again, so
+/// that the caller's copy never needs an address.
+#[cold]
+#[inline(never)]
+fn row_error(cfg: &RewardConfig, dt_s: f64, rows: &Rows<'_>, i: usize) -> PyErr {
+    let e = match RewardTerms::try_compute(cfg, dt_s, &rows.input(i)) {
+        Err(e) => e.to_string(),
+        Ok(_) => {
+            "refused by the batch checks but not by try_compute (a bug in stagerl; please report it)".into()
+        }
+    };
+    pyo3::exceptions::PyValueError::new_err(format!("row {i}: {e}"))
+}
+
 /// Rows `start..start + reached.len()`, every value of `cols` (one column chunk per reported term
 /// but `reached`) written unless a row is refused.
 fn compute_rows(
@@ -183,19 +212,19 @@ fn compute_rows(
 ) -> PyResult<()> {
     let cols: &mut [&mut [MaybeUninit<f64>]; KEYS - 1] =
         cols.as_mut_slice().try_into().expect("one chunk per reported term but `reached`");
-    let (p, q, t, v, j) = (rows.p, rows.q, rows.t, rows.v, rows.j);
-    let v3 = |a: &[f64], i: usize| Vector3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
     for (k, done) in reached.iter_mut().enumerate() {
         let i = start + k;
-        let input = RewardInput {
-            ee_pos: v3(p, i),
-            ee_quat: [q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]],
-            target: v3(t, i),
-            joint_vel: &v[j * i..j * (i + 1)],
-            prev_ee_pos: rows.prev.map(|a| v3(a, i)),
-        };
-        let terms = RewardTerms::try_compute(cfg, dt_s, &input)
-            .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("row {i}: {e}")))?;
+        let input = rows.input(i);
+        // The checks of `try_compute`, with its error built only for a row that fails them (so
+        // that `input` stays in registers: a 16-byte load of values stored 8 bytes at a time for
+        // the error path stalled each row).
+        if !input.is_valid() {
+            return Err(row_error(cfg, dt_s, rows, i));
+        }
+        let terms = RewardTerms::compute(cfg, dt_s, &input);
+        if !terms.all_finite() {
+            return Err(row_error(cfg, dt_s, rows, i));
+        }
         *done = terms.reached;
         // `reached`, the second reported term, has its own bool column (`reached_is_second`).
         let [(_, distance), _reached, rest @ ..] = terms.reported();

@@ -164,31 +164,63 @@ pub struct RewardInput<'a> {
 
 impl RewardInput<'_> {
     /// Reject input outside the reward's domain: non-finite values, an empty velocity vector, a
-    /// quaternion whose norm is off 1 by more than 1e-6.
+    /// quaternion whose norm is off 1 by more than 1e-6. Ok exactly when
+    /// [`RewardInput::is_valid`]; the error names the first value at fault.
     #[inline]
     pub fn validate(&self) -> Result<()> {
-        let finite = |name: &str, v: &[f64]| match v.iter().position(|x| !x.is_finite()) {
-            Some(i) => Err(Error::InvalidInput(format!("{name}[{i}] = {} is not finite", v[i]))),
-            None => Ok(()),
-        };
-        finite("ee_pos", self.ee_pos.as_slice())?;
-        finite("ee_quat", &self.ee_quat)?;
-        finite("target", self.target.as_slice())?;
-        finite("joint_vel", self.joint_vel)?;
-        if let Some(p) = &self.prev_ee_pos {
-            finite("prev_ee_pos", p.as_slice())?;
+        if self.is_valid() {
+            Ok(())
+        } else {
+            Err(self.invalid())
         }
-        if self.joint_vel.is_empty() {
-            return Err(Error::InvalidInput("joint_vel is empty: need one value per joint".into()));
-        }
-        let norm = self.ee_quat.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if (norm - 1.0).abs() > 1e-6 {
-            return Err(Error::InvalidInput(format!(
-                "ee_quat has norm {norm}, expected a unit quaternion (|norm - 1| <= 1e-6)"
-            )));
-        }
-        Ok(())
     }
+
+    /// [`RewardInput::validate`]'s test without an error to build (for batches: a row that fails
+    /// it can then be explained by `validate`).
+    #[inline]
+    pub fn is_valid(&self) -> bool {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        finite(self.ee_pos.as_slice())
+            && finite(&self.ee_quat)
+            && finite(self.target.as_slice())
+            && finite(self.joint_vel)
+            && self.prev_ee_pos.is_none_or(|p| finite(p.as_slice()))
+            && !self.joint_vel.is_empty()
+            && (quat_norm(&self.ee_quat) - 1.0).abs() <= 1e-6
+    }
+
+    /// The error for input that is not [`RewardInput::is_valid`]: the first value at fault.
+    #[cold]
+    #[inline(never)]
+    fn invalid(&self) -> Error {
+        let first_bad = |name: &str, v: &[f64]| {
+            v.iter()
+                .position(|x| !x.is_finite())
+                .map(|i| Error::InvalidInput(format!("{name}[{i}] = {} is not finite", v[i])))
+        };
+        let prev = self.prev_ee_pos.as_ref().map_or(&[][..], |p| p.as_slice());
+        first_bad("ee_pos", self.ee_pos.as_slice())
+            .or_else(|| first_bad("ee_quat", &self.ee_quat))
+            .or_else(|| first_bad("target", self.target.as_slice()))
+            .or_else(|| first_bad("joint_vel", self.joint_vel))
+            .or_else(|| first_bad("prev_ee_pos", prev))
+            .unwrap_or_else(|| {
+                if self.joint_vel.is_empty() {
+                    Error::InvalidInput("joint_vel is empty: need one value per joint".into())
+                } else {
+                    Error::InvalidInput(format!(
+                        "ee_quat has norm {}, expected a unit quaternion (|norm - 1| <= 1e-6)",
+                        quat_norm(&self.ee_quat)
+                    ))
+                }
+            })
+    }
+}
+
+/// The Euclidean norm of a quaternion's four values (in order, as `validate` has always summed).
+#[inline]
+fn quat_norm(q: &[f64; 4]) -> f64 {
+    q.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
 /// Every term of the paper's rewards for one step.
@@ -329,7 +361,7 @@ impl RewardTerms {
     /// Eq. 4's `temp = sin(acos(w))` is a positive scale of `(x, y, z)`, so it does not change
     /// phi; it only matters where it vanishes, which is tested as `|(x, y, z)| < 1e-9` (equal
     /// to `sin(acos(w))` for a unit quaternion, and free of its cancellation near w = 1).
-    #[inline]
+    #[inline(always)]
     pub fn compute(cfg: &RewardConfig, dt_s: f64, input: &RewardInput<'_>) -> RewardTerms {
         // Eqs. 1-2.
         let to_target = input.target - input.ee_pos;
@@ -395,9 +427,10 @@ impl RewardTerms {
         }
     }
 
-    /// Whether every term [`RewardTerms::try_compute`] checks is finite (one pass, no names).
+    /// Whether every term [`RewardTerms::try_compute`] checks is finite: for valid input, `Ok`
+    /// from `try_compute` exactly when this holds of [`RewardTerms::compute`]'s result.
     #[inline]
-    fn all_finite(&self) -> bool {
+    pub fn all_finite(&self) -> bool {
         let t = self;
         [
             t.distance,
@@ -426,8 +459,17 @@ impl RewardTerms {
         input.validate()?;
         let t = RewardTerms::compute(cfg, dt_s, input);
         if t.all_finite() {
-            return Ok(t);
+            Ok(t)
+        } else {
+            Err(t.overflow(input))
         }
+    }
+
+    /// The error for terms that are not [`RewardTerms::all_finite`]: the first such term.
+    #[cold]
+    #[inline(never)]
+    fn overflow(&self, input: &RewardInput<'_>) -> Error {
+        let t = self;
         let terms = [
             ("distance", t.distance),
             ("position", t.position),
@@ -443,15 +485,13 @@ impl RewardTerms {
             ("reward", t.reward),
             ("total", t.total),
         ];
-        match terms.iter().find(|(_, v)| !v.is_finite()) {
-            Some((name, v)) => Err(Error::InvalidInput(format!(
-                "the reward term `{name}` = {v} is not finite: the finite input overflows f64 \
-                 (distance to the target {:e} m, squared joint speed {:e}); use physical scales",
-                (input.target - input.ee_pos).norm(),
-                input.joint_vel.iter().map(|v| v * v).sum::<f64>()
-            ))),
-            None => Ok(t),
-        }
+        let (name, v) = terms.iter().find(|(_, v)| !v.is_finite()).copied().unwrap_or(("total", t.total));
+        Error::InvalidInput(format!(
+            "the reward term `{name}` = {v} is not finite: the finite input overflows f64 \
+             (distance to the target {:e} m, squared joint speed {:e}); use physical scales",
+            (input.target - input.ee_pos).norm(),
+            input.joint_vel.iter().map(|v| v * v).sum::<f64>()
+        ))
     }
 }
 
