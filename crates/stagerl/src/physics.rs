@@ -75,6 +75,9 @@ impl Template {
     /// its multibody, and the arm's bodies in the loader's link order.
     fn build(&self) -> (PhysicsWorld, MultibodyIndex, Vec<RigidBodyHandle>) {
         let mut w = PhysicsWorld::new();
+        // A tree of some twenty leaves gains nothing from rapier's incremental re-optimization
+        // (2 % of a step's instructions); it finds the same pairs (the order could differ).
+        w.broad_phase = BroadPhaseBvh::with_optimization_strategy(BvhOptimizationStrategy::None);
         w.gravity = Vector::new(0.0, 0.0, -GRAVITY_M_S2);
         w.integration_parameters = self.params;
         let handles = self.robot.clone().insert_using_multibody_joints(
