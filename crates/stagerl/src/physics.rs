@@ -12,15 +12,16 @@
 //! Settings (those that held a UR5 still and tracked its commands, see the design notes):
 //! one physics step per control step ([`DynamicArm::new`]'s `dt_s`), [`SOLVER_ITERATIONS`] solver
 //! iteration with [`INTERNAL_PGS_ITERATIONS`] internal PGS iterations, motor damping
-//! [`MOTOR_DAMPING`], sleeping off.
+//! [`MOTOR_DAMPING`], sleeping off, continuous collision detection off (see `params`).
 //!
 //! Determinism: a step is a function of the joint positions, the joint velocities and the
 //! command alone, bit for bit (single thread, no `parallel` feature). Rapier carries state from
 //! step to step besides the arm's own (contact warm-start impulses, the order of contact pairs,
 //! the broad phase's tree), and that state matters when there are contacts. So by default
 //! ([`DynamicArm::set_exact_resume`]) a step that ends up with an active contact is taken again
-//! on a world built afresh (from the cached bodies and colliders) at the state the step started
-//! from, and a step after one with contact starts on a fresh world directly; a step without
+//! on a fresh world (a copy of the world as first built, kept for that: the same bits as building
+//! it again) at the state the step started from, and a step after one with contact starts on a
+//! fresh world directly; a step without
 //! contact is independent of that history (contact recycling is off, and
 //! the multibody's internal joint constraints start from zero impulses every step).
 //! [`DynamicArm::set_state`] also starts a fresh world. Storing `q`, `qdot` and calling
@@ -74,6 +75,9 @@ impl Template {
     /// its multibody, and the arm's bodies in the loader's link order.
     fn build(&self) -> (PhysicsWorld, MultibodyIndex, Vec<RigidBodyHandle>) {
         let mut w = PhysicsWorld::new();
+        // A tree of some twenty leaves gains nothing from rapier's incremental re-optimization
+        // (2 % of a step's instructions); it finds the same pairs (the order could differ).
+        w.broad_phase = BroadPhaseBvh::with_optimization_strategy(BvhOptimizationStrategy::None);
         w.gravity = Vector::new(0.0, 0.0, -GRAVITY_M_S2);
         w.integration_parameters = self.params;
         let handles = self.robot.clone().insert_using_multibody_joints(
@@ -97,12 +101,68 @@ impl Template {
     }
 }
 
+/// The world as [`Template::build`] returns it (before any step and before the state is
+/// written in), kept in parts that can be cloned (`PhysicsWorld` itself cannot): a world made
+/// from a copy, with new pipelines, is the one a build would give, bit for bit, at a fraction
+/// of the cost (no URDF robot to clone and insert).
+#[derive(Clone)]
+struct Snapshot {
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    multibody: MultibodyIndex,
+}
+
+impl Snapshot {
+    /// A copy of `w`, a world fresh from [`Template::build`] with the arm's multibody `multibody`.
+    fn of(w: &PhysicsWorld, multibody: MultibodyIndex) -> Snapshot {
+        Snapshot {
+            islands: w.islands.clone(),
+            broad_phase: w.broad_phase.clone(),
+            narrow_phase: w.narrow_phase.clone(),
+            bodies: w.bodies.clone(),
+            colliders: w.colliders.clone(),
+            impulse_joints: w.impulse_joints.clone(),
+            multibody_joints: w.multibody_joints.clone(),
+            soft_bodies: w.soft_bodies.clone(),
+            multibody,
+        }
+    }
+
+    /// A new world from the copy: the same as [`Template::build`]'s (new pipelines and CCD
+    /// workspace, as there), with `params`.
+    fn world(&self, params: IntegrationParameters) -> PhysicsWorld {
+        PhysicsWorld {
+            gravity: Vector::new(0.0, 0.0, -GRAVITY_M_S2),
+            integration_parameters: params,
+            physics_pipeline: PhysicsPipeline::new(),
+            collision_pipeline: CollisionPipeline::new(),
+            islands: self.islands.clone(),
+            broad_phase: self.broad_phase.clone(),
+            narrow_phase: self.narrow_phase.clone(),
+            bodies: self.bodies.clone(),
+            colliders: self.colliders.clone(),
+            impulse_joints: self.impulse_joints.clone(),
+            multibody_joints: self.multibody_joints.clone(),
+            soft_bodies: self.soft_bodies.clone(),
+            ccd_solver: CCDSolver::new(),
+        }
+    }
+}
+
 /// A serial arm under velocity control in a rigid-body simulation (see the module docs).
 ///
 /// Physics settings: [`SOLVER_ITERATIONS`], [`INTERNAL_PGS_ITERATIONS`], [`MOTOR_DAMPING`],
 /// [`GRAVITY_M_S2`], one physics step of `dt_s` per [`DynamicArm::step`].
 pub struct DynamicArm {
     template: Template,
+    /// The template's world as built, which fresh worlds are copies of.
+    snapshot: Snapshot,
     world: PhysicsWorld,
     multibody: MultibodyIndex,
     dofs: Vec<Dof>,
@@ -132,12 +192,11 @@ impl Clone for DynamicArm {
     /// The same arm in the same state, on a world built afresh (which the next step starts
     /// from: the same bits as the original's next step, see the module docs).
     fn clone(&self) -> DynamicArm {
-        let template = self.template.clone();
-        let (world, multibody, _) = template.build();
         DynamicArm {
-            template,
-            world,
-            multibody,
+            template: self.template.clone(),
+            snapshot: self.snapshot.clone(),
+            world: self.snapshot.world(self.template.params),
+            multibody: self.snapshot.multibody,
             dofs: self.dofs.clone(),
             q: self.q.clone(),
             qdot: self.qdot.clone(),
@@ -150,7 +209,7 @@ impl Clone for DynamicArm {
             fresh: false,
             contact: self.contact,
             floor: self.floor,
-            stale: false,
+            stale: self.stale,
         }
     }
 }
@@ -225,6 +284,7 @@ impl DynamicArm {
         let n = chain.dof();
         let ndofs = world.multibody_joints.get_multibody(multibody).map_or(0, |m| m.ndofs());
         Ok(DynamicArm {
+            snapshot: Snapshot::of(&world, multibody),
             template,
             world,
             multibody,
@@ -342,11 +402,20 @@ impl DynamicArm {
         self.contact = self.world.narrow_phase.contact_pairs().any(|p| p.has_any_active_contact());
     }
 
-    /// Replace the world by a new one from the template (the state is written separately).
+    /// Replace the world by a new one: a copy of the snapshot, or (new obstacles, or the
+    /// `rebuild_every_step` reference) built from the template. The state is written separately.
     fn rebuild(&mut self) {
-        let (world, multibody, _) = self.template.build();
-        self.world = world;
-        self.multibody = multibody;
+        if self.stale || self.rebuild_every_step {
+            let (world, multibody, _) = self.template.build();
+            if self.stale {
+                self.snapshot = Snapshot::of(&world, multibody);
+            }
+            self.world = world;
+            self.multibody = multibody;
+        } else {
+            self.world = self.snapshot.world(self.template.params);
+            self.multibody = self.snapshot.multibody;
+        }
         self.fresh = true;
         self.stale = false;
     }
@@ -420,7 +489,8 @@ fn axis_of(kind: JointKind) -> JointAxis {
 }
 
 /// The integration parameters: one step of `dt_s`, the solver settings above, no sleeping
-/// (bodies are made unable to sleep), no contact warm-starting from the previous step.
+/// (bodies are made unable to sleep), no contact warm-starting from the previous step, no
+/// continuous collision detection.
 fn params(dt_s: f64) -> IntegrationParameters {
     IntegrationParameters {
         dt: dt_s as f32,
@@ -428,6 +498,13 @@ fn params(dt_s: f64) -> IntegrationParameters {
         num_internal_pgs_iterations: INTERNAL_PGS_ITERATIONS,
         // A pair that barely moved keeps its contact points otherwise: history.
         contact_recycling: false,
+        // Rapier's automatic CCD sweeps every fast body against the fixed colliders (the
+        // floor: every moving link, most steps) and clamps the poses of the bodies it stops;
+        // a multibody's links are placed from its joint coordinates, which the clamp leaves
+        // alone, so it only cost time (about a sixth of a step) and could only leak a clamped
+        // pose into the next step's contacts. Contacts come from the narrow phase, with its
+        // prediction distance, as before.
+        max_ccd_substeps: 0,
         ..IntegrationParameters::default()
     }
 }
@@ -838,6 +915,13 @@ mod tests {
         let mut b = ur5(&obstacles, true);
         b.rebuild_every_step = true;
         assert_eq!(bits(&both_trajectories(&mut a)), bits(&both_trajectories(&mut b)));
+        // New obstacles: `a` copies its new snapshot from then on, `b` still builds every step.
+        a.set_obstacles(&obstacles[1..]);
+        b.set_obstacles(&obstacles[1..]);
+        assert_eq!(bits(&both_trajectories(&mut a)), bits(&both_trajectories(&mut b)));
+        // A clone starts from a copy of the snapshot: the same bits again.
+        let mut c = a.clone();
+        assert_eq!(bits(&both_trajectories(&mut c)), bits(&both_trajectories(&mut a)));
     }
 
     /// A command swaying every joint around where it starts (at most 0.4 rad away), rad/s.
