@@ -226,7 +226,8 @@ fn compute_rows(
             return Err(row_error(cfg, dt_s, rows, i));
         }
         *done = terms.reached;
-        // `reached`, the second reported term, has its own bool column (`reached_is_second`).
+        // `reached`, the second reported term, has its own bool column (tested from Python:
+        // `test_keys_are_the_cli_order` in python/tests/test_rewards.py).
         let [(_, distance), _reached, rest @ ..] = terms.reported();
         cols[0][k].write(distance);
         for (col, (_, x)) in cols[1..].iter_mut().zip(rest) {
@@ -234,14 +235,4 @@ fn compute_rows(
         }
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn reached_is_second() {
-        let keys = super::keys();
-        assert_eq!(keys.len(), super::KEYS);
-        assert_eq!(keys[1], "reached");
-    }
 }
