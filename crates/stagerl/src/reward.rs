@@ -427,28 +427,32 @@ impl RewardTerms {
         }
     }
 
+    /// The terms [`RewardTerms::try_compute`] checks for finiteness, named as in its error.
+    #[inline(always)]
+    fn checked(&self) -> [(&'static str, f64); 13] {
+        let t = self;
+        [
+            ("distance", t.distance),
+            ("position", t.position),
+            ("phi", t.phi),
+            ("direction", t.direction),
+            ("posture", t.posture),
+            ("move", t.movement),
+            ("stride", t.stride),
+            ("har", t.har),
+            ("alpha1", t.alpha1),
+            ("alpha2", t.alpha2),
+            ("sar", t.sar),
+            ("reward", t.reward),
+            ("total", t.total),
+        ]
+    }
+
     /// Whether every term [`RewardTerms::try_compute`] checks is finite: for valid input, `Ok`
     /// from `try_compute` exactly when this holds of [`RewardTerms::compute`]'s result.
     #[inline]
     pub fn all_finite(&self) -> bool {
-        let t = self;
-        [
-            t.distance,
-            t.position,
-            t.phi,
-            t.direction,
-            t.posture,
-            t.movement,
-            t.stride,
-            t.har,
-            t.alpha1,
-            t.alpha2,
-            t.sar,
-            t.reward,
-            t.total,
-        ]
-        .iter()
-        .all(|v| v.is_finite())
+        self.checked().iter().all(|(_, v)| v.is_finite())
     }
 
     /// [`RewardTerms::compute`] for input from outside: the input is validated, and a term that
@@ -469,23 +473,8 @@ impl RewardTerms {
     #[cold]
     #[inline(never)]
     fn overflow(&self, input: &RewardInput<'_>) -> Error {
-        let t = self;
-        let terms = [
-            ("distance", t.distance),
-            ("position", t.position),
-            ("phi", t.phi),
-            ("direction", t.direction),
-            ("posture", t.posture),
-            ("move", t.movement),
-            ("stride", t.stride),
-            ("har", t.har),
-            ("alpha1", t.alpha1),
-            ("alpha2", t.alpha2),
-            ("sar", t.sar),
-            ("reward", t.reward),
-            ("total", t.total),
-        ];
-        let (name, v) = terms.iter().find(|(_, v)| !v.is_finite()).copied().unwrap_or(("total", t.total));
+        let terms = self.checked();
+        let (name, v) = terms.iter().find(|(_, v)| !v.is_finite()).copied().unwrap_or(("total", self.total));
         Error::InvalidInput(format!(
             "the reward term `{name}` = {v} is not finite: the finite input overflows f64 \
              (distance to the target {:e} m, squared joint speed {:e}); use physical scales",
