@@ -66,6 +66,23 @@ fn report_on_trained_runs() {
     for name in ["figure7.png", "figure8.png", "trajectories.png"] {
         assert!(is_png(&out.join(name)), "{name}");
     }
+    // Paths in the outputs are relative (to the output directory for the files written, to the
+    // input directory for the checkpoints rolled out); only provenance.json's commands, as typed,
+    // may name the machine's directories.
+    for entry in std::fs::read_dir(&out).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if name.ends_with(".png") || name == "provenance.json" {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(!text.contains(root.to_str().unwrap()), "{name} names {}", root.display());
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table1.json")).unwrap()).unwrap();
+    assert!(json["files"].as_array().unwrap().iter().any(|f| f == "table1.md"), "{}", json["files"]);
+    let ckpt = json["trajectories"][0]["checkpoint"].as_str().unwrap();
+    assert!(runs.join(ckpt).is_file() && ckpt.starts_with("sac-"), "{ckpt}");
     // Provenance: the report's own command, the code it was built from (a git commit), times.
     let prov: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("provenance.json")).unwrap()).unwrap();

@@ -346,7 +346,7 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     )?);
 
     if opts.trajectories > 0 {
-        files.extend(write_trajectories(&groups, &mut report, opts)?);
+        files.extend(write_trajectories(dir, &groups, &mut report, opts)?);
     }
     let command =
         if opts.command.is_empty() { vec!["(library call)".to_string()] } else { opts.command.clone() };
@@ -354,7 +354,9 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     files.push(out(crate::provenance::FILE));
     let json_path = out("table1.json");
     files.push(json_path.clone());
-    report.files = files;
+    // Named relative to the output directory, as the trajectories' checkpoints are relative to
+    // the input directory: the outputs hold no path of the machine that wrote them.
+    report.files = files.iter().map(|p| p.strip_prefix(&opts.out).unwrap_or(p).to_path_buf()).collect();
     let json = serde_json::to_string_pretty(&report)
         .map_err(|e| Error::InvalidInput(format!("report JSON: {e}")))?;
     crate::io::write_atomic(&json_path, json.as_bytes())?;
@@ -364,7 +366,12 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
 /// The evaluation trajectories of the best and the worst run (`trajectories.{png,svg,csv}`) and
 /// their animated 3D views (`view-best.html`, `view-worst.html`, the same targets planned from
 /// the home pose, at most [`crate::view::MAX_TRAJECTORIES`]); the files written.
-fn write_trajectories(groups: &[Group], report: &mut Report, opts: &ReportOptions) -> Result<Vec<PathBuf>> {
+fn write_trajectories(
+    dir: &Path,
+    groups: &[Group],
+    report: &mut Report,
+    opts: &ReportOptions,
+) -> Result<Vec<PathBuf>> {
     let out = |name: &str| opts.out.join(name);
     let mut files = Vec::new();
     let mut sets: Vec<Rollouts> = Vec::new();
@@ -378,7 +385,7 @@ fn write_trajectories(groups: &[Group], report: &mut Report, opts: &ReportOption
                 r.title = format!("{role}: {}{rate}", r.title);
                 let count = opts.trajectories.min(crate::view::MAX_TRAJECTORIES as u32);
                 let source = crate::view::ViewSource::Targets { count, seed };
-                let ckpt = PathBuf::from(&r.checkpoint);
+                let ckpt = dir.join(&r.checkpoint);
                 match crate::view::view_of_run(&crate::rundir::RunDir::new(&run.dir), Some(&ckpt), &source) {
                     Ok(mut v) => {
                         v.title = r.title.clone();

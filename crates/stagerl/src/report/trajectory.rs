@@ -3,6 +3,7 @@
 
 use serde::Serialize;
 use std::fmt::Write as _;
+use std::path::Path;
 
 use super::runs::RunData;
 use super::table::{algo_title, reward_title};
@@ -29,6 +30,7 @@ pub struct TrajectoryPath {
 pub struct Rollouts {
     pub title: String,
     pub run: String,
+    /// The checkpoint rolled out, relative to the report's input directory.
     pub checkpoint: String,
     pub eval_seed: u64,
     /// Success threshold, metres (drawn around the targets).
@@ -87,7 +89,10 @@ pub fn rollout(run: &RunData, trials: u32, eval_seed: u64) -> Result<Rollouts> {
             run.seed()
         ),
         run: run.name.clone(),
-        checkpoint: ckpt.display().to_string(),
+        checkpoint: Path::new(&run.name)
+            .join(ckpt.strip_prefix(&run.dir).unwrap_or(&ckpt))
+            .display()
+            .to_string(),
         eval_seed,
         beta_m: cfg.reward.beta_m,
         paths,
