@@ -239,7 +239,7 @@ fn obs_bounds(env: &ReachEnv) -> (Vec<f32>, Vec<f32>) {
     lo.push(0.0);
     hi.push(delta as f32);
     // Observed obstacles (`task.observe_obstacles`): one slot of values per obstacle.
-    let slot = task.obstacle_obs_bounds();
+    let slot = task.obstacle_obs_bounds(chain.reach_bound_m());
     for _ in 0..task.obstacle_slots() {
         for &(l, h) in &slot {
             lo.push((l - 1e-6 - l.abs() * 1e-6) as f32);

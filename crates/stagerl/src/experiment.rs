@@ -668,6 +668,33 @@ mod tests {
         }
     }
 
+    /// Every file of `configs/`, a preset (bundled or run by path) or a config (`--config`),
+    /// parses, and each config validates, so that a documented command never meets a config error.
+    #[test]
+    fn every_config_file_parses() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs");
+        let mut seen = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                seen += 1;
+                if !text.contains("[sweep]") {
+                    let c = crate::config::Config::from_toml_str(&text, &path);
+                    c.and_then(|c| c.validate()).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                    continue;
+                }
+                let p =
+                    Preset::from_toml_str(&text, &path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                assert!(!p.runs().is_empty(), "{}", path.display());
+                for r in p.runs() {
+                    r.config.validate().unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                }
+            }
+        }
+        assert!(seen >= 14, "{seen} preset files in {}", dir.display());
+    }
+
     #[test]
     fn bundled_presets_parse() {
         for (name, _) in BUNDLED_PRESETS.iter().filter(|(n, _)| !n.starts_with("learners")) {

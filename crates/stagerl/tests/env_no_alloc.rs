@@ -48,6 +48,8 @@ fn random_obstacles_allocate_nothing() {
     cfg.task.random_obstacles = Some(stagerl::env::task::RandomObstacles::default());
     cfg.task.observe_obstacles = true;
     cfg.task.on_collision = stagerl::env::OnCollision::Terminate;
+    no_allocation_in(cfg.clone());
+    cfg.task.obstacle_observation = stagerl::env::ObstacleObservation::Nearest;
     no_allocation_in(cfg);
 }
 

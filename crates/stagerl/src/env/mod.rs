@@ -26,7 +26,7 @@ use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::rng::Rng;
 use crate::robot::{Chain, Pose};
 use crate::{Error, Result};
-pub use task::{ObservationKind, OnCollision, ResolvedTask, Sim, TaskConfig};
+pub use task::{ObservationKind, ObstacleObservation, OnCollision, ResolvedTask, Sim, TaskConfig};
 
 /// The outcome of one step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -175,6 +175,11 @@ pub struct ReachEnv {
     contact: Option<Contact>,
     /// The episode's obstacles: the fixed ones, then the random ones.
     obstacles: Vec<crate::collision::Obstacle>,
+    /// `task.obstacle_observation = "nearest"`: (distance from the end effector, index) per
+    /// obstacle, sorted for the observation's slots (scratch of capacity `max_obstacles`).
+    nearest: Vec<(f64, usize)>,
+    /// The largest value of a "nearest" slot's distance entry (an empty slot's).
+    far_obs: f32,
     /// The rigid-body simulation (`task.sim = "dynamic"`), boxed: it is large.
     physics: Option<Box<DynamicArm>>,
 }
@@ -226,9 +231,12 @@ impl ReachEnv {
                 Some(Box::new(arm))
             }
         };
+        let far_obs = task.obstacle_obs_bounds(chain.reach_bound_m())[task::OBSTACLE_OBS_LEN - 1].1 as f32;
         let mut env = ReachEnv {
             collider,
             contact: None,
+            nearest: Vec::with_capacity(task.max_obstacles()),
+            far_obs,
             obstacles,
             physics,
             chain,
@@ -427,19 +435,52 @@ impl ReachEnv {
                 for k in 0..3 {
                     self.obs[n + k] = p[k] as f32;
                 }
-                let slots = &mut self.obs[n + 10..];
-                slots.fill(0.0);
-                for (o, slot) in self.obstacles.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN)) {
-                    let (p, h) = (o.position_m, o.half_size_m());
-                    for k in 0..3 {
-                        slot[k] = p[k] as f32;
-                        slot[3 + k] = h[k] as f32;
-                    }
-                    slot[6] = f32::from(u8::from(o.shape == crate::collision::ObstacleShape::Sphere));
+                match self.task.obstacle_observation {
+                    ObstacleObservation::Absolute => self.write_obstacles_absolute(n + 10),
+                    ObstacleObservation::Nearest => self.write_obstacles_nearest(n + 10),
                 }
             }
         }
         write_target_entries(&self.task, &mut self.obs, self.ee.position, self.target);
+    }
+
+    /// [`ObstacleObservation::Absolute`]'s slots, from `self.obs[start..]`.
+    fn write_obstacles_absolute(&mut self, start: usize) {
+        let slots = &mut self.obs[start..];
+        slots.fill(0.0);
+        for (o, slot) in self.obstacles.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN)) {
+            let (p, h) = (o.position_m, o.half_size_m());
+            for k in 0..3 {
+                slot[k] = p[k] as f32;
+                slot[3 + k] = h[k] as f32;
+            }
+            slot[6] = f32::from(u8::from(o.shape == crate::collision::ObstacleShape::Sphere));
+        }
+    }
+
+    /// [`ObstacleObservation::Nearest`]'s slots, from `self.obs[start..]`.
+    fn write_obstacles_nearest(&mut self, start: usize) {
+        let ee = self.ee.position;
+        let scale = self.task.obs_delta_scale;
+        self.nearest.clear();
+        self.nearest
+            .extend(self.obstacles.iter().enumerate().map(|(i, o)| (o.distance_to_point_m(ee.into()), i)));
+        self.nearest.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let slots = &mut self.obs[start..];
+        for slot in slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN) {
+            slot.fill(0.0);
+            slot[6] = self.far_obs;
+        }
+        for (&(distance, i), slot) in self.nearest.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN))
+        {
+            let o = &self.obstacles[i];
+            let (p, h) = (o.position_m, o.half_size_m());
+            for k in 0..3 {
+                slot[k] = (scale * (p[k] - ee[k])) as f32;
+                slot[3 + k] = (scale * h[k]) as f32;
+            }
+            slot[6] = (scale * distance) as f32;
+        }
     }
 
     /// The obstacles of this episode: the fixed ones, then the random ones.
@@ -999,6 +1040,75 @@ pub(crate) mod tests {
         }
         let too_many = EnvState { random_obstacles: vec![a.obstacles()[1].clone(); 6], ..saved };
         assert!(d.restore(&too_many).unwrap_err().to_string().contains("6 random obstacles"));
+    }
+
+    /// `task.obstacle_observation = "nearest"`: slots nearest first, relative to the end effector
+    /// and scaled; empty slots read as far away; every value within the bounds the Python
+    /// observation space uses; the same episodes as the absolute encoding (only the
+    /// observation differs).
+    #[test]
+    fn nearest_obstacle_observation_orders_and_scales_the_slots() {
+        let chain = Arc::new(Chain::ur5());
+        let make = |encoding| {
+            let task = TaskConfig {
+                obstacles: vec![crate::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
+                random_obstacles: Some(task::RandomObstacles { count: [1, 3], ..Default::default() }),
+                observe_obstacles: true,
+                obstacle_observation: encoding,
+                ..TaskConfig::default()
+            };
+            ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), 3).unwrap()
+        };
+        let (mut near, mut abs) = (make(ObstacleObservation::Nearest), make(ObstacleObservation::Absolute));
+        let bounds = near.task().obstacle_obs_bounds(chain.reach_bound_m());
+        let k = near.task().obs_delta_scale;
+        let far = bounds[6].1 as f32;
+        assert!(far > 10.0 && bounds[6].0 < 0.0, "{bounds:?}");
+        let mut empty_seen = false;
+        for episode in 0..50 {
+            near.reset();
+            abs.reset();
+            assert_eq!(near.obstacles(), abs.obstacles(), "episode {episode}");
+            for step in 0.. {
+                let obs = near.observation().to_vec();
+                let ee = near.ee_pose().position;
+                let slots: Vec<&[f32]> = obs[16..].chunks_exact(7).collect();
+                let used = near.obstacles().len();
+                let mut last = f32::NEG_INFINITY;
+                for slot in &slots[..used] {
+                    // The slot's obstacle: the one whose scaled offset it holds.
+                    let o = near
+                        .obstacles()
+                        .iter()
+                        .find(|o| (0..3).all(|c| slot[c] == (k * (o.position_m[c] - ee[c])) as f32))
+                        .expect("a slot per obstacle");
+                    assert_eq!(slot[3..6], o.half_size_m().map(|h| (k * h) as f32));
+                    assert_eq!(slot[6], (k * o.distance_to_point_m(ee.into())) as f32);
+                    assert!(slot[6] >= last, "nearest first: {slot:?} after {last}");
+                    last = slot[6];
+                }
+                for slot in &slots[used..] {
+                    assert_eq!(slot, &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, far]);
+                    empty_seen = true;
+                }
+                for (i, x) in obs[16..].iter().enumerate() {
+                    let (lo, hi) = bounds[i % 7];
+                    assert!((lo as f32..=hi as f32).contains(x), "value {i} = {x} outside [{lo}, {hi}]");
+                }
+                assert_eq!(obs[..16], abs.observation()[..16]);
+                if near.is_done() || step == 20 {
+                    break;
+                }
+                let a = [0.6, -0.3, 0.4, 0.2, 0.0, 0.0];
+                assert_eq!(near.step(&a).unwrap(), abs.step(&a).unwrap());
+            }
+        }
+        assert!(empty_seen, "some episode has fewer obstacles than slots");
+        let e = TaskConfig { obstacle_observation: ObstacleObservation::Nearest, ..TaskConfig::default() }
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("task.obstacle_observation") && e.contains("observe_obstacles"), "{e}");
     }
 
     #[test]

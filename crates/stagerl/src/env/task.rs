@@ -68,6 +68,10 @@ pub struct TaskConfig {
     /// is all zeros. A box's orientation is not observed (random boxes are axis-aligned).
     #[serde(default, skip_serializing_if = "is_false")]
     pub observe_obstacles: bool,
+    /// How `observe_obstacles` encodes an obstacle: `"absolute"` (the default, above) or
+    /// `"nearest"` (see [`ObstacleObservation::Nearest`]).
+    #[serde(default, skip_serializing_if = "ObstacleObservation::is_absolute")]
+    pub obstacle_observation: ObstacleObservation,
     /// How a joint-velocity command moves the arm: `"kinematic"` (the default: integrated and
     /// clamped to the limits, no inertia) or `"dynamic"` (a rigid-body simulation, rapier3d:
     /// velocity motors capped at each joint's URDF effort, gravity, contacts with the floor, the
@@ -224,6 +228,31 @@ impl RandomObstacles {
     }
 }
 
+/// `task.obstacle_observation`: the 7 values of an observed obstacle's slot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObstacleObservation {
+    /// Centre in the base frame (3, m), half size along the obstacle's axes (3, m) and 1 for a
+    /// sphere, 0 for a box; slots in the order of the obstacles (fixed, then random), an empty
+    /// slot all zeros.
+    #[default]
+    Absolute,
+    /// Relative to the end effector and scaled as the target's entries are (k =
+    /// `task.obs_delta_scale`): k (centre - end effector) (3, m), k x half size (3, m) and k x
+    /// the end effector's distance to the obstacle's surface (1, m; negative inside); slots
+    /// ordered nearest first by that distance (ties by obstacle order). An empty slot is zeros
+    /// but its distance, the largest a slot can hold ([`ResolvedTask::obstacle_obs_bounds`]), so
+    /// that it reads as far away.
+    Nearest,
+}
+
+impl ObstacleObservation {
+    /// The default (left out of a written config, so that older configs keep their hash).
+    pub fn is_absolute(&self) -> bool {
+        *self == ObstacleObservation::Absolute
+    }
+}
+
 /// `task.on_collision`: what a step that ends in contact does.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -257,6 +286,7 @@ impl Default for TaskConfig {
             on_collision: OnCollision::Record,
             random_obstacles: None,
             observe_obstacles: false,
+            obstacle_observation: ObstacleObservation::Absolute,
             sim: Sim::Kinematic,
         }
     }
@@ -291,6 +321,7 @@ pub struct ResolvedTask {
     pub on_collision: OnCollision,
     pub random_obstacles: Option<RandomObstacles>,
     pub observe_obstacles: bool,
+    pub obstacle_observation: ObstacleObservation,
     pub sim: Sim,
 }
 
@@ -337,6 +368,13 @@ impl TaskConfig {
                 "task.observe_obstacles",
                 true,
                 "false when the task has no obstacles ([[task.obstacles]] or [task.random_obstacles])",
+            ));
+        }
+        if !self.observe_obstacles && !self.obstacle_observation.is_absolute() {
+            return Err(Error::config(
+                "task.obstacle_observation",
+                "nearest",
+                "\"absolute\" (the default) unless task.observe_obstacles = true: it says how observed obstacles are encoded",
             ));
         }
         Ok(())
@@ -414,6 +452,7 @@ impl TaskConfig {
             on_collision: self.on_collision,
             random_obstacles: self.random_obstacles.clone(),
             observe_obstacles: self.observe_obstacles,
+            obstacle_observation: self.obstacle_observation,
             sim: self.sim,
         };
         // Estimate how often a draw passes the height test; refuse a distribution the arm
@@ -491,9 +530,11 @@ impl ResolvedTask {
         }
     }
 
-    /// Bounds of the obstacle entries of the observation, per value of one slot (low, high): the
-    /// region and the fixed obstacles' centres, sizes up to the largest, the sphere flag in [0, 1].
-    pub fn obstacle_obs_bounds(&self) -> [(f64, f64); OBSTACLE_OBS_LEN] {
+    /// Bounds of the obstacle entries of the observation, per value of one slot (low, high), for
+    /// an end effector at most `reach_m` metres from the base. Absolute: the region and the fixed
+    /// obstacles' centres, sizes up to the largest, the sphere flag in [0, 1]. Nearest: the same
+    /// centres less any end-effector position, sizes and distances, scaled by `obs_delta_scale`.
+    pub fn obstacle_obs_bounds(&self, reach_m: f64) -> [(f64, f64); OBSTACLE_OBS_LEN] {
         let mut b = [(0.0_f64, 0.0_f64); OBSTACLE_OBS_LEN];
         b[6] = (0.0, 1.0);
         let mut grow = |p: [f64; 3], h: [f64; 3]| {
@@ -508,6 +549,17 @@ impl ResolvedTask {
         if let Some(r) = &self.random_obstacles {
             grow(r.region_min_m, [r.size_m[1]; 3]);
             grow(r.region_max_m, [r.size_m[1]; 3]);
+        }
+        if self.obstacle_observation == ObstacleObservation::Nearest {
+            let k = self.obs_delta_scale;
+            // The farthest a centre can be from an end effector within reach.
+            let far = (0..3).map(|i| b[i].0.abs().max(b[i].1.abs()).powi(2)).sum::<f64>().sqrt() + reach_m;
+            let largest = (3..6).map(|i| b[i].1).fold(0.0, f64::max);
+            for i in 0..3 {
+                b[i] = (k * (b[i].0 - reach_m), k * (b[i].1 + reach_m));
+                b[3 + i].1 *= k;
+            }
+            b[6] = (-k * largest, k * far);
         }
         b
     }
