@@ -62,6 +62,27 @@ def test_observations_stay_within_the_space():
             obs, _ = env.reset()
 
 
+@pytest.mark.parametrize("encoding", ["absolute", "nearest"])
+def test_observed_obstacles_stay_within_the_space(encoding):
+    """Random obstacles in the observation (7 values a slot, 1 fixed + 3 random slots), either
+    encoding: check_env passes and every observation lies in the Box."""
+    ball = {"shape": "sphere", "radius_m": 0.05, "position_m": [0.0, 0.6, 0.3]}
+    task = {"obstacles": [ball], "random_obstacles": {"count": [1, 3]}, "observe_obstacles": True,
+            "obstacle_observation": encoding}
+    env = gym.make("stagerl/Reach-v0", config={"task": task})
+    assert env.observation_space.shape == (16 + 7 * 4,)
+    check_env(env.unwrapped, skip_render_check=True)
+    rng = np.random.default_rng(2)
+    obs, _ = env.reset(seed=2)
+    for _ in range(1000):
+        assert env.observation_space.contains(obs), obs
+        obs, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
+        if term or trunc:
+            obs, _ = env.reset()
+    with pytest.raises(ValueError, match="task.obstacle_observation"):
+        gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball], "obstacle_observation": "nearest"}})
+
+
 def test_info_holds_every_term_and_the_reward_is_the_chosen_one():
     for reward in ["posture", "stride", "har", "sar", "basic"]:
         env = gym.make("stagerl/Reach-v0", reward=reward)
