@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import subprocess
 
 import numpy as np
@@ -161,6 +162,63 @@ def test_a_large_call_equals_small_ones():
     for k in rewards.KEYS:
         if k != "distance":
             np.testing.assert_array_equal(whole[k], before[k], err_msg=k)
+
+
+def test_out_reuses_the_arrays_of_an_earlier_result():
+    # 100 000 rows (the threaded path) into the arrays of an earlier call: the same values as a
+    # fresh call, the same dict and arrays returned, nothing else written.
+    a = random_rows(100_000, seed=3)
+    b = random_rows(100_000, seed=4)
+    first = rewards.compute(*a, function="sar")
+    ids = {k: (id(v), v.__array_interface__["data"][0]) for k, v in first.items()}
+    again = rewards.compute(*b, function="posture", out=first)
+    assert again is first
+    assert {k: (id(v), v.__array_interface__["data"][0]) for k, v in again.items()} == ids
+    fresh = rewards.compute(*b, function="posture")
+    for k in rewards.KEYS:
+        np.testing.assert_array_equal(again[k], fresh[k], err_msg=k)
+    # Arrays the caller made work too (float64 and bool, C-contiguous, writable).
+    mine = {k: np.empty(100_000, dtype=bool if k == "reached" else np.float64) for k in rewards.KEYS}
+    rewards.compute(*b, function="posture", out=mine)
+    for k in rewards.KEYS:
+        np.testing.assert_array_equal(mine[k], fresh[k], err_msg=k)
+
+
+def test_bad_out_raises_value_error_naming_the_key():
+    ee, quat, target, vel = random_rows(5, seed=1)
+
+    def good():
+        return {k: np.zeros(5, dtype=bool if k == "reached" else np.float64) for k in rewards.KEYS}
+
+    def changed(key, value):
+        d = good()
+        if value is None:
+            del d[key]
+        else:
+            d[key] = value(d) if callable(value) else value
+        return d
+
+    def read_only(d):
+        d["bonus"].flags.writeable = False
+        return d["bonus"]
+
+    cases = [
+        (changed("posture", None), "lacks the keys ['posture']"),
+        (changed("stride", np.zeros(5, np.float32)), "out['stride']"),
+        (changed("reached", np.zeros(5)), "out['reached']"),
+        (changed("total", np.zeros(4)), "out['total'].shape"),
+        (changed("move", np.zeros(10)[::2]), "out['move']"),
+        (changed("bonus", read_only), "out['bonus']"),
+        (changed("alpha2", lambda d: d["alpha1"]), "share no memory"),
+        ([1, 2], "a dict of arrays"),
+    ]
+    for out, words in cases:
+        with pytest.raises(ValueError, match=re.escape(words)):
+            rewards.compute(ee, quat, target, vel, out=out)
+    # An output array that is also an input (one joint velocity per row, read from it).
+    d = good()
+    with pytest.raises(ValueError, match="share no memory"):
+        rewards.compute(ee, quat, target, d["distance"].reshape(5, 1), out=d)
 
 
 def test_zero_rows_give_empty_arrays():

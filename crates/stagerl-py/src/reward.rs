@@ -1,6 +1,6 @@
 //! The paper's rewards over rows of numpy arrays (`stagerl.rewards.compute`).
 
-use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::mem::MaybeUninit;
@@ -37,9 +37,12 @@ fn rows<'a>(
     contiguous(field, array)
 }
 
-/// Every reported term for every row; `config_json` holds the reward section's fields.
+/// Every reported term for every row; `config_json` holds the reward section's fields. With
+/// `out` (the float columns, in the order of [`keys`] without `reached`) and `out_reached`, the
+/// values are written into those arrays (each of length N, C-contiguous, writable, sharing no
+/// memory with another or with the inputs) and `None` is returned; else a dict of new arrays.
 #[pyfunction]
-#[pyo3(signature = (ee_pos, ee_quat, target, joint_vel, config_json, dt_s, prev_ee_pos=None))]
+#[pyo3(signature = (ee_pos, ee_quat, target, joint_vel, config_json, dt_s, prev_ee_pos=None, out=None, out_reached=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn compute<'py>(
     py: Python<'py>,
@@ -50,7 +53,9 @@ pub fn compute<'py>(
     config_json: &str,
     dt_s: f64,
     prev_ee_pos: Option<PyReadonlyArray2<'py, f64>>,
-) -> PyResult<Bound<'py, PyDict>> {
+    out: Option<Vec<Bound<'py, PyArray1<f64>>>>,
+    out_reached: Option<Bound<'py, PyArray1<bool>>>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
     let cfg: RewardConfig = serde_json::from_str(config_json)
         .map_err(|e| bad_arg("constants", config_json, &format!("fields of the [reward] section ({e})")))?;
     cfg.validate().map_err(to_py)?;
@@ -74,6 +79,10 @@ pub fn compute<'py>(
         return Err(bad_arg("prev_ee_pos", "None", "an (N, 3) array when direction = \"displacement\""));
     }
     let rows = Rows { p, q, t, v, j, prev };
+    if let (Some(out), Some(out_reached)) = (out, out_reached) {
+        compute_into(py, &cfg, dt_s, &rows, n, &out, &out_reached)?;
+        return Ok(None);
+    }
     // The columns are the rows of one (KEYS - 1, n) buffer (one allocation: one unaligned head and
     // tail for the huge pages, see `column`), written once each, so not zeroed first (filling them
     // with zeros cost a tenth of the call); the result's arrays are views of its rows.
@@ -102,7 +111,65 @@ pub fn compute<'py>(
             row += 1;
         }
     }
-    Ok(d)
+    Ok(Some(d))
+}
+
+/// [`compute`] into the caller's arrays (`out`: the float columns in order; `out_reached`).
+fn compute_into(
+    py: Python<'_>,
+    cfg: &RewardConfig,
+    dt_s: f64,
+    rows: &Rows<'_>,
+    n: usize,
+    out: &[Bound<'_, PyArray1<f64>>],
+    out_reached: &Bound<'_, PyArray1<bool>>,
+) -> PyResult<()> {
+    if out.len() != KEYS - 1 {
+        return Err(bad_arg(
+            "out",
+            format!("{} float arrays", out.len()),
+            &format!("{} (every key but `reached`)", KEYS - 1),
+        ));
+    }
+    let shared = |e: numpy::BorrowError| {
+        bad_arg(
+            "out",
+            format!("arrays that cannot all be written at once ({e})"),
+            "writable arrays that share no memory with one another or with the inputs",
+        )
+    };
+    let mut cols_rw = Vec::with_capacity(KEYS - 1);
+    for a in out {
+        cols_rw.push(a.try_readwrite().map_err(shared)?);
+    }
+    let mut reached_rw = out_reached.try_readwrite().map_err(shared)?;
+    let mut cols: Vec<&mut [MaybeUninit<f64>]> = Vec::with_capacity(KEYS - 1);
+    for (c, key) in cols_rw.iter_mut().zip(keys().into_iter().filter(|k| *k != "reached")) {
+        let len = c.len();
+        let slice = c
+            .as_slice_mut()
+            .map_err(|_| bad_arg(&format!("out[{key:?}]"), "a non-contiguous array", "C-contiguous"))?;
+        if len != n {
+            return Err(bad_arg(
+                &format!("out[{key:?}].shape"),
+                format!("({len},)"),
+                &format!("({n},), one value per row"),
+            ));
+        }
+        // SAFETY: MaybeUninit<f64> has f64's layout; the slice is only written.
+        cols.push(unsafe { &mut *(slice as *mut [f64] as *mut [MaybeUninit<f64>]) });
+    }
+    let reached = reached_rw
+        .as_slice_mut()
+        .map_err(|_| bad_arg("out[\"reached\"]", "a non-contiguous array", "C-contiguous"))?;
+    if reached.len() != n {
+        return Err(bad_arg(
+            "out[\"reached\"].shape",
+            format!("({},)", reached.len()),
+            &format!("({n},), one value per row"),
+        ));
+    }
+    py.detach(|| guard("rewards.compute", || compute_parallel(cfg, dt_s, rows, &mut cols, reached)))
 }
 
 /// An empty vector with room for `n` values whose pages, on Linux, the kernel is asked to back with
