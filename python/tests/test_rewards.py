@@ -215,6 +215,10 @@ def test_bad_out_raises_value_error_naming_the_key():
     for out, words in cases:
         with pytest.raises(ValueError, match=re.escape(words)):
             rewards.compute(ee, quat, target, vel, out=out)
+    # The extension refuses a half-given output (the float columns without `reached`).
+    floats = [a for k, a in good().items() if k != "reached"]
+    with pytest.raises(ValueError, match="out_reached"):
+        stagerl._core.compute(ee, quat, target, vel, '{"function": "sar"}', 0.05, None, floats)
     # An output array that is also an input (one joint velocity per row, read from it).
     d = good()
     with pytest.raises(ValueError, match="share no memory"):

@@ -79,9 +79,13 @@ pub fn compute<'py>(
         return Err(bad_arg("prev_ee_pos", "None", "an (N, 3) array when direction = \"displacement\""));
     }
     let rows = Rows { p, q, t, v, j, prev };
-    if let (Some(out), Some(out_reached)) = (out, out_reached) {
-        compute_into(py, &cfg, dt_s, &rows, n, &out, &out_reached)?;
-        return Ok(None);
+    match (out, out_reached) {
+        (Some(out), Some(out_reached)) => {
+            compute_into(py, &cfg, dt_s, &rows, n, &out, &out_reached)?;
+            return Ok(None);
+        }
+        (None, None) => {}
+        _ => return Err(bad_arg("out", "a half-given output", "both `out` and `out_reached`, or neither")),
     }
     // The columns are the rows of one (KEYS - 1, n) buffer (one allocation: one unaligned head and
     // tail for the huge pages, see `column`), written once each, so not zeroed first (filling them
@@ -145,31 +149,31 @@ fn compute_into(
     let mut reached_rw = out_reached.try_readwrite().map_err(shared)?;
     let mut cols: Vec<&mut [MaybeUninit<f64>]> = Vec::with_capacity(KEYS - 1);
     for (c, key) in cols_rw.iter_mut().zip(keys().into_iter().filter(|k| *k != "reached")) {
-        let len = c.len();
-        let slice = c
-            .as_slice_mut()
-            .map_err(|_| bad_arg(&format!("out[{key:?}]"), "a non-contiguous array", "C-contiguous"))?;
-        if len != n {
-            return Err(bad_arg(
-                &format!("out[{key:?}].shape"),
-                format!("({len},)"),
-                &format!("({n},), one value per row"),
-            ));
-        }
+        let slice = out_slice(key, c, n)?;
         // SAFETY: MaybeUninit<f64> has f64's layout; the slice is only written.
         cols.push(unsafe { &mut *(slice as *mut [f64] as *mut [MaybeUninit<f64>]) });
     }
-    let reached = reached_rw
-        .as_slice_mut()
-        .map_err(|_| bad_arg("out[\"reached\"]", "a non-contiguous array", "C-contiguous"))?;
-    if reached.len() != n {
+    let reached = out_slice("reached", &mut reached_rw, n)?;
+    py.detach(|| guard("rewards.compute", || compute_parallel(cfg, dt_s, rows, &mut cols, reached)))
+}
+
+/// The values of the output array for `key`: C-contiguous, `n` of them, or a `ValueError`.
+fn out_slice<'a, T: numpy::Element>(
+    key: &str,
+    array: &'a mut numpy::PyReadwriteArray1<'_, T>,
+    n: usize,
+) -> PyResult<&'a mut [T]> {
+    let len = array.len();
+    if len != n {
         return Err(bad_arg(
-            "out[\"reached\"].shape",
-            format!("({},)", reached.len()),
+            &format!("out[{key:?}].shape"),
+            format!("({len},)"),
             &format!("({n},), one value per row"),
         ));
     }
-    py.detach(|| guard("rewards.compute", || compute_parallel(cfg, dt_s, rows, &mut cols, reached)))
+    array
+        .as_slice_mut()
+        .map_err(|_| bad_arg(&format!("out[{key:?}]"), "a non-contiguous array", "C-contiguous"))
 }
 
 /// An empty vector with room for `n` values whose pages, on Linux, the kernel is asked to back with
