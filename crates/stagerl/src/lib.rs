@@ -22,7 +22,8 @@
 //!   TensorBoard writer share).
 //! - [`view`]: planned trajectories as a self-contained, animated HTML 3D view.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
-//! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
+//! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`; [`par`]:
+//!   the worker threads one run can split its updates over (same bits on any number).
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
 //!   [`her`]: their hindsight relabelling;
 //!   [`train`]: the off-policy loop and evaluation; [`rundir`]: the run directory; [`checkpoint`],
@@ -47,6 +48,7 @@ pub mod log;
 pub mod math;
 pub mod metrics;
 pub mod nn;
+pub mod par;
 pub mod physics;
 pub mod plan;
 pub mod policy;

@@ -47,6 +47,9 @@ pub struct UpdateArgs {
     /// Timed updates (after 20 warm-up updates), 1 to 1 000 000.
     #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     updates: u32,
+    /// Threads for the update (the same results on any number, see `stagerl::par`), 1 to 64.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    threads: u32,
 }
 
 #[derive(clap::Args)]
@@ -59,6 +62,9 @@ pub struct TrainArgs {
     /// too), 1 to 100 000 000.
     #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     steps: u64,
+    /// Threads for the update (the same results on any number, see `stagerl::par`), 1 to 64.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    threads: u32,
 }
 
 #[derive(clap::Args)]
@@ -84,8 +90,14 @@ pub struct EnvArgs {
 pub fn run(b: Bench) -> Result<()> {
     match b {
         Bench::Env(a) => env(a),
-        Bench::Update(a) => update(a),
-        Bench::Train(a) => train(a),
+        Bench::Update(a) => {
+            let pool = stagerl::par::Pool::new(a.threads as usize)?;
+            stagerl::par::install(Some(&pool), || update(a))
+        }
+        Bench::Train(a) => {
+            let pool = stagerl::par::Pool::new(a.threads as usize)?;
+            stagerl::par::install(Some(&pool), || train(a))
+        }
         Bench::Plan(a) => plan(a),
     }
 }
@@ -177,8 +189,8 @@ fn update(a: UpdateArgs) -> Result<()> {
     times.sort_by(f64::total_cmp);
     let median = times[times.len() / 2];
     outln!(
-        "update: {} hidden {}x{} batch {}: median {:.3} ms, min {:.3} ms over {} updates (obs {od}, act {ad}, one thread)",
-        a.algo, a.hidden, a.hidden, a.batch, median, times[0], times.len()
+        "update: {} hidden {}x{} batch {}: median {:.3} ms, min {:.3} ms over {} updates (obs {od}, act {ad}, {})",
+        a.algo, a.hidden, a.hidden, a.batch, median, times[0], times.len(), threads_text(a.threads)
     )?;
     outln!("{}", serde_json::json!({ "ms_per_update": median }))?;
     Ok(())
@@ -199,11 +211,20 @@ fn train(a: TrainArgs) -> Result<()> {
     std::fs::remove_dir_all(&dir).ok();
     let sps = summary.env_steps as f64 / secs;
     outln!(
-        "train: {} hidden {}x{}: {} env steps, {} updates in {:.2} s, {:.0} env steps/s end to end (one update per step, one thread)",
-        a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps
+        "train: {} hidden {}x{}: {} env steps, {} updates in {:.2} s, {:.0} env steps/s end to end (one update per step, {})",
+        a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps, threads_text(a.threads)
     )?;
     outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
     Ok(())
+}
+
+/// "one thread" or "N threads".
+fn threads_text(n: u32) -> String {
+    if n == 1 {
+        "one thread".into()
+    } else {
+        format!("{n} threads")
+    }
 }
 
 fn plan(a: PlanArgs) -> Result<()> {

@@ -47,6 +47,11 @@ pub struct Args {
     /// Trials of the closing evaluation (deterministic policy); 0 skips it.
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(0..=10_000_000))]
     eval_trials: u32,
+    /// Threads for this run's updates, 1 to 64. The run is the same, bit for bit, on any number
+    /// (work is split only into parts that write separate values, see `stagerl::par`); wide
+    /// networks gain (hidden 256: see the README's Performance section), hidden 64 does not.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    threads: u32,
 }
 
 /// Exit code of a run stopped by SIGINT or SIGTERM (after saving it).
@@ -114,6 +119,11 @@ fn output_ok(output: &RunOutput, dir: &std::path::Path) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let pool = stagerl::par::Pool::new(args.threads as usize)?;
+    stagerl::par::install(Some(&pool), || run_on_pool(args))
+}
+
+fn run_on_pool(args: Args) -> Result<()> {
     if let Some(dir) = &args.resume {
         return resume(dir, args.eval_trials);
     }

@@ -4,7 +4,16 @@ use std::ops::Range;
 
 use super::matmul::{matmul, Strides};
 use super::{Activation, Scalar};
+use crate::par;
 use crate::rng::Rng;
+
+/// Batch rows per piece when a product is split over threads ([`par::split`]): a multiple of
+/// the kernels' row tiles.
+const ROW_ALIGN: usize = 8;
+
+/// Multiply-adds below which a product runs on one thread (about 5 us of work: waking a worker
+/// and waiting for it cost about 1 us).
+const PAR_MIN_MACS: usize = 1 << 22;
 
 /// A fully connected layer: `y = x W^T + b`.
 ///
@@ -72,18 +81,21 @@ impl Linear {
     /// activation: see [`Activation::add_bias_apply`]).
     pub fn forward_no_bias<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
         let (n_in, n_out) = (self.in_features, self.out_features);
-        matmul(
-            batch,
-            n_out,
-            n_in,
-            &mut y[..batch * n_out],
-            Strides::row_major(n_out),
-            false,
-            &x[..batch * n_in],
-            Strides::row_major(n_in),
-            &params[self.weight_range()],
-            Strides::transposed(n_in),
-        );
+        let w = &params[self.weight_range()];
+        par::split_rows_mut(y, batch, n_out, ROW_ALIGN, n_in * n_out, PAR_MIN_MACS, &|r, y| {
+            matmul(
+                r.len(),
+                n_out,
+                n_in,
+                y,
+                Strides::row_major(n_out),
+                false,
+                &x[r.start * n_in..r.end * n_in],
+                Strides::row_major(n_in),
+                w,
+                Strides::transposed(n_in),
+            )
+        });
     }
 
     /// Accumulates the parameter gradients for upstream gradient `dy = dL/dy` (`batch x out`):
@@ -102,18 +114,23 @@ impl Linear {
     /// The weight part of [`Linear::backward_params`] alone: `dW += dy^T x`.
     pub fn backward_weight<T: Scalar>(&self, grads: &mut [T], x: &[T], dy: &[T], batch: usize) {
         let (n_in, n_out) = (self.in_features, self.out_features);
-        matmul(
-            n_out,
-            n_in,
-            batch,
-            &mut grads[self.weight_range()],
-            Strides::row_major(n_in),
-            true,
-            &dy[..batch * n_out],
-            Strides::transposed(n_out),
-            &x[..batch * n_in],
-            Strides::row_major(n_in),
-        );
+        let (dy, x) = (&dy[..batch * n_out], &x[..batch * n_in]);
+        // Rows of dW (output features) apart: each keeps its whole sum over the batch.
+        let gw = &mut grads[self.weight_range()];
+        par::split_rows_mut(gw, n_out, n_in, 1, batch * n_in, PAR_MIN_MACS, &|r, gw| {
+            matmul(
+                r.len(),
+                n_in,
+                batch,
+                gw,
+                Strides::row_major(n_in),
+                true,
+                &dy[r.start..],
+                Strides::transposed(n_out),
+                x,
+                Strides::row_major(n_in),
+            )
+        });
     }
 
     /// Gradient with respect to the input: `dx = dy W` (`batch x in`), overwriting `dx`.
@@ -137,18 +154,20 @@ impl Linear {
         let (n_in, n_out) = (self.in_features, self.out_features);
         assert!(cols.start <= cols.end && cols.end <= n_in, "Linear: input columns out of range");
         let width = cols.len();
-        let w = &params[self.weight_range()];
-        matmul(
-            batch,
-            width,
-            n_out,
-            &mut dx[..batch * width],
-            Strides::row_major(width),
-            false,
-            &dy[..batch * n_out],
-            Strides::row_major(n_out),
-            &w[cols.start..],
-            Strides::row_major(n_in),
-        );
+        let w = &params[self.weight_range()][cols.start..];
+        par::split_rows_mut(dx, batch, width, ROW_ALIGN, width * n_out, PAR_MIN_MACS, &|r, dx| {
+            matmul(
+                r.len(),
+                width,
+                n_out,
+                dx,
+                Strides::row_major(width),
+                false,
+                &dy[r.start * n_out..r.end * n_out],
+                Strides::row_major(n_out),
+                w,
+                Strides::row_major(n_in),
+            )
+        });
     }
 }
