@@ -318,10 +318,6 @@ pub fn split_rows_mut<T: Send>(
     f: &(dyn Fn(Range<usize>, &mut [T]) + Sync),
 ) {
     let out = &mut out[..rows * row_len];
-    struct Base<T>(*mut T);
-    // SAFETY: each piece below touches only its own rows of `out`, which `split_rows_mut`
-    // borrows mutably until every piece has returned.
-    unsafe impl<T: Send> Sync for Base<T> {}
     let base = Base(out.as_mut_ptr());
     let base = &base;
     split(rows, align, cost, min_cost, &|r: Range<usize>| {
@@ -332,6 +328,72 @@ pub fn split_rows_mut<T: Send>(
         f(r, piece)
     });
 }
+
+/// `f(k, &mut a[k], &mut b[k])` for every `k`: [`for_each_mut3`] with two slices.
+pub fn for_each_mut<A: Send, B: Send>(a: &mut [A], b: &mut [B], f: &(dyn Fn(usize, &mut A, &mut B) + Sync)) {
+    let mut units = [(); MAX_THREADS];
+    let units = units.get_mut(..a.len()).expect("par::for_each_mut: at most MAX_THREADS items");
+    for_each_mut3(a, b, units, &|k, x, y, _| f(k, x, y));
+}
+
+/// `f(k, &mut a[k], &mut b[k], &mut c[k])` for every `k`, one item per task across this thread's
+/// pool (item 0 on the calling thread), e.g. twin critics with their optimisers and scratch.
+/// Each call touches its own items only, so the results are those of the serial loop.
+///
+/// # Panics
+/// If the slices differ in length.
+pub fn for_each_mut3<A: Send, B: Send, C: Send>(
+    a: &mut [A],
+    b: &mut [B],
+    c: &mut [C],
+    f: &(dyn Fn(usize, &mut A, &mut B, &mut C) + Sync),
+) {
+    let n = a.len();
+    assert!(b.len() == n && c.len() == n, "par::for_each_mut3: slices of different lengths");
+    let (pa, pb, pc) = (Base(a.as_mut_ptr()), Base(b.as_mut_ptr()), Base(c.as_mut_ptr()));
+    let (pa, pb, pc) = (&pa, &pb, &pc);
+    for_each_index(n, &|k| {
+        // SAFETY: each index is run once, so the items `k` are borrowed by one call only, while
+        // the slices stay borrowed mutably by this function.
+        let (x, y, z) = unsafe { (&mut *pa.0.add(k), &mut *pb.0.add(k), &mut *pc.0.add(k)) };
+        f(k, x, y, z)
+    });
+}
+
+/// `a()` on the calling thread and `b()` on a worker of this thread's pool, at once (one after
+/// the other without a pool).
+pub fn join<A: FnOnce() + Send, B: FnOnce() + Send>(a: A, b: B) {
+    if current_threads() == 1 {
+        a();
+        return b();
+    }
+    let (a, b) = (Mutex::new(Some(a)), Mutex::new(Some(b)));
+    for_each_index(2, &|k| {
+        if k == 0 {
+            if let Some(f) = a.lock().unwrap_or_else(|p| p.into_inner()).take() {
+                f();
+            }
+        } else if let Some(f) = b.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            f();
+        }
+    });
+}
+
+/// `f(k)` for `k` in `0..n`, one task each across this thread's pool (`f(0)` on the calling
+/// thread), or serially without one.
+fn for_each_index(n: usize, f: &(dyn Fn(usize) + Sync)) {
+    match CURRENT.with(Cell::get) {
+        // SAFETY: as in `current_threads`.
+        Some(p) if n > 1 => unsafe { &*p }.for_each(n, f),
+        _ => (0..n).for_each(f),
+    }
+}
+
+/// A raw pointer shared by the tasks of one job (see its uses).
+struct Base<T>(*mut T);
+// SAFETY: every use hands each task disjoint elements, borrowed mutably by the caller until
+// the job has ended.
+unsafe impl<T: Send> Sync for Base<T> {}
 
 #[cfg(test)]
 mod tests {
@@ -398,6 +460,44 @@ mod tests {
             })
         });
         assert_eq!(inner.load(Relaxed), 2);
+    }
+
+    #[test]
+    fn for_each_mut_gives_each_call_its_items() {
+        let pool = Pool::new(2).unwrap();
+        let (mut a, mut b, mut c) = (vec![0u64; 5], vec![1u64; 5], vec![0usize; 5]);
+        for _ in 0..100 {
+            install(Some(&pool), || {
+                for_each_mut3(&mut a, &mut b, &mut c, &|k, x, y, z| {
+                    *x += k as u64;
+                    *y += 1;
+                    *z = k;
+                })
+            });
+        }
+        assert_eq!(a, [0, 100, 200, 300, 400]);
+        assert_eq!(b, [101; 5]);
+        assert_eq!(c, [0, 1, 2, 3, 4]);
+        let (mut c, mut d) = (vec![1], vec![2]);
+        for_each_mut(&mut c, &mut d, &|_, x, y| std::mem::swap(x, y));
+        assert_eq!((c[0], d[0]), (2, 1));
+        // join: both run, on two threads with the pool.
+        let (mut x, mut y) = (0, 0);
+        let (tx, ty) = (std::sync::Mutex::new(None), std::sync::Mutex::new(None));
+        install(Some(&pool), || {
+            join(
+                || {
+                    x = 1;
+                    *tx.lock().unwrap() = Some(std::thread::current().id());
+                },
+                || {
+                    y = 2;
+                    *ty.lock().unwrap() = Some(std::thread::current().id());
+                },
+            )
+        });
+        assert_eq!((x, y), (1, 2));
+        assert_eq!(tx.into_inner().unwrap(), Some(std::thread::current().id()), "a runs on the caller");
     }
 
     #[test]

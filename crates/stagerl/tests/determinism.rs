@@ -125,13 +125,13 @@ fn ppo_with_observation_normalisation_is_deterministic_and_differs_from_plain_pp
 
 /// Splitting an update over worker threads (`stagerl::par`) changes no bit: the same
 /// episodes.csv and networks on 1 and 2 threads, for every algorithm, with networks and batches
-/// large enough that the products are split (hidden 64, batch 256).
+/// large enough that the products are split (hidden 128, batch 256), and twin critics at once.
 #[test]
 fn threads_do_not_change_the_run() {
     let pool = stagerl::par::Pool::new(2).unwrap();
     for algo in Algo::ALL {
         let big = |cfg: &mut Config| {
-            cfg.agent.hidden = vec![64, 64];
+            cfg.agent.hidden = vec![128, 128];
             cfg.agent.batch_size = 256;
             // PPO: minibatches of 256 rows.
             if let Some(ppo) = &mut cfg.agent.ppo {

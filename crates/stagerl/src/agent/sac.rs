@@ -16,6 +16,7 @@
 use super::parts::learned_parts;
 use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, Learner, OffPolicy, UpdateStats};
 use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
+use crate::par;
 use crate::replay::Batch;
 use crate::rng::Rng;
 
@@ -45,8 +46,14 @@ pub struct Sac {
     next_act: Vec<f32>,
     next_logp: Vec<f32>,
     y: Vec<f32>,
+    /// The second critic's values where the first's go to `y`, `dq`, `q1v`, `da` (the twin
+    /// critics run at once on two threads, see `stagerl::par`).
+    q2n: Vec<f32>,
     dq: Vec<f32>,
+    dq2: Vec<f32>,
     q1v: Vec<f32>,
+    q2v: Vec<f32>,
+    da2: Vec<f32>,
     g1: Vec<f32>,
     g2: Vec<f32>,
     da: Vec<f32>,
@@ -82,7 +89,11 @@ impl Sac {
             next_logp: vec![0.0; b],
             y: vec![0.0; b],
             dq: vec![0.0; b],
+            q2n: vec![0.0; b],
+            dq2: vec![0.0; b],
             q1v: vec![0.0; b],
+            q2v: vec![0.0; b],
+            da2: vec![0.0; b * act_dim],
             g1: vec![0.0; b],
             g2: vec![0.0; b],
             da: vec![0.0; b * act_dim],
@@ -150,18 +161,28 @@ impl OffPolicy for Sac {
         self.next_act[..b * ad].copy_from_slice(a_next);
         self.next_logp[..b].copy_from_slice(logp_next);
         concat_cols(&batch.next_obs, od, &self.next_act[..b * ad], ad, b, &mut self.critic_in);
-        let q1n = self.q1_target.predict(&self.critic_in, b);
-        self.y[..b].copy_from_slice(q1n);
-        let q2n = self.q2_target.predict(&self.critic_in, b);
+        // The twin critics' passes run at once (on two threads with a pool; the same bits).
+        let (ci, y, q2n) = (&self.critic_in, &mut self.y, &mut self.q2n);
+        let (q1t, q2t) = (&mut self.q1_target, &mut self.q2_target);
+        par::join(
+            || y[..b].copy_from_slice(q1t.predict(ci, b)),
+            || q2n[..b].copy_from_slice(q2t.predict(ci, b)),
+        );
         for i in 0..b {
-            let soft_v = self.y[i].min(q2n[i]) - alpha * self.next_logp[i];
+            let soft_v = self.y[i].min(self.q2n[i]) - alpha * self.next_logp[i];
             self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * soft_v;
         }
         concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
         let n = self.cfg.max_grad_norm;
-        let critic_loss =
-            fit_critic(&mut self.q1, &mut self.q1_opt, &self.critic_in, &self.y[..b], &mut self.dq, n)
-                + fit_critic(&mut self.q2, &mut self.q2_opt, &self.critic_in, &self.y[..b], &mut self.dq, n);
+        let (ci, y) = (&self.critic_in, &self.y[..b]);
+        let (mut l1, mut l2) = (0.0, 0.0);
+        let (q1, q1_opt, dq) = (&mut self.q1, &mut self.q1_opt, &mut self.dq);
+        let (q2, q2_opt, dq2) = (&mut self.q2, &mut self.q2_opt, &mut self.dq2);
+        par::join(
+            || l1 = fit_critic(q1, q1_opt, ci, y, dq, n),
+            || l2 = fit_critic(q2, q2_opt, ci, y, dq2, n),
+        );
+        let critic_loss = l1 + l2;
 
         // 2. Actor, through the reparameterised sample and dQ/da of the smaller critic.
         let raw = self.actor.forward(&batch.obs, b);
@@ -169,24 +190,31 @@ impl OffPolicy for Sac {
         let (a, logp) = self.head.forward(raw, &self.eps[..b * ad], b);
         self.next_logp[..b].copy_from_slice(logp); // reuse: log pi(a~|s)
         concat_cols(&batch.obs, od, a, ad, b, &mut self.critic_in);
-        let q1v = self.q1.forward(&self.critic_in, b);
-        self.q1v[..b].copy_from_slice(q1v);
-        let q2v = self.q2.forward(&self.critic_in, b);
+        let ci = &self.critic_in;
+        let (q1, q1v, q2, q2v) = (&mut self.q1, &mut self.q1v, &mut self.q2, &mut self.q2v);
+        par::join(
+            || q1v[..b].copy_from_slice(q1.forward(ci, b)),
+            || q2v[..b].copy_from_slice(q2.forward(ci, b)),
+        );
         let inv_b = 1.0 / b as f32;
         let mut actor_loss = 0.0f64;
         for i in 0..b {
-            let first = self.q1v[i] <= q2v[i];
-            let qmin = if first { self.q1v[i] } else { q2v[i] };
+            let first = self.q1v[i] <= self.q2v[i];
+            let qmin = if first { self.q1v[i] } else { self.q2v[i] };
             actor_loss += f64::from(alpha * self.next_logp[i] - qmin);
             self.g1[i] = if first { -inv_b } else { 0.0 };
             self.g2[i] = if first { 0.0 } else { -inv_b };
             self.dlogp[i] = alpha * inv_b;
         }
         actor_loss /= b as f64;
-        let d1 = self.q1.input_grad_cols(&self.g1[..b], od..od + ad);
-        self.da[..b * ad].copy_from_slice(d1);
-        let d2 = self.q2.input_grad_cols(&self.g2[..b], od..od + ad);
-        for (x, y) in self.da[..b * ad].iter_mut().zip(d2) {
+        let cols = od..od + ad;
+        let (q1, g1, da) = (&mut self.q1, &self.g1[..b], &mut self.da[..b * ad]);
+        let (q2, g2, da2) = (&mut self.q2, &self.g2[..b], &mut self.da2[..b * ad]);
+        par::join(
+            || da.copy_from_slice(q1.input_grad_cols(g1, cols.clone())),
+            || da2.copy_from_slice(q2.input_grad_cols(g2, cols.clone())),
+        );
+        for (x, y) in self.da[..b * ad].iter_mut().zip(&self.da2[..b * ad]) {
             *x += y;
         }
         let d_raw = self.head.backward(&self.da[..b * ad], &self.dlogp[..b]);
@@ -203,8 +231,8 @@ impl OffPolicy for Sac {
 
         // 4. Targets.
         let tau = self.cfg.tau as f32;
-        self.q1_target.polyak_from(&self.q1, tau);
-        self.q2_target.polyak_from(&self.q2, tau);
+        let (q1t, q1, q2t, q2) = (&mut self.q1_target, &self.q1, &mut self.q2_target, &self.q2);
+        par::join(|| q1t.polyak_from(q1, tau), || q2t.polyak_from(q2, tau));
 
         UpdateStats {
             critic_loss: critic_loss / 2.0,

@@ -20,6 +20,7 @@ use super::noise::ActionNoise;
 use super::parts::learned_parts;
 use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats};
 use crate::nn::{concat_cols, Activation, Adam, Mlp};
+use crate::par;
 use crate::replay::Batch;
 use crate::rng::Rng;
 
@@ -76,6 +77,16 @@ pub struct Td3 {
     smoothing_noise: Vec<f64>,
     y: Vec<f32>,
     dq: Vec<f32>,
+    /// Per critic: its target's values and its loss gradient (the critics run at once on a
+    /// pool's threads, see `stagerl::par`), and its last loss.
+    scratch: Vec<CriticScratch>,
+}
+
+/// One critic's buffers for an update.
+struct CriticScratch {
+    q_next: Vec<f32>,
+    dq: Vec<f32>,
+    loss: f64,
 }
 
 impl Td3 {
@@ -108,6 +119,9 @@ impl Td3 {
             smoothing_noise: vec![0.0; b * act_dim],
             y: vec![0.0; b],
             dq: vec![0.0; b],
+            scratch: (0..family.critics.len())
+                .map(|_| CriticScratch { q_next: vec![0.0; b], dq: vec![0.0; b], loss: 0.0 })
+                .collect(),
             family,
             cfg: cfg.clone(),
             obs_dim,
@@ -175,14 +189,14 @@ impl OffPolicy for Td3 {
         concat_cols(&batch.next_obs, od, a_next, ad, b, &mut self.critic_in);
 
         // 2. Critics, towards the smallest target critic.
-        for (i, target) in self.critic_targets.iter_mut().enumerate() {
-            let q_next = target.predict(&self.critic_in, b);
-            if i == 0 {
-                self.y[..b].copy_from_slice(q_next);
-            } else {
-                for (y, &q) in self.y[..b].iter_mut().zip(q_next) {
-                    *y = y.min(q);
-                }
+        let ci = &self.critic_in;
+        par::for_each_mut(&mut self.critic_targets, &mut self.scratch, &|_, t, s| {
+            s.q_next[..b].copy_from_slice(t.predict(ci, b))
+        });
+        self.y[..b].copy_from_slice(&self.scratch[0].q_next[..b]);
+        for s in &self.scratch[1..] {
+            for (y, &q) in self.y[..b].iter_mut().zip(&s.q_next[..b]) {
+                *y = y.min(q);
             }
         }
         for i in 0..b {
@@ -190,9 +204,13 @@ impl OffPolicy for Td3 {
         }
         concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
         let n = self.cfg.max_grad_norm;
+        let (ci, y) = (&self.critic_in, &self.y[..b]);
+        par::for_each_mut3(&mut self.critics, &mut self.critic_opts, &mut self.scratch, &|_, q, opt, s| {
+            s.loss = fit_critic(q, opt, ci, y, &mut s.dq, n)
+        });
         let mut critic_loss = 0.0;
-        for (q, opt) in self.critics.iter_mut().zip(&mut self.critic_opts) {
-            critic_loss += fit_critic(q, opt, &self.critic_in, &self.y[..b], &mut self.dq, n);
+        for s in &self.scratch {
+            critic_loss += s.loss;
         }
 
         // 3. Delayed actor and targets.
@@ -210,9 +228,10 @@ impl OffPolicy for Td3 {
             step(&mut self.actor, &mut self.actor_opt, self.cfg.max_grad_norm);
             let tau = self.cfg.tau as f32;
             self.actor_target.polyak_from(&self.actor, tau);
-            for (target, q) in self.critic_targets.iter_mut().zip(&self.critics) {
-                target.polyak_from(q, tau);
-            }
+            let critics = &self.critics;
+            par::for_each_mut(&mut self.critic_targets, &mut self.scratch, &|k, t, _| {
+                t.polyak_from(&critics[k], tau)
+            });
         }
 
         let critic_loss = critic_loss / self.critics.len() as f64;
