@@ -274,3 +274,34 @@ fn help_lists_the_allowed_values_of_every_enumerated_option() {
         }
     }
 }
+
+/// `train --threads 2` trains the same run as one thread (wide networks, so the products are
+/// split and the twin critics run at once), and a thread count outside 1..=64 is refused.
+#[test]
+fn threads_change_nothing_but_the_speed() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-threads-{}", std::process::id()));
+    let config = dir.join("wide.toml");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(&config, "[agent]\nhidden = [128, 128]\nlearning_starts = 200\n").unwrap();
+    let mut runs = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.join(format!("sac-{threads}"));
+        let args = ["train", "--algo", "sac", "--episodes", "20", "--eval-trials", "5", "--threads", threads];
+        let o = stagerl(
+            &[&args[..], &["--config", config.to_str().unwrap(), "--out", out.to_str().unwrap()]].concat(),
+            "",
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+        // Every column but the wall time.
+        runs.push(csv.lines().map(|l| l.rsplit_once(',').unwrap().0.to_string()).collect::<Vec<_>>());
+    }
+    assert_eq!(runs[0].len(), 21);
+    assert_eq!(runs[0], runs[1], "--threads 2 trained another run");
+    for bad in ["0", "65", "x"] {
+        let o = stagerl(&["train", "--threads", bad, "--out", dir.join("never").to_str().unwrap()], "");
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("--threads") && !dir.join("never").exists(), "{bad}: {}", stderr(&o));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
