@@ -22,7 +22,8 @@
 //!   TensorBoard writer share).
 //! - [`view`]: planned trajectories as a self-contained, animated HTML 3D view.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
-//! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`.
+//! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) with its own
+//!   run-time-dispatched SIMD matrix kernels.
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
 //!   [`her`]: their hindsight relabelling;
 //!   [`train`]: the off-policy loop and evaluation; [`rundir`]: the run directory; [`checkpoint`],

@@ -2,7 +2,7 @@
 
 use std::ops::Range;
 
-use super::matmul::{matmul, Strides};
+use super::matmul;
 use super::{Activation, Scalar};
 use crate::rng::Rng;
 
@@ -58,7 +58,8 @@ impl Linear {
         }
     }
 
-    /// Forward pass: `y = x W^T + b`.
+    /// Forward pass: `y = x W^T + b`, i.e. `y[b, o] = sum over i of x[b, i] W[o, i]` (one
+    /// fused multiply-add chain in increasing `i`, see `super::matmul`) `+ bias[o]`.
     ///
     /// `params` is the whole flat parameter vector; `x` holds at least `batch * in` values,
     /// `y` at least `batch * out` values (extra values are left untouched).
@@ -72,18 +73,7 @@ impl Linear {
     /// activation: see [`Activation::add_bias_apply`]).
     pub fn forward_no_bias<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
         let (n_in, n_out) = (self.in_features, self.out_features);
-        matmul(
-            batch,
-            n_out,
-            n_in,
-            &mut y[..batch * n_out],
-            Strides::row_major(n_out),
-            false,
-            &x[..batch * n_in],
-            Strides::row_major(n_in),
-            &params[self.weight_range()],
-            Strides::transposed(n_in),
-        );
+        matmul::forward(batch, n_out, n_in, y, x, &params[self.weight_range()]);
     }
 
     /// Accumulates the parameter gradients for upstream gradient `dy = dL/dy` (`batch x out`):
@@ -99,21 +89,12 @@ impl Linear {
         self.backward_weight(grads, x, dy, batch);
     }
 
-    /// The weight part of [`Linear::backward_params`] alone: `dW += dy^T x`.
+    /// The weight part of [`Linear::backward_params`] alone: `dW += dy^T x`, i.e.
+    /// `dW[o, i] += sum over b of dy[b, o] x[b, i]` (one chain from the old value, in increasing
+    /// `b`).
     pub fn backward_weight<T: Scalar>(&self, grads: &mut [T], x: &[T], dy: &[T], batch: usize) {
         let (n_in, n_out) = (self.in_features, self.out_features);
-        matmul(
-            n_out,
-            n_in,
-            batch,
-            &mut grads[self.weight_range()],
-            Strides::row_major(n_in),
-            true,
-            &dy[..batch * n_out],
-            Strides::transposed(n_out),
-            &x[..batch * n_in],
-            Strides::row_major(n_in),
-        );
+        matmul::backward_weight(n_out, n_in, batch, &mut grads[self.weight_range()], dy, x);
     }
 
     /// Gradient with respect to the input: `dx = dy W` (`batch x in`), overwriting `dx`.
@@ -122,7 +103,9 @@ impl Linear {
     }
 
     /// Gradient with respect to the input columns `cols` only: `dx = dy W[:, cols]`
-    /// (`batch x cols.len()`), overwriting `dx`; e.g. dQ/da when the input is `[obs | action]`.
+    /// (`batch x cols.len()`), overwriting `dx`, i.e. `dx[b, j] = sum over o of dy[b, o]
+    /// W[o, cols.start + j]` (one chain in increasing `o`); e.g. dQ/da when the input is
+    /// `[obs | action]`.
     ///
     /// # Panics
     /// If `cols` is not inside `0..in_features`.
@@ -136,19 +119,7 @@ impl Linear {
     ) {
         let (n_in, n_out) = (self.in_features, self.out_features);
         assert!(cols.start <= cols.end && cols.end <= n_in, "Linear: input columns out of range");
-        let width = cols.len();
         let w = &params[self.weight_range()];
-        matmul(
-            batch,
-            width,
-            n_out,
-            &mut dx[..batch * width],
-            Strides::row_major(width),
-            false,
-            &dy[..batch * n_out],
-            Strides::row_major(n_out),
-            &w[cols.start..],
-            Strides::row_major(n_in),
-        );
+        matmul::backward_input(batch, cols.len(), n_out, dx, dy, (&w[cols.start..], n_in));
     }
 }

@@ -1,0 +1,259 @@
+//! The engine's own small-matrix products, single-threaded, for the three patterns of
+//! [`super::Linear`]: [`forward`] `y = x W^T`, [`backward_weight`] `dW += dy^T x` and
+//! [`backward_input`] `dx = dy W[:, cols]`.
+//!
+//! # Exact semantics
+//! Every output element is ONE sequential chain of fused multiply-adds over the depth index
+//! `p = 0, 1, ..., k - 1` in increasing order, `acc = fma(lhs[i, p], rhs[p, j], acc)` (one
+//! rounding each), starting from +0.0 (overwriting products) or from the element's current value
+//! (`backward_weight`, which accumulates). The one exception, [`forward`] with a single output
+//! column (`n == 1`, the critics' last layer), is a dot product in a different but equally fixed
+//! order: 16 chains `s[l]` over `p = l, l + 16, l + 32, ...` (each in increasing `p` from +0.0),
+//! summed by the balanced tree `((s[l] + s[l + 8]) + (.. + 4)) ...` (see `portable::tree16`).
+//!
+//! The results are therefore independent of tiling, of the depth blocks (an `f32` partial sum
+//! stored and reloaded is exact), of the vector width and of the SIMD level: the AVX-512F
+//! kernels, the AVX2 + FMA kernels and the portable loops ([`Scalar::mul_add`], a correctly
+//! rounded fma even where the CPU lacks the instruction) give the same bits, which the tests
+//! check against plain reference loops. The rounding is not `gemm`'s (nor a plain `a * b + c`
+//! loop's), and a NaN's payload may differ between levels.
+//!
+//! # Kernels
+//! `f32` at run time on x86-64 ([`crate::simd::simd_level`]; the build stays baseline x86-64):
+//! register tiles of outer products, which broadcast one left-hand scalar a row and load the
+//! right-hand rows as vectors (`kernel`): AVX-512F 8 rows x 32 columns (16 accumulators) and
+//! AVX2 6 x 16 (12), a last column panel of one vector (tiles of 16 x 16 and 12 x 8 rows) when at
+//! most one vector's columns remain, masked loads and stores for partial vectors and 8/4/2/1-row
+//! tiles for the remaining rows. `backward_weight` and `backward_input` read their operands in
+//! place (the right-hand rows are contiguous along the output columns); `forward` packs `W^T`
+//! per call into a stack buffer of 128 x 64 values (depth x columns), never the heap. The
+//! one-column forward product runs one 16-lane dot product a row. `f64` (the gradient checks)
+//! and `f32` without AVX2 + FMA use the portable loops. Nothing allocates.
+
+use super::Scalar;
+use crate::simd::SimdLevel;
+
+// The AVX-512 intrinsics are stable since Rust 1.89, as is the `avx512f` target feature that
+// `crate::simd` already enables: the workspace's declared `rust-version` (1.85) is older.
+#[cfg(target_arch = "x86_64")]
+#[clippy::msrv = "1.89"]
+mod kernel;
+#[cfg(target_arch = "x86_64")]
+#[clippy::msrv = "1.89"]
+mod lanes;
+mod portable;
+
+#[cfg(test)]
+mod tests;
+
+/// `y (m x n) = x (m x k) * w^T`, overwriting `y`: `y[i*n + j] = sum over p of x[i*k + p] *
+/// w[j*k + p]`, with `w` the row-major `n x k` weight (the exact order: see the module docs; a
+/// dot product when `n == 1`).
+///
+/// # Panics
+/// If `y`, `x` or `w` holds fewer than `m * n`, `m * k` or `n * k` values.
+#[inline]
+pub(crate) fn forward<T: Scalar>(m: usize, n: usize, k: usize, y: &mut [T], x: &[T], w: &[T]) {
+    forward_at(crate::simd::simd_level(), (m, n, k), y, x, w);
+}
+
+/// [`forward`] at the given SIMD level (the portable loops where the CPU lacks it).
+pub(crate) fn forward_at<T: Scalar>(
+    level: SimdLevel,
+    (m, n, k): (usize, usize, usize),
+    y: &mut [T],
+    x: &[T],
+    w: &[T],
+) {
+    let (y, x, w) = (&mut y[..m * n], &x[..m * k], &w[..n * k]);
+    if y.is_empty() || k == 0 {
+        y.fill(T::ZERO);
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if let Some((simd, y, x, w)) = f32_simd(level, y, x, w) {
+        let (y, x, w) = (y.as_mut_ptr(), x.as_ptr(), w.as_ptr());
+        // SAFETY: the slices hold exactly `m * n`, `m * k`, `n * k` values and `k > 0`; the
+        // token proves that the CPU has the kernel's instructions.
+        unsafe {
+            match simd {
+                Simd::Avx512(s) => kernel::forward_avx512(s, (m, n, k), y, x, w),
+                Simd::Avx2(s) => kernel::forward_avx2(s, (m, n, k), y, x, w),
+            }
+        }
+        return;
+    }
+    let _ = level;
+    if n == 1 {
+        portable::dot16(m, k, y, x, w);
+    } else {
+        portable::product((m, n, k), (y, n), false, (x, k, 1), (w, 1, k));
+    }
+}
+
+/// `dw (m x n) += dy^T x` with `dy` row-major `k x m` and `x` row-major `k x n`:
+/// `dw[i*n + j] += sum over p of dy[p*m + i] * x[p*n + j]` (one chain from the old value, in
+/// increasing `p`).
+///
+/// # Panics
+/// If `dw`, `dy` or `x` holds fewer than `m * n`, `k * m` or `k * n` values.
+#[inline]
+pub(crate) fn backward_weight<T: Scalar>(m: usize, n: usize, k: usize, dw: &mut [T], dy: &[T], x: &[T]) {
+    backward_weight_at(crate::simd::simd_level(), (m, n, k), dw, dy, x);
+}
+
+/// [`backward_weight`] at the given SIMD level.
+pub(crate) fn backward_weight_at<T: Scalar>(
+    level: SimdLevel,
+    (m, n, k): (usize, usize, usize),
+    dw: &mut [T],
+    dy: &[T],
+    x: &[T],
+) {
+    let (dw, dy, x) = (&mut dw[..m * n], &dy[..k * m], &x[..k * n]);
+    if dw.is_empty() || k == 0 {
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if let Some((simd, c, a, b)) = f32_simd(level, dw, dy, x) {
+        let (c, a, b) = (c.as_mut_ptr(), a.as_ptr(), b.as_ptr());
+        let r = kernel::Raw { m, n, k, a, a_rs: 1, a_cs: m, b, b_rs: n, c, c_rs: n, accumulate: true };
+        // SAFETY: the slices hold exactly the values `r` addresses; the token proves that the
+        // CPU has the kernel's instructions.
+        unsafe {
+            if pack_rhs(m, n) {
+                simd.packed(r, kernel::Rhs { b, rs: n, cs: 1 })
+            } else {
+                simd.product(r)
+            }
+        };
+        return;
+    }
+    let _ = level;
+    portable::product((m, n, k), (dw, n), true, (dy, 1, m), (x, n, 1));
+}
+
+/// `dx (m x n) = dy (m x k) * w`, overwriting `dx`, where `w` has rows of stride `w_rs >= n`:
+/// `dx[i*n + j] = sum over p of dy[i*k + p] * w[p*w_rs + j]` (e.g. the columns `cols` of a
+/// row-major weight `k x in`: `w = &weight[cols.start..]`, `w_rs = in`).
+///
+/// # Panics
+/// If `n > w_rs`, or `dx`, `dy` or `w` holds fewer than `m * n`, `m * k` or
+/// `(k - 1) * w_rs + n` values.
+#[inline]
+pub(crate) fn backward_input<T: Scalar>(
+    m: usize,
+    n: usize,
+    k: usize,
+    dx: &mut [T],
+    dy: &[T],
+    w: (&[T], usize),
+) {
+    backward_input_at(crate::simd::simd_level(), (m, n, k), dx, dy, w);
+}
+
+/// [`backward_input`] at the given SIMD level.
+pub(crate) fn backward_input_at<T: Scalar>(
+    level: SimdLevel,
+    (m, n, k): (usize, usize, usize),
+    dx: &mut [T],
+    dy: &[T],
+    (w, w_rs): (&[T], usize),
+) {
+    assert!(n <= w_rs, "backward_input: {n} columns in rows of stride {w_rs}");
+    let extent = if k == 0 || n == 0 { 0 } else { (k - 1) * w_rs + n };
+    let (dx, dy, w) = (&mut dx[..m * n], &dy[..m * k], &w[..extent]);
+    if dx.is_empty() || k == 0 {
+        dx.fill(T::ZERO);
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if let Some((simd, c, a, b)) = f32_simd(level, dx, dy, w) {
+        let (c, a, b) = (c.as_mut_ptr(), a.as_ptr(), b.as_ptr());
+        let r = kernel::Raw { m, n, k, a, a_rs: k, a_cs: 1, b, b_rs: w_rs, c, c_rs: n, accumulate: false };
+        // SAFETY: the slices hold exactly the values `r` addresses (`w` its `extent`); the token
+        // proves that the CPU has the kernel's instructions.
+        unsafe {
+            if pack_rhs(m, w_rs) {
+                simd.packed(r, kernel::Rhs { b, rs: w_rs, cs: 1 })
+            } else {
+                simd.product(r)
+            }
+        };
+        return;
+    }
+    let _ = level;
+    portable::product((m, n, k), (dx, n), false, (dy, k, 1), (w, w_rs, 1));
+}
+
+/// Whether the outer-product kernels should read their right-hand side (rows of stride `b_rs`)
+/// from a packed copy: for strides of 128 values and more, where the rows would compete for the
+/// same cache sets, and at least 32 output rows to amortise the copy (measured with
+/// `benches/nn_matmul.rs`: 1.1x at 256 x 256 x 256, a loss for 64-wide rows or a few rows).
+fn pack_rhs(m: usize, b_rs: usize) -> bool {
+    m >= 32 && b_rs >= 128
+}
+
+/// The SIMD kernels of a level, with the token proving the CPU has them.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug)]
+enum Simd {
+    Avx512(lanes::Avx512),
+    Avx2(lanes::Avx2),
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Simd {
+    /// The kernels of `level`, as [`crate::simd`]'s functions choose them: `None` (the portable
+    /// loops) for the baseline or where the CPU lacks the level.
+    fn at(level: SimdLevel) -> Option<Simd> {
+        let detected = crate::simd::simd_level();
+        match level {
+            SimdLevel::Avx512 if detected == SimdLevel::Avx512 => lanes::Avx512::new().map(Simd::Avx512),
+            SimdLevel::Avx2 if detected != SimdLevel::Baseline => lanes::Avx2::new().map(Simd::Avx2),
+            _ => None,
+        }
+    }
+
+    /// Runs the outer-product kernels on `r` with its right-hand side `rhs` packed.
+    ///
+    /// # Safety
+    /// `r` with `rhs` must lie inside its operands.
+    unsafe fn packed(self, r: kernel::Raw, rhs: kernel::Rhs) {
+        // SAFETY: the caller's guarantee; the token proves the instructions.
+        unsafe {
+            match self {
+                Simd::Avx512(s) => kernel::packed_avx512(s, r, rhs),
+                Simd::Avx2(s) => kernel::packed_avx2(s, r, rhs),
+            }
+        }
+    }
+
+    /// Runs the outer-product kernels on `r`.
+    ///
+    /// # Safety
+    /// `r` must lie inside its operands.
+    unsafe fn product(self, r: kernel::Raw) {
+        // SAFETY: the caller's guarantee; the token proves the instructions.
+        unsafe {
+            match self {
+                Simd::Avx512(s) => kernel::product_avx512(s, r),
+                Simd::Avx2(s) => kernel::product_avx2(s, r),
+            }
+        }
+    }
+}
+
+/// The `f32` views of the operands and the kernels of `level`, if `T` is `f32` and the level has
+/// SIMD kernels on this CPU.
+#[cfg(target_arch = "x86_64")]
+#[allow(clippy::type_complexity)]
+fn f32_simd<'a, T: Scalar>(
+    level: SimdLevel,
+    c: &'a mut [T],
+    a: &'a [T],
+    b: &'a [T],
+) -> Option<(Simd, &'a mut [f32], &'a [f32], &'a [f32])> {
+    let simd = Simd::at(level)?;
+    Some((simd, T::as_f32_mut(c)?, T::as_f32(a)?, T::as_f32(b)?))
+}

@@ -1,0 +1,177 @@
+//! The products against plain reference loops, bit for bit, at every SIMD level, on random
+//! shapes (edge sizes included) and on the networks' real shapes.
+
+use super::*;
+use crate::rng::Rng;
+
+const LEVELS: [SimdLevel; 3] = [SimdLevel::Avx512, SimdLevel::Avx2, SimdLevel::Baseline];
+
+/// One chain `acc = fma(a_p, b_p, acc)` over `p = 0..k` in increasing order from `init`.
+fn chain(init: f32, k: usize, ab: impl Fn(usize) -> (f32, f32)) -> f32 {
+    let mut acc = init;
+    for p in 0..k {
+        let (a, b) = ab(p);
+        acc = a.mul_add(b, acc);
+    }
+    acc
+}
+
+/// The one-column forward order: 16 chains over `p = l (mod 16)`, then the fixed tree.
+fn dot16(k: usize, ab: impl Fn(usize) -> (f32, f32)) -> f32 {
+    let mut s = [0.0f32; 16];
+    for p in 0..k {
+        let (a, b) = ab(p);
+        s[p % 16] = a.mul_add(b, s[p % 16]);
+    }
+    let pair = |l: usize| s[l] + s[l + 8];
+    let quad = |l: usize| pair(l) + pair(l + 4);
+    (quad(0) + quad(2)) + (quad(1) + quad(3))
+}
+
+/// Random values of mixed magnitudes (2^-6 .. 2^6), with exact zeros of both signs.
+fn values(rng: &mut Rng, n: usize) -> Vec<f32> {
+    (0..n)
+        .map(|_| match rng.below(16) {
+            0 => 0.0,
+            1 => -0.0,
+            _ => (rng.normal() * 2f64.powi(rng.below(13) as i32 - 6)) as f32,
+        })
+        .collect()
+}
+
+/// Guard values after the outputs, which no product may touch.
+const GUARD: usize = 37;
+
+fn assert_same(what: &str, got: &[f32], want: &[f32]) {
+    assert_eq!(got.len(), want.len());
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        assert_eq!(g.to_bits(), w.to_bits(), "{what}: element {i}: {g:e} against the reference {w:e}");
+    }
+}
+
+fn check_forward(rng: &mut Rng, (m, n, k): (usize, usize, usize)) {
+    let (x, w) = (values(rng, m * k), values(rng, n * k));
+    let want: Vec<f32> = (0..m * n)
+        .map(|e| {
+            let (i, j) = (e / n, e % n);
+            let ab = |p: usize| (x[i * k + p], w[j * k + p]);
+            if n == 1 {
+                dot16(k, ab)
+            } else {
+                chain(0.0, k, ab)
+            }
+        })
+        .chain(std::iter::repeat_n(7.0, GUARD))
+        .collect();
+    for level in LEVELS {
+        let mut y = vec![f32::NAN; m * n + GUARD];
+        y[m * n..].fill(7.0);
+        forward_at(level, (m, n, k), &mut y, &x, &w);
+        assert_same(&format!("forward {m}x{n}x{k} at {level:?}"), &y, &want);
+    }
+}
+
+fn check_backward_weight(rng: &mut Rng, (m, n, k): (usize, usize, usize)) {
+    let (dy, x, dw0) = (values(rng, k * m), values(rng, k * n), values(rng, m * n + GUARD));
+    let want: Vec<f32> = (0..m * n)
+        .map(|e| chain(dw0[e], k, |p| (dy[p * m + e / n], x[p * n + e % n])))
+        .chain(dw0[m * n..].iter().copied())
+        .collect();
+    for level in LEVELS {
+        let mut dw = dw0.clone();
+        backward_weight_at(level, (m, n, k), &mut dw, &dy, &x);
+        assert_same(&format!("backward_weight {m}x{n}x{k} at {level:?}"), &dw, &want);
+    }
+}
+
+/// `dx = dy W[:, start..start + n]` for a weight `k x (start + n + after)`.
+fn check_backward_input(rng: &mut Rng, (m, n, k): (usize, usize, usize), (start, after): (usize, usize)) {
+    let w_rs = start + n + after;
+    let (dy, weight) = (values(rng, m * k), values(rng, k * w_rs));
+    let want: Vec<f32> = (0..m * n)
+        .map(|e| chain(0.0, k, |p| (dy[e / n * k + p], weight[p * w_rs + start + e % n])))
+        .chain(std::iter::repeat_n(7.0, GUARD))
+        .collect();
+    for level in LEVELS {
+        let mut dx = vec![f32::NAN; m * n + GUARD];
+        dx[m * n..].fill(7.0);
+        backward_input_at(level, (m, n, k), &mut dx, &dy, (&weight[start..], w_rs));
+        assert_same(&format!("backward_input {m}x{n}x{k} cols {start}.. of {w_rs} at {level:?}"), &dx, &want);
+    }
+}
+
+#[test]
+fn every_level_matches_the_reference_on_random_small_shapes() {
+    let mut rng = Rng::new(10);
+    for _ in 0..300 {
+        let (m, n, k) = (1 + rng.below(40) as usize, 1 + rng.below(40) as usize, 1 + rng.below(40) as usize);
+        check_forward(&mut rng, (m, n, k));
+        check_backward_weight(&mut rng, (m, n, k));
+        let (start, after) = (rng.below(5) as usize, rng.below(5) as usize);
+        check_backward_input(&mut rng, (m, n, k), (start, after));
+    }
+}
+
+/// Batch 256, observations 16, critic inputs 22, hidden 64 and 256, outputs 1, 6 and 12, and
+/// sizes past the forward pass's depth and column blocks (128 and 64).
+#[test]
+fn every_level_matches_the_reference_on_the_networks_shapes() {
+    let mut rng = Rng::new(11);
+    for (i, o) in [(16, 64), (22, 64), (64, 64), (64, 1), (64, 6), (64, 12), (22, 256), (256, 256), (256, 1)]
+        .into_iter()
+        .chain([(256, 12), (256, 6), (129, 65), (300, 130), (255, 127), (17, 1), (3, 2)])
+    {
+        check_forward(&mut rng, (256, o, i));
+        check_backward_weight(&mut rng, (o, i, 256));
+        check_backward_input(&mut rng, (256, i, o), (0, 0));
+    }
+    // dQ/da: the action columns 16..22 of a critic's first layer.
+    for h in [64, 256] {
+        check_backward_input(&mut rng, (256, 6, h), (16, 0));
+    }
+    check_backward_input(&mut rng, (33, 40, 7), (3, 100));
+}
+
+/// Empty products: `k = 0` overwrites with +0.0 (or leaves an accumulated output), `m = 0` or
+/// `n = 0` touches nothing.
+#[test]
+fn empty_products() {
+    for level in LEVELS {
+        let mut y = vec![f32::NAN; 12];
+        forward_at(level, (3, 4, 0), &mut y, &[], &[]);
+        assert!(y.iter().all(|v| v.to_bits() == 0));
+        let mut dw = vec![2.5f32; 12];
+        backward_weight_at(level, (3, 4, 0), &mut dw, &[], &[]);
+        assert!(dw.iter().all(|&v| v == 2.5));
+        let mut dx = vec![f32::NAN; 12];
+        backward_input_at(level, (3, 4, 0), &mut dx, &[], (&[], 4));
+        assert!(dx.iter().all(|v| v.to_bits() == 0));
+        let mut y = vec![1.0f32; 4];
+        forward_at(level, (0, 4, 3), &mut y, &[], &[0.0; 12]);
+        backward_weight_at(level, (4, 0, 3), &mut y, &[0.0; 12], &[]);
+        assert_eq!(y, [1.0; 4]);
+    }
+}
+
+/// `f64` runs the same chains (the portable loops), checked against an `f64` reference.
+#[test]
+fn f64_follows_the_same_order() {
+    let mut rng = Rng::new(12);
+    let (m, n, k) = (9, 5, 37);
+    let x: Vec<f64> = (0..m * k).map(|_| rng.normal()).collect();
+    let w: Vec<f64> = (0..n * k).map(|_| rng.normal()).collect();
+    let mut y = vec![0.0; m * n];
+    forward(m, n, k, &mut y, &x, &w);
+    for (e, &v) in y.iter().enumerate() {
+        let (i, j) = (e / n, e % n);
+        let want = (0..k).fold(0.0f64, |acc, p| x[i * k + p].mul_add(w[j * k + p], acc));
+        assert_eq!(v.to_bits(), want.to_bits());
+    }
+    let mut dw = vec![0.5; k * n];
+    backward_weight(k, n, m, &mut dw, &x, &y);
+    for (e, &v) in dw.iter().enumerate() {
+        let (i, j) = (e / n, e % n);
+        let want = (0..m).fold(0.5f64, |acc, p| x[p * k + i].mul_add(y[p * n + j], acc));
+        assert_eq!(v.to_bits(), want.to_bits());
+    }
+}
