@@ -58,22 +58,29 @@ impl Linear {
         }
     }
 
-    /// Forward pass: `y = x W^T + b`, i.e. `y[b, o] = sum over i of x[b, i] W[o, i]` (one
-    /// fused multiply-add chain in increasing `i`, see `super::matmul`) `+ bias[o]`.
+    /// Forward pass: `y = x W^T + b`, i.e. `y[b, o] = sum over i of x[b, i] W[o, i]` (one fused
+    /// multiply-add chain in increasing `i`; the exact order: `super::matmul`) `+ bias[o]`.
     ///
     /// `params` is the whole flat parameter vector; `x` holds at least `batch * in` values,
     /// `y` at least `batch * out` values (extra values are left untouched).
     pub fn forward<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
-        self.forward_no_bias(params, x, batch, y);
+        self.forward_act(params, x, batch, y, Activation::Identity);
+    }
+
+    /// Forward pass with an activation: `y = f(x W^T + b)`, the same values as
+    /// [`Linear::forward_no_bias`] followed by [`Activation::add_bias_apply`] (the bias and
+    /// `Identity` or `Relu` are applied as the product's tiles are stored).
+    pub fn forward_act<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T], f: Activation) {
+        let (n_in, n_out) = (self.in_features, self.out_features);
         let bias = &params[self.bias_range()];
-        Activation::Identity.add_bias_apply(&mut y[..batch * self.out_features], bias);
+        matmul::forward((batch, n_out, n_in), y, x, &params[self.weight_range()], Some((bias, f)));
     }
 
     /// The product alone, `y = x W^T` (the caller adds the bias, possibly fused with an
-    /// activation: see [`Activation::add_bias_apply`]).
+    /// activation: see [`Activation::add_bias_apply`], or use [`Linear::forward_act`]).
     pub fn forward_no_bias<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
         let (n_in, n_out) = (self.in_features, self.out_features);
-        matmul::forward(batch, n_out, n_in, y, x, &params[self.weight_range()]);
+        matmul::forward((batch, n_out, n_in), y, x, &params[self.weight_range()], None);
     }
 
     /// Accumulates the parameter gradients for upstream gradient `dy = dL/dy` (`batch x out`):

@@ -368,9 +368,8 @@ impl<T: Scalar> Net<'_, T> {
             let out = &mut rest[0];
             let n = batch * layer.out_features;
             grow(out, n);
-            layer.forward_no_bias(self.params, input, batch, out);
             let act = if l + 1 == n_layers { self.output } else { self.hidden };
-            act.add_bias_apply(&mut out[..n], &self.params[layer.bias_range()]);
+            layer.forward_act(self.params, input, batch, &mut out[..n], act);
         }
     }
 

@@ -14,9 +14,20 @@ const KB: usize = 128;
 /// Width of one block of packed `W^T` (columns of the stack buffer).
 const NB: usize = 64;
 
+/// What a tile does to its sums before storing them: nothing, or `v + bias[j]`, or
+/// `max(v + bias[j], 0)` (as `maxps`, the instruction `Activation::add_bias_apply`'s loop
+/// compiles to, so the same bits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Fuse {
+    None,
+    Bias,
+    BiasRelu,
+}
+
 /// `c[i*c_rs + j] (= | +=) sum over p of a[i*a_rs + p*a_cs] * b[p*b_rs + j]` for `i < m`,
-/// `j < n`, `p < k` (`+=` with `accumulate`): the right-hand side's rows are contiguous, so the
-/// kernel loads them as vectors and broadcasts the left-hand side's scalars.
+/// `j < n`, `p < k` (`+=` with `accumulate`), then `fuse` with `bias[j]`: the right-hand side's
+/// rows are contiguous, so the kernel loads them as vectors and broadcasts the left-hand side's
+/// scalars.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Raw {
     pub m: usize,
@@ -30,6 +41,9 @@ pub(super) struct Raw {
     pub c: *mut f32,
     pub c_rs: usize,
     pub accumulate: bool,
+    pub fuse: Fuse,
+    /// `n` values when `fuse` is not `Fuse::None`.
+    pub bias: *const f32,
 }
 
 impl Raw {
@@ -43,7 +57,8 @@ impl Raw {
     /// The same product restricted to columns `j..`.
     #[inline(always)]
     fn cols_from(self, j: usize) -> Raw {
-        Raw { b: self.b.wrapping_add(j), c: self.c.wrapping_add(j), ..self }
+        let (b, c, bias) = (self.b.wrapping_add(j), self.c.wrapping_add(j), self.bias.wrapping_add(j));
+        Raw { b, c, bias, ..self }
     }
 }
 
@@ -80,11 +95,21 @@ unsafe fn tile<S: Lanes, const MR: usize, const NV: usize>(s: S, r: Raw, last: S
                 step(s, &mut acc, (r.b.add(p * r.b_rs), last), |i| *a.add(i * r.a_rs));
             }
         }
+        let mut bias = [s.zero(); NV];
+        if r.fuse != Fuse::None {
+            for v in 0..NV {
+                bias[v] = s.load_masked(r.bias.add(v * w), if v + 1 < NV { s.mask(w) } else { last });
+            }
+        }
         for (i, row) in acc.iter().enumerate() {
             let c = r.c.add(i * r.c_rs);
             for v in 0..NV {
-                let m = if v + 1 < NV { s.mask(w) } else { last };
-                s.store_masked(c.add(v * w), m, row[v]);
+                let out = match r.fuse {
+                    Fuse::None => row[v],
+                    Fuse::Bias => s.add(row[v], bias[v]),
+                    Fuse::BiasRelu => s.max(s.add(row[v], bias[v]), s.zero()),
+                };
+                s.store_masked(c.add(v * w), if v + 1 < NV { s.mask(w) } else { last }, out);
             }
         }
     }
@@ -284,7 +309,10 @@ unsafe fn blocked<S: Lanes>((s, product): (S, unsafe fn(S, Raw)), r: Raw, rhs: R
             unsafe {
                 pack(rhs, (j0, nb), (p0, kb), bp);
                 let (a, c, accumulate) = (r.a.add(p0 * r.a_cs), r.c.add(j0), r.accumulate || p0 > 0);
-                product(s, Raw { n: nb, k: kb, a, b: bp, b_rs: nb, c, accumulate, ..r });
+                // The bias and activation once, after the last depth block.
+                let fuse = if p0 + kb == r.k { r.fuse } else { Fuse::None };
+                let bias = r.bias.wrapping_add(j0);
+                product(s, Raw { n: nb, k: kb, a, b: bp, b_rs: nb, c, accumulate, fuse, bias, ..r });
             }
         }
     }
@@ -312,10 +340,18 @@ pub(super) unsafe fn product_avx2(s: Avx2, r: Raw) {
     unsafe { product::<Avx2, 2>(s, r, [12, 6, 0, 0]) }
 }
 
-/// The forward product `y = x w^T` as a [`Raw`] whose right-hand side is still to be packed.
-fn forward_raw((m, n, k): (usize, usize, usize), y: *mut f32, x: *const f32) -> Raw {
-    let b = std::ptr::null();
-    Raw { m, n, k, a: x, a_rs: k, a_cs: 1, b, b_rs: 0, c: y, c_rs: n, accumulate: false }
+impl Raw {
+    /// The forward product `y (m x n) = x (m x k) w^T`, then `fuse` with `bias`, without its
+    /// right-hand side (`w`, packed by [`forward_avx512`] or [`forward_avx2`]).
+    pub fn forward(
+        (m, n, k): (usize, usize, usize),
+        y: *mut f32,
+        x: *const f32,
+        (fuse, bias): (Fuse, *const f32),
+    ) -> Raw {
+        let (b, accumulate) = (std::ptr::null(), false);
+        Raw { m, n, k, a: x, a_rs: k, a_cs: 1, b, b_rs: 0, c: y, c_rs: n, accumulate, fuse, bias }
+    }
 }
 
 /// [`Raw`] with its right-hand side copied into a stack buffer block by block ([`blocked`]),
@@ -339,24 +375,19 @@ pub(super) unsafe fn packed_avx2(s: Avx2, r: Raw, rhs: Rhs) {
     unsafe { blocked((s, product_avx2), r, rhs) }
 }
 
-/// `y (m x n) = x (m x k) w^T` with AVX-512F (the dot kernel for `n == 1`).
+/// The forward product `r` (see [`Raw::forward`]) with the row-major `n x k` weight `w`, with
+/// AVX-512F (the dot kernel for `n == 1`).
 ///
 /// # Safety
-/// `y`, `x`, `w` must hold `m * n`, `m * k`, `n * k` values, `k > 0`.
+/// `r`'s operands and `w` must hold the values they address, `k > 0`.
 #[target_feature(enable = "avx512f")]
-pub(super) unsafe fn forward_avx512(
-    s: Avx512,
-    mnk: (usize, usize, usize),
-    y: *mut f32,
-    x: *const f32,
-    w: *const f32,
-) {
+pub(super) unsafe fn forward_avx512(s: Avx512, r: Raw, w: *const f32) {
     // SAFETY: the caller's guarantee.
     unsafe {
-        if mnk.1 == 1 {
-            dot_avx512(mnk.0, mnk.2, y, x, w);
+        if r.n == 1 {
+            dot_avx512(r, w);
         } else {
-            blocked((s, product_avx512), forward_raw(mnk, y, x), Rhs { b: w, rs: 1, cs: mnk.2 });
+            blocked((s, product_avx512), r, Rhs { b: w, rs: 1, cs: r.k });
         }
     }
 }
@@ -366,39 +397,50 @@ pub(super) unsafe fn forward_avx512(
 /// # Safety
 /// As [`forward_avx512`].
 #[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn forward_avx2(
-    s: Avx2,
-    mnk: (usize, usize, usize),
-    y: *mut f32,
-    x: *const f32,
-    w: *const f32,
-) {
+pub(super) unsafe fn forward_avx2(s: Avx2, r: Raw, w: *const f32) {
     // SAFETY: the caller's guarantee.
     unsafe {
-        if mnk.1 == 1 {
-            dot_avx2(s, mnk.0, mnk.2, y, x, w);
+        if r.n == 1 {
+            dot_avx2(s, r, w);
         } else {
-            blocked((s, product_avx2), forward_raw(mnk, y, x), Rhs { b: w, rs: 1, cs: mnk.2 });
+            blocked((s, product_avx2), r, Rhs { b: w, rs: 1, cs: r.k });
         }
     }
 }
 
-/// `y[i] = dot16(x[i, ..], w)` for `i < m` (see `super::portable::dot16`): 16-lane registers
-/// of chains, the tail merged under a mask, then the fixed tree; rows four at a time.
+/// `fuse` applied to one sum (the scalar form of the tile's epilogue, same instructions).
 ///
 /// # Safety
-/// `y`, `x`, `w` must hold `m`, `m * k`, `k` values; the CPU must have AVX-512F.
+/// `bias` must be readable unless `fuse` is `Fuse::None`.
+#[inline(always)]
+unsafe fn fuse1(v: f32, fuse: Fuse, bias: *const f32) -> f32 {
+    // SAFETY: the caller's guarantee; SSE is baseline on x86-64.
+    unsafe {
+        match fuse {
+            Fuse::None => v,
+            Fuse::Bias => v + *bias,
+            Fuse::BiasRelu => _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(v + *bias), _mm_setzero_ps())),
+        }
+    }
+}
+
+/// The forward product `r` with one column: `y[i] = fuse(dot16(x[i, ..], w))` for `i < m` (see
+/// `super::portable::dot16`): 16-lane registers of chains, the tail merged under a mask, then
+/// the fixed tree; rows four at a time.
+///
+/// # Safety
+/// `r.c`, `r.a`, `w` must hold `m`, `m * k`, `k` values; the CPU must have AVX-512F.
 #[target_feature(enable = "avx512f")]
-unsafe fn dot_avx512(m: usize, k: usize, y: *mut f32, x: *const f32, w: *const f32) {
+unsafe fn dot_avx512(r: Raw, w: *const f32) {
     let mut i = 0;
     // SAFETY: rows `i..i + R` lie inside `0..m` (the caller's guarantee covers them).
     unsafe {
-        while i + 4 <= m {
-            dot_rows_avx512::<4>(k, y.add(i), x.add(i * k), w);
+        while i + 4 <= r.m {
+            dot_rows_avx512::<4>(r.rows_from(i), w);
             i += 4;
         }
-        while i < m {
-            dot_rows_avx512::<1>(k, y.add(i), x.add(i * k), w);
+        while i < r.m {
+            dot_rows_avx512::<1>(r.rows_from(i), w);
             i += 1;
         }
     }
@@ -409,7 +451,8 @@ unsafe fn dot_avx512(m: usize, k: usize, y: *mut f32, x: *const f32, w: *const f
 /// # Safety
 /// As [`dot_avx512`] with `m = R`; the CPU must have AVX-512F.
 #[inline(always)]
-unsafe fn dot_rows_avx512<const R: usize>(k: usize, y: *mut f32, x: *const f32, w: *const f32) {
+unsafe fn dot_rows_avx512<const R: usize>(r: Raw, w: *const f32) {
+    let (k, x, y) = (r.k, r.a, r.c);
     let (full, tail) = (k - k % 16, k % 16);
     let mask = ((1u32 << tail) - 1) as u16;
     // SAFETY: rows `0..R` of `x` (`k` values each), `w` (`k` values) and `y[..R]` are inside
@@ -419,20 +462,20 @@ unsafe fn dot_rows_avx512<const R: usize>(k: usize, y: *mut f32, x: *const f32, 
         let mut p = 0;
         while p < full {
             let wv = _mm512_loadu_ps(w.add(p));
-            for (r, s) in s.iter_mut().enumerate() {
-                *s = _mm512_fmadd_ps(_mm512_loadu_ps(x.add(r * k + p)), wv, *s);
+            for (i, s) in s.iter_mut().enumerate() {
+                *s = _mm512_fmadd_ps(_mm512_loadu_ps(x.add(i * k + p)), wv, *s);
             }
             p += 16;
         }
         if tail != 0 {
             let wv = _mm512_maskz_loadu_ps(mask, w.add(p));
-            for (r, s) in s.iter_mut().enumerate() {
-                *s = _mm512_mask3_fmadd_ps(_mm512_maskz_loadu_ps(mask, x.add(r * k + p)), wv, *s, mask);
+            for (i, s) in s.iter_mut().enumerate() {
+                *s = _mm512_mask3_fmadd_ps(_mm512_maskz_loadu_ps(mask, x.add(i * k + p)), wv, *s, mask);
             }
         }
-        for (r, s) in s.iter().enumerate() {
+        for (i, s) in s.iter().enumerate() {
             let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(*s)));
-            *y.add(r) = tree8(_mm256_add_ps(_mm512_castps512_ps256(*s), hi));
+            *y.add(i) = fuse1(tree8(_mm256_add_ps(_mm512_castps512_ps256(*s), hi)), r.fuse, r.bias);
         }
     }
 }
@@ -443,16 +486,16 @@ unsafe fn dot_rows_avx512<const R: usize>(k: usize, y: *mut f32, x: *const f32, 
 /// # Safety
 /// As [`dot_avx512`], with AVX2 and FMA.
 #[target_feature(enable = "avx2,fma")]
-unsafe fn dot_avx2(s: Avx2, m: usize, k: usize, y: *mut f32, x: *const f32, w: *const f32) {
+unsafe fn dot_avx2(s: Avx2, r: Raw, w: *const f32) {
     let mut i = 0;
     // SAFETY: rows `i..i + R` lie inside `0..m` (the caller's guarantee covers them).
     unsafe {
-        while i + 4 <= m {
-            dot_rows_avx2::<4>(s, k, y.add(i), x.add(i * k), w);
+        while i + 4 <= r.m {
+            dot_rows_avx2::<4>(s, r.rows_from(i), w);
             i += 4;
         }
-        while i < m {
-            dot_rows_avx2::<1>(s, k, y.add(i), x.add(i * k), w);
+        while i < r.m {
+            dot_rows_avx2::<1>(s, r.rows_from(i), w);
             i += 1;
         }
     }
@@ -463,7 +506,8 @@ unsafe fn dot_avx2(s: Avx2, m: usize, k: usize, y: *mut f32, x: *const f32, w: *
 /// # Safety
 /// As [`dot_avx512`] with `m = R`; the CPU must have AVX2 and FMA.
 #[inline(always)]
-unsafe fn dot_rows_avx2<const R: usize>(s: Avx2, k: usize, y: *mut f32, x: *const f32, w: *const f32) {
+unsafe fn dot_rows_avx2<const R: usize>(s: Avx2, r: Raw, w: *const f32) {
+    let (k, x, y) = (r.k, r.a, r.c);
     let (full, tail) = (k - k % 16, k % 16);
     let (m0, m1) = (s.mask(tail.min(8)), s.mask(tail.saturating_sub(8)));
     // SAFETY: as in `dot_rows_avx512`.
@@ -473,25 +517,25 @@ unsafe fn dot_rows_avx2<const R: usize>(s: Avx2, k: usize, y: *mut f32, x: *cons
         let mut p = 0;
         while p < full {
             let (w0, w1) = (_mm256_loadu_ps(w.add(p)), _mm256_loadu_ps(w.add(p + 8)));
-            for r in 0..R {
-                lo[r] = _mm256_fmadd_ps(_mm256_loadu_ps(x.add(r * k + p)), w0, lo[r]);
-                hi[r] = _mm256_fmadd_ps(_mm256_loadu_ps(x.add(r * k + p + 8)), w1, hi[r]);
+            for i in 0..R {
+                lo[i] = _mm256_fmadd_ps(_mm256_loadu_ps(x.add(i * k + p)), w0, lo[i]);
+                hi[i] = _mm256_fmadd_ps(_mm256_loadu_ps(x.add(i * k + p + 8)), w1, hi[i]);
             }
             p += 16;
         }
         if tail != 0 {
             // Past the end when `tail <= 8`, but then `m1` is empty and nothing is read.
             let (w0, w1) = (_mm256_maskload_ps(w.add(p), m0), _mm256_maskload_ps(w.wrapping_add(p + 8), m1));
-            for r in 0..R {
-                let xr = x.add(r * k + p);
-                let f0 = _mm256_fmadd_ps(_mm256_maskload_ps(xr, m0), w0, lo[r]);
-                lo[r] = _mm256_blendv_ps(lo[r], f0, _mm256_castsi256_ps(m0));
-                let f1 = _mm256_fmadd_ps(_mm256_maskload_ps(xr.wrapping_add(8), m1), w1, hi[r]);
-                hi[r] = _mm256_blendv_ps(hi[r], f1, _mm256_castsi256_ps(m1));
+            for i in 0..R {
+                let xr = x.add(i * k + p);
+                let f0 = _mm256_fmadd_ps(_mm256_maskload_ps(xr, m0), w0, lo[i]);
+                lo[i] = _mm256_blendv_ps(lo[i], f0, _mm256_castsi256_ps(m0));
+                let f1 = _mm256_fmadd_ps(_mm256_maskload_ps(xr.wrapping_add(8), m1), w1, hi[i]);
+                hi[i] = _mm256_blendv_ps(hi[i], f1, _mm256_castsi256_ps(m1));
             }
         }
-        for r in 0..R {
-            *y.add(r) = tree8(_mm256_add_ps(lo[r], hi[r]));
+        for i in 0..R {
+            *y.add(i) = fuse1(tree8(_mm256_add_ps(lo[i], hi[i])), r.fuse, r.bias);
         }
     }
 }

@@ -23,6 +23,10 @@ pub(super) trait Lanes: Copy {
     fn splat(self, x: f32) -> Self::V;
     /// `a * b + c` per lane, rounded once.
     fn fma(self, a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+    /// `a + b` per lane.
+    fn add(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `max(a, b)` per lane as `maxps` computes it: `b` where either is NaN or both are zeros.
+    fn max(self, a: Self::V, b: Self::V) -> Self::V;
     /// The mask of lanes `0..n` (`n <= W`).
     fn mask(self, n: usize) -> Self::M;
     /// Loads `W` values.
@@ -73,6 +77,16 @@ impl Lanes for Avx512 {
     fn fma(self, a: __m512, b: __m512, c: __m512) -> __m512 {
         // SAFETY: as above.
         unsafe { _mm512_fmadd_ps(a, b, c) }
+    }
+    #[inline(always)]
+    fn add(self, a: __m512, b: __m512) -> __m512 {
+        // SAFETY: as above.
+        unsafe { _mm512_add_ps(a, b) }
+    }
+    #[inline(always)]
+    fn max(self, a: __m512, b: __m512) -> __m512 {
+        // SAFETY: as above.
+        unsafe { _mm512_max_ps(a, b) }
     }
     #[inline(always)]
     fn mask(self, n: usize) -> __mmask16 {
@@ -129,6 +143,16 @@ impl Lanes for Avx2 {
     fn fma(self, a: __m256, b: __m256, c: __m256) -> __m256 {
         // SAFETY: as above.
         unsafe { _mm256_fmadd_ps(a, b, c) }
+    }
+    #[inline(always)]
+    fn add(self, a: __m256, b: __m256) -> __m256 {
+        // SAFETY: as above.
+        unsafe { _mm256_add_ps(a, b) }
+    }
+    #[inline(always)]
+    fn max(self, a: __m256, b: __m256) -> __m256 {
+        // SAFETY: as above.
+        unsafe { _mm256_max_ps(a, b) }
     }
     #[inline(always)]
     fn mask(self, n: usize) -> __m256i {

@@ -30,7 +30,7 @@
 //! one-column forward product runs one 16-lane dot product a row. `f64` (the gradient checks)
 //! and `f32` without AVX2 + FMA use the portable loops. Nothing allocates.
 
-use super::Scalar;
+use super::{Activation, Scalar};
 use crate::simd::SimdLevel;
 
 // The AVX-512 intrinsics are stable since Rust 1.89, as is the `avx512f` target feature that
@@ -48,13 +48,21 @@ mod tests;
 
 /// `y (m x n) = x (m x k) * w^T`, overwriting `y`: `y[i*n + j] = sum over p of x[i*k + p] *
 /// w[j*k + p]`, with `w` the row-major `n x k` weight (the exact order: see the module docs; a
-/// dot product when `n == 1`).
+/// dot product when `n == 1`); then, with `bias_act = Some((bias, f))`, `y[i*n + j] =
+/// f(y[i*n + j] + bias[j])` exactly as [`Activation::add_bias_apply`] computes it (fused into
+/// the kernels' stores for `Identity` and `Relu`).
 ///
 /// # Panics
-/// If `y`, `x` or `w` holds fewer than `m * n`, `m * k` or `n * k` values.
+/// If `y`, `x`, `w` or `bias` holds fewer than `m * n`, `m * k`, `n * k` or `n` values.
 #[inline]
-pub(crate) fn forward<T: Scalar>(m: usize, n: usize, k: usize, y: &mut [T], x: &[T], w: &[T]) {
-    forward_at(crate::simd::simd_level(), (m, n, k), y, x, w);
+pub(crate) fn forward<T: Scalar>(
+    (m, n, k): (usize, usize, usize),
+    y: &mut [T],
+    x: &[T],
+    w: &[T],
+    bias_act: Option<(&[T], Activation)>,
+) {
+    forward_at(crate::simd::simd_level(), (m, n, k), y, x, w, bias_act);
 }
 
 /// [`forward`] at the given SIMD level (the portable loops where the CPU lacks it).
@@ -64,31 +72,59 @@ pub(crate) fn forward_at<T: Scalar>(
     y: &mut [T],
     x: &[T],
     w: &[T],
+    bias_act: Option<(&[T], Activation)>,
 ) {
     let (y, x, w) = (&mut y[..m * n], &x[..m * k], &w[..n * k]);
+    let bias_act = bias_act.map(|(b, f)| (&b[..n], f));
     if y.is_empty() || k == 0 {
         y.fill(T::ZERO);
+    } else if forward_simd(level, (m, n, k), y, x, w, bias_act) {
         return;
-    }
-    #[cfg(target_arch = "x86_64")]
-    if let Some((simd, y, x, w)) = f32_simd(level, y, x, w) {
-        let (y, x, w) = (y.as_mut_ptr(), x.as_ptr(), w.as_ptr());
-        // SAFETY: the slices hold exactly `m * n`, `m * k`, `n * k` values and `k > 0`; the
-        // token proves that the CPU has the kernel's instructions.
-        unsafe {
-            match simd {
-                Simd::Avx512(s) => kernel::forward_avx512(s, (m, n, k), y, x, w),
-                Simd::Avx2(s) => kernel::forward_avx2(s, (m, n, k), y, x, w),
-            }
-        }
-        return;
-    }
-    let _ = level;
-    if n == 1 {
+    } else if n == 1 {
         portable::dot16(m, k, y, x, w);
     } else {
         portable::product((m, n, k), (y, n), false, (x, k, 1), (w, 1, k));
     }
+    if let Some((bias, f)) = bias_act {
+        f.add_bias_apply(y, bias);
+    }
+}
+
+/// [`forward_at`] with the `f32` SIMD kernels, if `T` is `f32` and the level has them on this
+/// CPU (`k > 0`, the slices cut to size); returns whether they ran.
+fn forward_simd<T: Scalar>(
+    level: SimdLevel,
+    (m, n, k): (usize, usize, usize),
+    y: &mut [T],
+    x: &[T],
+    w: &[T],
+    bias_act: Option<(&[T], Activation)>,
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if let Some((simd, y, x, w)) = f32_simd(level, y, x, w) {
+        use kernel::Fuse;
+        let bias_act = bias_act.and_then(|(b, f)| Some((T::as_f32(b)?, f)));
+        let (fuse, bias) = match bias_act {
+            Some((b, Activation::Identity)) => (Fuse::Bias, b.as_ptr()),
+            Some((b, Activation::Relu)) => (Fuse::BiasRelu, b.as_ptr()),
+            _ => (Fuse::None, std::ptr::null()),
+        };
+        let r = kernel::Raw::forward((m, n, k), y.as_mut_ptr(), x.as_ptr(), (fuse, bias));
+        // SAFETY: the slices hold exactly `m * n`, `m * k`, `n * k` values, the bias `n`, and
+        // `k > 0`; the token proves that the CPU has the kernel's instructions.
+        unsafe {
+            match simd {
+                Simd::Avx512(s) => kernel::forward_avx512(s, r, w.as_ptr()),
+                Simd::Avx2(s) => kernel::forward_avx2(s, r, w.as_ptr()),
+            }
+        }
+        if let (Some((b, f)), Fuse::None) = (bias_act, fuse) {
+            f.add_bias_apply(y, b);
+        }
+        return true;
+    }
+    let _ = (level, (m, n, k), y, x, w, bias_act);
+    false
 }
 
 /// `dw (m x n) += dy^T x` with `dy` row-major `k x m` and `x` row-major `k x n`:
@@ -117,7 +153,21 @@ pub(crate) fn backward_weight_at<T: Scalar>(
     #[cfg(target_arch = "x86_64")]
     if let Some((simd, c, a, b)) = f32_simd(level, dw, dy, x) {
         let (c, a, b) = (c.as_mut_ptr(), a.as_ptr(), b.as_ptr());
-        let r = kernel::Raw { m, n, k, a, a_rs: 1, a_cs: m, b, b_rs: n, c, c_rs: n, accumulate: true };
+        let r = kernel::Raw {
+            m,
+            n,
+            k,
+            a,
+            a_rs: 1,
+            a_cs: m,
+            b,
+            b_rs: n,
+            c,
+            c_rs: n,
+            accumulate: true,
+            fuse: kernel::Fuse::None,
+            bias: std::ptr::null(),
+        };
         // SAFETY: the slices hold exactly the values `r` addresses; the token proves that the
         // CPU has the kernel's instructions.
         unsafe {
@@ -170,7 +220,21 @@ pub(crate) fn backward_input_at<T: Scalar>(
     #[cfg(target_arch = "x86_64")]
     if let Some((simd, c, a, b)) = f32_simd(level, dx, dy, w) {
         let (c, a, b) = (c.as_mut_ptr(), a.as_ptr(), b.as_ptr());
-        let r = kernel::Raw { m, n, k, a, a_rs: k, a_cs: 1, b, b_rs: w_rs, c, c_rs: n, accumulate: false };
+        let r = kernel::Raw {
+            m,
+            n,
+            k,
+            a,
+            a_rs: k,
+            a_cs: 1,
+            b,
+            b_rs: w_rs,
+            c,
+            c_rs: n,
+            accumulate: false,
+            fuse: kernel::Fuse::None,
+            bias: std::ptr::null(),
+        };
         // SAFETY: the slices hold exactly the values `r` addresses (`w` its `extent`); the token
         // proves that the CPU has the kernel's instructions.
         unsafe {

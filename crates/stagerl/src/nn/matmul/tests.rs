@@ -50,8 +50,8 @@ fn assert_same(what: &str, got: &[f32], want: &[f32]) {
 }
 
 fn check_forward(rng: &mut Rng, (m, n, k): (usize, usize, usize)) {
-    let (x, w) = (values(rng, m * k), values(rng, n * k));
-    let want: Vec<f32> = (0..m * n)
+    let (x, w, bias) = (values(rng, m * k), values(rng, n * k), values(rng, n));
+    let product: Vec<f32> = (0..m * n)
         .map(|e| {
             let (i, j) = (e / n, e % n);
             let ab = |p: usize| (x[i * k + p], w[j * k + p]);
@@ -61,13 +61,20 @@ fn check_forward(rng: &mut Rng, (m, n, k): (usize, usize, usize)) {
                 chain(0.0, k, ab)
             }
         })
-        .chain(std::iter::repeat_n(7.0, GUARD))
         .collect();
-    for level in LEVELS {
-        let mut y = vec![f32::NAN; m * n + GUARD];
-        y[m * n..].fill(7.0);
-        forward_at(level, (m, n, k), &mut y, &x, &w);
-        assert_same(&format!("forward {m}x{n}x{k} at {level:?}"), &y, &want);
+    for act in [None, Some(Activation::Identity), Some(Activation::Relu), Some(Activation::Tanh)] {
+        // The reference: the product, then the bias and activation as the engine's own loop.
+        let mut want = product.clone();
+        if let Some(f) = act {
+            f.add_bias_apply(&mut want, &bias);
+        }
+        want.extend(std::iter::repeat_n(7.0, GUARD));
+        for level in LEVELS {
+            let mut y = vec![f32::NAN; m * n + GUARD];
+            y[m * n..].fill(7.0);
+            forward_at(level, (m, n, k), &mut y, &x, &w, act.map(|f| (&bias[..], f)));
+            assert_same(&format!("forward {m}x{n}x{k} {act:?} at {level:?}"), &y, &want);
+        }
     }
 }
 
@@ -101,10 +108,10 @@ fn check_backward_input(rng: &mut Rng, (m, n, k): (usize, usize, usize), (start,
 }
 
 #[test]
-fn every_level_matches_the_reference_on_random_small_shapes() {
+fn every_level_matches_the_reference_on_random_small_shapes_and_edges() {
     let mut rng = Rng::new(10);
     for _ in 0..300 {
-        let (m, n, k) = (1 + rng.below(40) as usize, 1 + rng.below(40) as usize, 1 + rng.below(40) as usize);
+        let (m, n, k) = (1 + rng.below(40) as usize, 1 + rng.below(80) as usize, 1 + rng.below(40) as usize);
         check_forward(&mut rng, (m, n, k));
         check_backward_weight(&mut rng, (m, n, k));
         let (start, after) = (rng.below(5) as usize, rng.below(5) as usize);
@@ -138,8 +145,10 @@ fn every_level_matches_the_reference_on_the_networks_shapes() {
 fn empty_products() {
     for level in LEVELS {
         let mut y = vec![f32::NAN; 12];
-        forward_at(level, (3, 4, 0), &mut y, &[], &[]);
+        forward_at(level, (3, 4, 0), &mut y, &[], &[], None);
         assert!(y.iter().all(|v| v.to_bits() == 0));
+        forward_at(level, (3, 4, 0), &mut y, &[], &[], Some((&[1.0, -2.0, 3.0, -4.0], Activation::Relu)));
+        assert_eq!(y, [1.0, 0.0, 3.0, 0.0].repeat(3));
         let mut dw = vec![2.5f32; 12];
         backward_weight_at(level, (3, 4, 0), &mut dw, &[], &[]);
         assert!(dw.iter().all(|&v| v == 2.5));
@@ -147,7 +156,7 @@ fn empty_products() {
         backward_input_at(level, (3, 4, 0), &mut dx, &[], (&[], 4));
         assert!(dx.iter().all(|v| v.to_bits() == 0));
         let mut y = vec![1.0f32; 4];
-        forward_at(level, (0, 4, 3), &mut y, &[], &[0.0; 12]);
+        forward_at(level, (0, 4, 3), &mut y, &[], &[0.0; 12], None);
         backward_weight_at(level, (4, 0, 3), &mut y, &[0.0; 12], &[]);
         assert_eq!(y, [1.0; 4]);
     }
@@ -161,7 +170,7 @@ fn f64_follows_the_same_order() {
     let x: Vec<f64> = (0..m * k).map(|_| rng.normal()).collect();
     let w: Vec<f64> = (0..n * k).map(|_| rng.normal()).collect();
     let mut y = vec![0.0; m * n];
-    forward(m, n, k, &mut y, &x, &w);
+    forward((m, n, k), &mut y, &x, &w, None);
     for (e, &v) in y.iter().enumerate() {
         let (i, j) = (e / n, e % n);
         let want = (0..k).fold(0.0f64, |acc, p| x[i * k + p].mul_add(w[j * k + p], acc));
@@ -173,5 +182,49 @@ fn f64_follows_the_same_order() {
         let (i, j) = (e / n, e % n);
         let want = (0..m).fold(0.5f64, |acc, p| x[p * k + i].mul_add(y[p * n + j], acc));
         assert_eq!(v.to_bits(), want.to_bits());
+    }
+}
+
+/// The fused bias and ReLU give the bits of the separate loop also where the sum is a zero of
+/// either sign or NaN (`maxps` keeps its second operand, +0.0, in both cases).
+#[test]
+fn fused_relu_on_zeros_and_nan() {
+    // Column 0 of row 0 is -0.0 (products that underflow to -0.0), row 1 is NaN, row 2 an
+    // exact cancellation to +0.0; biases of both signed zeros.
+    let (m, n, k) = (3, 2, 2);
+    let x = [-1e-30f32, -1e-30, f32::NAN, 1.0, 2.0, -2.0];
+    let w = [1e-30f32, 1e-30, 1.0, 1.0];
+    for bias in [[-0.0f32, 0.0], [0.0, -0.0]] {
+        for f in [Activation::Identity, Activation::Relu] {
+            let mut want = vec![0.0f32; m * n];
+            forward_at(SimdLevel::Baseline, (m, n, k), &mut want, &x, &w, None);
+            f.add_bias_apply(&mut want, &bias);
+            if f == Activation::Identity && bias[0].is_sign_negative() {
+                assert_eq!(want[0].to_bits(), (-0.0f32).to_bits(), "the case is exercised");
+            }
+            for level in LEVELS {
+                let mut y = vec![7.0f32; m * n];
+                forward_at(level, (m, n, k), &mut y, &x, &w, Some((&bias, f)));
+                for (g, w) in y.iter().zip(&want) {
+                    assert!(
+                        g.to_bits() == w.to_bits() || (g.is_nan() && w.is_nan()),
+                        "{f:?} at {level:?}: {g} {w}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The kernels this CPU has are the ones the tests above ran.
+#[test]
+fn the_cpus_simd_levels_have_kernels() {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let detected = crate::simd::simd_level();
+        eprintln!("SIMD level of this CPU: {detected:?}");
+        assert_eq!(Simd::at(SimdLevel::Avx512).is_some(), detected == SimdLevel::Avx512);
+        assert_eq!(Simd::at(SimdLevel::Avx2).is_some(), detected != SimdLevel::Baseline);
+        assert!(Simd::at(SimdLevel::Baseline).is_none());
     }
 }
