@@ -6,10 +6,18 @@
 //! Every output element is ONE sequential chain of fused multiply-adds over the depth index
 //! `p = 0, 1, ..., k - 1` in increasing order, `acc = fma(lhs[i, p], rhs[p, j], acc)` (one
 //! rounding each), starting from +0.0 (overwriting products) or from the element's current value
-//! (`backward_weight`, which accumulates). The one exception, [`forward`] with a single output
-//! column (`n == 1`, the critics' last layer), is a dot product in a different but equally fixed
-//! order: 16 chains `s[l]` over `p = l, l + 16, l + 32, ...` (each in increasing `p` from +0.0),
-//! summed by the balanced tree `((s[l] + s[l + 8]) + (.. + 4)) ...` (see `portable::tree16`).
+//! (`backward_weight`, which accumulates):
+//!
+//! - forward `y[b, o] = sum over i of x[b, i] W[o, i]`, chain over `i`;
+//! - backward_weight `dW[o, i] += sum over b of dy[b, o] x[b, i]`, chain over `b` from `dW[o, i]`;
+//! - backward_input `dx[b, j] = sum over o of dy[b, o] W[o, cols.start + j]`, chain over `o`.
+//!
+//! The one exception, [`forward`] with a single output column (`n == 1`, the critics' last
+//! layer, where a chain a row would leave 15 of 16 lanes idle), is a dot product in another
+//! fixed order: 16 chains `s[l]` over `p = l, l + 16, l + 32, ...` (each in increasing `p` from
+//! +0.0), then the balanced tree `t[l] = s[l] + s[l + 8]`, `u[l] = t[l] + t[l + 4]`,
+//! `v[l] = u[l] + u[l + 2]`, `v[0] + v[1]` (`portable::dot16`, tested against its own
+//! reference). [`forward`]'s bias and activation come after, as [`Activation::add_bias_apply`].
 //!
 //! The results are therefore independent of tiling, of the depth blocks (an `f32` partial sum
 //! stored and reloaded is exact), of the vector width and of the SIMD level: the AVX-512F
@@ -19,16 +27,20 @@
 //! loop's), and a NaN's payload may differ between levels.
 //!
 //! # Kernels
-//! `f32` at run time on x86-64 ([`crate::simd::simd_level`]; the build stays baseline x86-64):
-//! register tiles of outer products, which broadcast one left-hand scalar a row and load the
-//! right-hand rows as vectors (`kernel`): AVX-512F 8 rows x 32 columns (16 accumulators) and
-//! AVX2 6 x 16 (12), a last column panel of one vector (tiles of 16 x 16 and 12 x 8 rows) when at
-//! most one vector's columns remain, masked loads and stores for partial vectors and 8/4/2/1-row
-//! tiles for the remaining rows. `backward_weight` and `backward_input` read their operands in
-//! place (the right-hand rows are contiguous along the output columns); `forward` packs `W^T`
-//! per call into a stack buffer of 128 x 64 values (depth x columns), never the heap. The
-//! one-column forward product runs one 16-lane dot product a row. `f64` (the gradient checks)
-//! and `f32` without AVX2 + FMA use the portable loops. Nothing allocates.
+//! `f32` at run time on x86-64 ([`crate::simd::simd_level`]; the build stays baseline x86-64),
+//! in `kernel`: register tiles of outer products, which broadcast one left-hand scalar a row
+//! and load the right-hand rows as vectors. AVX-512F: 6 rows x 64 columns (24 accumulators),
+//! the last column panel as narrow as its columns allow (8 x 48, 12 x 32, 24 x 16, so outputs of
+//! 1, 6, 12 or 22 columns waste at most one partial vector); AVX2 + FMA: 6 x 16 and 12 x 8.
+//! Partial vectors are masked, the remaining rows one tile of their own. `forward` packs `W^T`
+//! per call into a stack buffer of 128 x 64 values (depth x columns, 8 x 8 transposes), and
+//! fuses the bias and `Identity` or `Relu` into its stores; `backward_weight` and
+//! `backward_input` read their right-hand side in place (its rows are contiguous along the
+//! output columns) unless the rows are 128 values apart or more and there are 32 output rows
+//! or more, where they copy it into the same stack buffer (rows that far apart compete for the
+//! same cache sets). The one-column forward product runs one 16-lane dot product a row, four
+//! rows at a time. `f64` (the gradient checks) and `f32` without AVX2 + FMA use the portable
+//! loops. Nothing allocates. `benches/nn_matmul.rs` times the kernels against `gemm`.
 
 use super::{Activation, Scalar};
 use crate::simd::SimdLevel;
