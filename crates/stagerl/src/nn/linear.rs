@@ -101,12 +101,36 @@ impl Linear {
     /// `b`).
     pub fn backward_weight<T: Scalar>(&self, grads: &mut [T], x: &[T], dy: &[T], batch: usize) {
         let (n_in, n_out) = (self.in_features, self.out_features);
-        matmul::backward_weight(n_out, n_in, batch, &mut grads[self.weight_range()], dy, x);
+        matmul::backward_weight((n_out, n_in, batch), &mut grads[self.weight_range()], dy, x);
     }
 
     /// Gradient with respect to the input: `dx = dy W` (`batch x in`), overwriting `dx`.
     pub fn backward_input<T: Scalar>(&self, params: &[T], dy: &[T], batch: usize, dx: &mut [T]) {
         self.backward_input_cols(params, dy, batch, 0..self.in_features, dx);
+    }
+
+    /// [`Linear::backward_input`] fused with the backward pass of the activation `f` whose
+    /// outputs `ys` (`batch x in`) were this layer's input: `dx = (dy W) * f'` as
+    /// [`Activation::backward`] computes it, i.e. dL/dz of the previous layer; with
+    /// `bias_grad` (the previous layer's bias gradient, `in` values) also its column sums, as
+    /// [`Activation::backward_sum`] adds them. The same values as the separate calls.
+    pub fn backward_input_act<T: Scalar>(
+        &self,
+        params: &[T],
+        dy: &[T],
+        batch: usize,
+        dx: &mut [T],
+        (ys, f, bias_grad): (&[T], Activation, Option<&mut [T]>),
+    ) {
+        let (n_in, n_out) = (self.in_features, self.out_features);
+        let deriv = matmul::Deriv { ys, f, bias_grad };
+        matmul::backward_input(
+            (batch, n_in, n_out),
+            dx,
+            dy,
+            (&params[self.weight_range()], n_in),
+            Some(deriv),
+        );
     }
 
     /// Gradient with respect to the input columns `cols` only: `dx = dy W[:, cols]`
@@ -127,6 +151,6 @@ impl Linear {
         let (n_in, n_out) = (self.in_features, self.out_features);
         assert!(cols.start <= cols.end && cols.end <= n_in, "Linear: input columns out of range");
         let w = &params[self.weight_range()];
-        matmul::backward_input(batch, cols.len(), n_out, dx, dy, (&w[cols.start..], n_in));
+        matmul::backward_input((batch, cols.len(), n_out), dx, dy, (&w[cols.start..], n_in), None);
     }
 }

@@ -8,20 +8,27 @@ use std::arch::x86_64::*;
 use std::mem::MaybeUninit;
 
 use super::lanes::{tree8, Avx2, Avx512, Lanes};
+use crate::nn::Activation;
 
 /// Depth of one block of packed `W^T` in the forward pass (rows of the stack buffer).
 const KB: usize = 128;
 /// Width of one block of packed `W^T` (columns of the stack buffer).
 const NB: usize = 64;
 
-/// What a tile does to its sums before storing them: nothing, or `v + bias[j]`, or
-/// `max(v + bias[j], 0)` (as `maxps`, the instruction `Activation::add_bias_apply`'s loop
-/// compiles to, so the same bits).
+/// What a tile does to its sums `v` before storing them (after the last depth block), each
+/// the same instructions as the separate loop in `Activation`, so the same bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Fuse {
+    /// Nothing.
     None,
+    /// `v + bias[j]` (`Activation::Identity.add_bias_apply`).
     Bias,
+    /// `max(v + bias[j], 0)` as `maxps` computes it (`Activation::Relu.add_bias_apply`).
     BiasRelu,
+    /// `g = v * f'`, the derivative of the activation `f` from its outputs `ys[i, j]` (laid out
+    /// as `c`) as `Activation::backward` computes it; with `true`, the column sums of `g` are
+    /// added to `bias_grad[j]` row after row, as `Activation::backward_sum` does.
+    Deriv(Activation, bool),
 }
 
 /// `c[i*c_rs + j] (= | +=) sum over p of a[i*a_rs + p*a_cs] * b[p*b_rs + j]` for `i < m`,
@@ -42,8 +49,12 @@ pub(super) struct Raw {
     pub c_rs: usize,
     pub accumulate: bool,
     pub fuse: Fuse,
-    /// `n` values when `fuse` is not `Fuse::None`.
+    /// `n` values for `Fuse::Bias` and `Fuse::BiasRelu`.
     pub bias: *const f32,
+    /// `m x n` values with row stride `c_rs` for `Fuse::Deriv`.
+    pub ys: *const f32,
+    /// `n` values for `Fuse::Deriv(_, true)`.
+    pub bias_grad: *mut f32,
 }
 
 impl Raw {
@@ -51,14 +62,20 @@ impl Raw {
     /// inside the operands).
     #[inline(always)]
     fn rows_from(self, i: usize) -> Raw {
-        Raw { a: self.a.wrapping_add(i * self.a_rs), c: self.c.wrapping_add(i * self.c_rs), ..self }
+        let (a, c, ys) = (
+            self.a.wrapping_add(i * self.a_rs),
+            self.c.wrapping_add(i * self.c_rs),
+            self.ys.wrapping_add(i * self.c_rs),
+        );
+        Raw { a, c, ys, ..self }
     }
 
     /// The same product restricted to columns `j..`.
     #[inline(always)]
     fn cols_from(self, j: usize) -> Raw {
         let (b, c, bias) = (self.b.wrapping_add(j), self.c.wrapping_add(j), self.bias.wrapping_add(j));
-        Raw { b, c, bias, ..self }
+        let (ys, bias_grad) = (self.ys.wrapping_add(j), self.bias_grad.wrapping_add(j));
+        Raw { b, c, bias, ys, bias_grad, ..self }
     }
 }
 
@@ -95,21 +112,105 @@ unsafe fn tile<S: Lanes, const MR: usize, const NV: usize>(s: S, r: Raw, last: S
                 step(s, &mut acc, (r.b.add(p * r.b_rs), last), |i| *a.add(i * r.a_rs));
             }
         }
-        let mut bias = [s.zero(); NV];
-        if r.fuse != Fuse::None {
-            for v in 0..NV {
-                bias[v] = s.load_masked(r.bias.add(v * w), if v + 1 < NV { s.mask(w) } else { last });
+        store(s, r, &acc, last);
+    }
+}
+
+/// Stores a tile's sums `acc` (rows `0..MR`, columns `0..NV * W`, the last vector under `last`)
+/// after `r.fuse`. Each kind of epilogue is its own loop, small enough to be unrolled, so that
+/// the accumulators stay in registers.
+///
+/// # Safety
+/// As [`tile`], for `c` and, as `r.fuse` needs them, `bias`, `ys` and `bias_grad`.
+#[inline(always)]
+unsafe fn store<S: Lanes, const MR: usize, const NV: usize>(
+    s: S,
+    r: Raw,
+    acc: &[[S::V; NV]; MR],
+    last: S::M,
+) {
+    // SAFETY: the caller's guarantee.
+    unsafe {
+        match r.fuse {
+            Fuse::None => each(s, r, acc, last, |_, _, x| x),
+            Fuse::Bias | Fuse::BiasRelu => {
+                let mut bias = [s.zero(); NV];
+                for (v, b) in bias.iter_mut().enumerate() {
+                    *b = s.load_masked(r.bias.add(v * S::W), if v + 1 < NV { s.mask(S::W) } else { last });
+                }
+                if r.fuse == Fuse::Bias {
+                    each(s, r, acc, last, |_, v, x| s.add(x, bias[v]));
+                } else {
+                    each(s, r, acc, last, |_, v, x| s.max(s.add(x, bias[v]), s.zero()));
+                }
+            }
+            Fuse::Deriv(Activation::Identity, sum) => deriv(s, r, acc, last, sum, |g, _| g),
+            Fuse::Deriv(Activation::Relu, sum) => deriv(s, r, acc, last, sum, |g, y| s.where_positive(y, g)),
+            Fuse::Deriv(Activation::Tanh, sum) => {
+                deriv(s, r, acc, last, sum, |g, y| s.mul(g, s.sub(s.splat(1.0), s.mul(y, y))))
             }
         }
-        for (i, row) in acc.iter().enumerate() {
-            let c = r.c.add(i * r.c_rs);
-            for v in 0..NV {
-                let out = match r.fuse {
-                    Fuse::None => row[v],
-                    Fuse::Bias => s.add(row[v], bias[v]),
-                    Fuse::BiasRelu => s.max(s.add(row[v], bias[v]), s.zero()),
-                };
-                s.store_masked(c.add(v * w), if v + 1 < NV { s.mask(w) } else { last }, out);
+    }
+}
+
+/// Stores `out(i, v, acc[i][v])` for every register of a tile.
+///
+/// # Safety
+/// As [`store`].
+#[inline(always)]
+unsafe fn each<S: Lanes, const MR: usize, const NV: usize>(
+    s: S,
+    r: Raw,
+    acc: &[[S::V; NV]; MR],
+    last: S::M,
+    mut out: impl FnMut(usize, usize, S::V) -> S::V,
+) {
+    for (i, row) in acc.iter().enumerate() {
+        for v in 0..NV {
+            let x = out(i, v, row[v]);
+            // SAFETY: row `i`, vector `v` of the tile's `c` (the caller's guarantee).
+            unsafe {
+                s.store_masked(
+                    r.c.add(i * r.c_rs + v * S::W),
+                    if v + 1 < NV { s.mask(S::W) } else { last },
+                    x,
+                )
+            };
+        }
+    }
+}
+
+/// The `Fuse::Deriv` epilogue: `g = d(acc, y)` with `y` the tile's element of `r.ys`, stored,
+/// and with `sum` added to `r.bias_grad` row after row.
+///
+/// # Safety
+/// As [`store`].
+#[inline(always)]
+unsafe fn deriv<S: Lanes, const MR: usize, const NV: usize>(
+    s: S,
+    r: Raw,
+    acc: &[[S::V; NV]; MR],
+    last: S::M,
+    sum: bool,
+    d: impl Fn(S::V, S::V) -> S::V,
+) {
+    let mask = |v: usize| if v + 1 < NV { s.mask(S::W) } else { last };
+    let mut sums = [s.zero(); NV];
+    // SAFETY: the tile's elements of `ys` and columns of `bias_grad` (the caller's guarantee).
+    unsafe {
+        if sum {
+            for (v, t) in sums.iter_mut().enumerate() {
+                *t = s.load_masked(r.bias_grad.add(v * S::W), mask(v));
+            }
+        }
+        each(s, r, acc, last, |i, v, x| {
+            let g = d(x, s.load_masked(r.ys.add(i * r.c_rs + v * S::W), mask(v)));
+            sums[v] = s.add(sums[v], g);
+            g
+        });
+        if sum {
+            for (v, t) in sums.iter().enumerate() {
+                s.store_masked(r.bias_grad.add(v * S::W), mask(v), *t);
             }
         }
     }
@@ -311,8 +412,12 @@ unsafe fn blocked<S: Lanes>((s, product): (S, unsafe fn(S, Raw)), r: Raw, rhs: R
                 let (a, c, accumulate) = (r.a.add(p0 * r.a_cs), r.c.add(j0), r.accumulate || p0 > 0);
                 // The bias and activation once, after the last depth block.
                 let fuse = if p0 + kb == r.k { r.fuse } else { Fuse::None };
-                let bias = r.bias.wrapping_add(j0);
-                product(s, Raw { n: nb, k: kb, a, b: bp, b_rs: nb, c, accumulate, fuse, bias, ..r });
+                let (bias, ys, bias_grad) =
+                    (r.bias.wrapping_add(j0), r.ys.wrapping_add(j0), r.bias_grad.wrapping_add(j0));
+                product(
+                    s,
+                    Raw { n: nb, k: kb, a, b: bp, b_rs: nb, c, accumulate, fuse, bias, ys, bias_grad, ..r },
+                );
             }
         }
     }
@@ -341,6 +446,19 @@ pub(super) unsafe fn product_avx2(s: Avx2, r: Raw) {
 }
 
 impl Raw {
+    /// `c (m x n) (= | +=) a (m x k) b (k x n)` with the given strides, nothing fused.
+    pub fn plain(
+        (m, n, k): (usize, usize, usize),
+        (a, a_rs, a_cs): (*const f32, usize, usize),
+        (b, b_rs): (*const f32, usize),
+        (c, c_rs): (*mut f32, usize),
+        accumulate: bool,
+    ) -> Raw {
+        let (fuse, bias, ys, bias_grad) =
+            (Fuse::None, std::ptr::null(), std::ptr::null(), std::ptr::null_mut());
+        Raw { m, n, k, a, a_rs, a_cs, b, b_rs, c, c_rs, accumulate, fuse, bias, ys, bias_grad }
+    }
+
     /// The forward product `y (m x n) = x (m x k) w^T`, then `fuse` with `bias`, without its
     /// right-hand side (`w`, packed by [`forward_avx512`] or [`forward_avx2`]).
     pub fn forward(
@@ -349,8 +467,7 @@ impl Raw {
         x: *const f32,
         (fuse, bias): (Fuse, *const f32),
     ) -> Raw {
-        let (b, accumulate) = (std::ptr::null(), false);
-        Raw { m, n, k, a: x, a_rs: k, a_cs: 1, b, b_rs: 0, c: y, c_rs: n, accumulate, fuse, bias }
+        Raw { fuse, bias, ..Raw::plain((m, n, k), (x, k, 1), (std::ptr::null(), 0), (y, n), false) }
     }
 }
 
@@ -417,7 +534,8 @@ unsafe fn fuse1(v: f32, fuse: Fuse, bias: *const f32) -> f32 {
     // SAFETY: the caller's guarantee; SSE is baseline on x86-64.
     unsafe {
         match fuse {
-            Fuse::None => v,
+            // `Fuse::Deriv` belongs to `backward_input`, never a one-column forward product.
+            Fuse::None | Fuse::Deriv(..) => v,
             Fuse::Bias => v + *bias,
             Fuse::BiasRelu => _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(v + *bias), _mm_setzero_ps())),
         }

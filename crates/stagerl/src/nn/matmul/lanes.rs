@@ -27,6 +27,12 @@ pub(super) trait Lanes: Copy {
     fn add(self, a: Self::V, b: Self::V) -> Self::V;
     /// `max(a, b)` per lane as `maxps` computes it: `b` where either is NaN or both are zeros.
     fn max(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `a - b` per lane.
+    fn sub(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `a * b` per lane.
+    fn mul(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `if y > 0 { g } else { +0.0 }` per lane (NaN `y` gives +0.0).
+    fn where_positive(self, y: Self::V, g: Self::V) -> Self::V;
     /// The mask of lanes `0..n` (`n <= W`).
     fn mask(self, n: usize) -> Self::M;
     /// Loads `W` values.
@@ -87,6 +93,21 @@ impl Lanes for Avx512 {
     fn max(self, a: __m512, b: __m512) -> __m512 {
         // SAFETY: as above.
         unsafe { _mm512_max_ps(a, b) }
+    }
+    #[inline(always)]
+    fn sub(self, a: __m512, b: __m512) -> __m512 {
+        // SAFETY: as above.
+        unsafe { _mm512_sub_ps(a, b) }
+    }
+    #[inline(always)]
+    fn mul(self, a: __m512, b: __m512) -> __m512 {
+        // SAFETY: as above.
+        unsafe { _mm512_mul_ps(a, b) }
+    }
+    #[inline(always)]
+    fn where_positive(self, y: __m512, g: __m512) -> __m512 {
+        // SAFETY: as above.
+        unsafe { _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(y, _mm512_setzero_ps()), g) }
     }
     #[inline(always)]
     fn mask(self, n: usize) -> __mmask16 {
@@ -153,6 +174,21 @@ impl Lanes for Avx2 {
     fn max(self, a: __m256, b: __m256) -> __m256 {
         // SAFETY: as above.
         unsafe { _mm256_max_ps(a, b) }
+    }
+    #[inline(always)]
+    fn sub(self, a: __m256, b: __m256) -> __m256 {
+        // SAFETY: as above.
+        unsafe { _mm256_sub_ps(a, b) }
+    }
+    #[inline(always)]
+    fn mul(self, a: __m256, b: __m256) -> __m256 {
+        // SAFETY: as above.
+        unsafe { _mm256_mul_ps(a, b) }
+    }
+    #[inline(always)]
+    fn where_positive(self, y: __m256, g: __m256) -> __m256 {
+        // SAFETY: as above.
+        unsafe { _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(y, _mm256_setzero_ps()), g) }
     }
     #[inline(always)]
     fn mask(self, n: usize) -> __m256i {

@@ -146,7 +146,7 @@ fn forward_simd<T: Scalar>(
 /// # Panics
 /// If `dw`, `dy` or `x` holds fewer than `m * n`, `k * m` or `k * n` values.
 #[inline]
-pub(crate) fn backward_weight<T: Scalar>(m: usize, n: usize, k: usize, dw: &mut [T], dy: &[T], x: &[T]) {
+pub(crate) fn backward_weight<T: Scalar>((m, n, k): (usize, usize, usize), dw: &mut [T], dy: &[T], x: &[T]) {
     backward_weight_at(crate::simd::simd_level(), (m, n, k), dw, dy, x);
 }
 
@@ -165,53 +165,53 @@ pub(crate) fn backward_weight_at<T: Scalar>(
     #[cfg(target_arch = "x86_64")]
     if let Some((simd, c, a, b)) = f32_simd(level, dw, dy, x) {
         let (c, a, b) = (c.as_mut_ptr(), a.as_ptr(), b.as_ptr());
-        let r = kernel::Raw {
-            m,
-            n,
-            k,
-            a,
-            a_rs: 1,
-            a_cs: m,
-            b,
-            b_rs: n,
-            c,
-            c_rs: n,
-            accumulate: true,
-            fuse: kernel::Fuse::None,
-            bias: std::ptr::null(),
-        };
+        let r = kernel::Raw::plain((m, n, k), (a, 1, m), (b, n), (c, n), true);
         // SAFETY: the slices hold exactly the values `r` addresses; the token proves that the
         // CPU has the kernel's instructions.
-        unsafe {
-            if pack_rhs(m, n) {
-                simd.packed(r, kernel::Rhs { b, rs: n, cs: 1 })
-            } else {
-                simd.product(r)
-            }
-        };
+        unsafe { simd.run(r, pack_rhs(m, n)) };
         return;
     }
     let _ = level;
     portable::product((m, n, k), (dw, n), true, (dy, 1, m), (x, n, 1));
 }
 
+/// The backward pass of the previous layer's activation `f`, fused into [`backward_input`]:
+/// `dx` becomes dL/dz as [`Activation::backward`] computes it from that layer's outputs `ys`
+/// (`m x n`), and with `bias_grad` (`n` values) the column sums of the result are added to it
+/// as [`Activation::backward_sum`] adds them.
+#[derive(Debug)]
+pub(crate) struct Deriv<'a, T> {
+    pub ys: &'a [T],
+    pub f: Activation,
+    pub bias_grad: Option<&'a mut [T]>,
+}
+
+impl<T: Scalar> Deriv<'_, T> {
+    /// The separate loops (for the portable product).
+    fn apply(self, (m, n): (usize, usize), dx: &mut [T]) {
+        match self.bias_grad {
+            Some(bias_grad) => self.f.backward_sum(&self.ys[..m * n], dx, &mut bias_grad[..n]),
+            None => self.f.backward(&self.ys[..m * n], dx),
+        }
+    }
+}
+
 /// `dx (m x n) = dy (m x k) * w`, overwriting `dx`, where `w` has rows of stride `w_rs >= n`:
 /// `dx[i*n + j] = sum over p of dy[i*k + p] * w[p*w_rs + j]` (e.g. the columns `cols` of a
-/// row-major weight `k x in`: `w = &weight[cols.start..]`, `w_rs = in`).
+/// row-major weight `k x in`: `w = &weight[cols.start..]`, `w_rs = in`); then `deriv`.
 ///
 /// # Panics
 /// If `n > w_rs`, or `dx`, `dy` or `w` holds fewer than `m * n`, `m * k` or
-/// `(k - 1) * w_rs + n` values.
+/// `(k - 1) * w_rs + n` values, or `deriv`'s slices fewer than `m * n` and `n`.
 #[inline]
 pub(crate) fn backward_input<T: Scalar>(
-    m: usize,
-    n: usize,
-    k: usize,
+    (m, n, k): (usize, usize, usize),
     dx: &mut [T],
     dy: &[T],
     w: (&[T], usize),
+    deriv: Option<Deriv<'_, T>>,
 ) {
-    backward_input_at(crate::simd::simd_level(), (m, n, k), dx, dy, w);
+    backward_input_at(crate::simd::simd_level(), (m, n, k), dx, dy, w, deriv);
 }
 
 /// [`backward_input`] at the given SIMD level.
@@ -221,45 +221,55 @@ pub(crate) fn backward_input_at<T: Scalar>(
     dx: &mut [T],
     dy: &[T],
     (w, w_rs): (&[T], usize),
+    deriv: Option<Deriv<'_, T>>,
 ) {
     assert!(n <= w_rs, "backward_input: {n} columns in rows of stride {w_rs}");
     let extent = if k == 0 || n == 0 { 0 } else { (k - 1) * w_rs + n };
     let (dx, dy, w) = (&mut dx[..m * n], &dy[..m * k], &w[..extent]);
+    let mut deriv =
+        deriv.map(|d| Deriv { ys: &d.ys[..m * n], bias_grad: d.bias_grad.map(|g| &mut g[..n]), ..d });
     if dx.is_empty() || k == 0 {
         dx.fill(T::ZERO);
-        return;
+    } else {
+        match backward_input_simd(level, (m, n, k), dx, dy, (w, w_rs), deriv) {
+            None => return,
+            Some(d) => deriv = d,
+        }
+        portable::product((m, n, k), (dx, n), false, (dy, k, 1), (w, w_rs, 1));
     }
+    if let Some(d) = deriv {
+        d.apply((m, n), dx);
+    }
+}
+
+/// [`backward_input_at`] with the `f32` SIMD kernels (`k > 0`, the slices cut to size), if `T`
+/// is `f32` and the level has them on this CPU: `None` if they ran, otherwise `Some(deriv)`
+/// back.
+fn backward_input_simd<'a, T: Scalar>(
+    level: SimdLevel,
+    (m, n, k): (usize, usize, usize),
+    dx: &mut [T],
+    dy: &[T],
+    (w, w_rs): (&[T], usize),
+    deriv: Option<Deriv<'a, T>>,
+) -> Option<Option<Deriv<'a, T>>> {
     #[cfg(target_arch = "x86_64")]
     if let Some((simd, c, a, b)) = f32_simd(level, dx, dy, w) {
         let (c, a, b) = (c.as_mut_ptr(), a.as_ptr(), b.as_ptr());
-        let r = kernel::Raw {
-            m,
-            n,
-            k,
-            a,
-            a_rs: k,
-            a_cs: 1,
-            b,
-            b_rs: w_rs,
-            c,
-            c_rs: n,
-            accumulate: false,
-            fuse: kernel::Fuse::None,
-            bias: std::ptr::null(),
-        };
-        // SAFETY: the slices hold exactly the values `r` addresses (`w` its `extent`); the token
-        // proves that the CPU has the kernel's instructions.
-        unsafe {
-            if pack_rhs(m, w_rs) {
-                simd.packed(r, kernel::Rhs { b, rs: w_rs, cs: 1 })
-            } else {
-                simd.product(r)
-            }
-        };
-        return;
+        let mut r = kernel::Raw::plain((m, n, k), (a, k, 1), (b, w_rs), (c, n), false);
+        if let Some(d) = deriv {
+            let ys = T::as_f32(d.ys).map_or(std::ptr::null(), <[f32]>::as_ptr);
+            let bias_grad = d.bias_grad.and_then(T::as_f32_mut).map(<[f32]>::as_mut_ptr);
+            let fuse = kernel::Fuse::Deriv(d.f, bias_grad.is_some());
+            r = kernel::Raw { fuse, ys, bias_grad: bias_grad.unwrap_or(std::ptr::null_mut()), ..r };
+        }
+        // SAFETY: the slices hold exactly the values `r` addresses (`w` its `extent`, `ys`
+        // `m * n`, `bias_grad` `n`); the token proves that the CPU has the kernel's instructions.
+        unsafe { simd.run(r, pack_rhs(m, w_rs)) };
+        return None;
     }
-    let _ = level;
-    portable::product((m, n, k), (dx, n), false, (dy, k, 1), (w, w_rs, 1));
+    let _ = (level, (m, n, k), dx, dy, (w, w_rs));
+    Some(deriv)
 }
 
 /// Whether the outer-product kernels should read their right-hand side (rows of stride `b_rs`)
@@ -291,30 +301,20 @@ impl Simd {
         }
     }
 
-    /// Runs the outer-product kernels on `r` with its right-hand side `rhs` packed.
-    ///
-    /// # Safety
-    /// `r` with `rhs` must lie inside its operands.
-    unsafe fn packed(self, r: kernel::Raw, rhs: kernel::Rhs) {
-        // SAFETY: the caller's guarantee; the token proves the instructions.
-        unsafe {
-            match self {
-                Simd::Avx512(s) => kernel::packed_avx512(s, r, rhs),
-                Simd::Avx2(s) => kernel::packed_avx2(s, r, rhs),
-            }
-        }
-    }
-
-    /// Runs the outer-product kernels on `r`.
+    /// Runs the outer-product kernels on `r`, reading its right-hand side from a packed copy
+    /// if `pack` (see [`pack_rhs`]).
     ///
     /// # Safety
     /// `r` must lie inside its operands.
-    unsafe fn product(self, r: kernel::Raw) {
+    unsafe fn run(self, r: kernel::Raw, pack: bool) {
+        let rhs = kernel::Rhs { b: r.b, rs: r.b_rs, cs: 1 };
         // SAFETY: the caller's guarantee; the token proves the instructions.
         unsafe {
-            match self {
-                Simd::Avx512(s) => kernel::product_avx512(s, r),
-                Simd::Avx2(s) => kernel::product_avx2(s, r),
+            match (self, pack) {
+                (Simd::Avx512(s), true) => kernel::packed_avx512(s, r, rhs),
+                (Simd::Avx512(s), false) => kernel::product_avx512(s, r),
+                (Simd::Avx2(s), true) => kernel::packed_avx2(s, r, rhs),
+                (Simd::Avx2(s), false) => kernel::product_avx2(s, r),
             }
         }
     }

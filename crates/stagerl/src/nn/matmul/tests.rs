@@ -91,19 +91,42 @@ fn check_backward_weight(rng: &mut Rng, (m, n, k): (usize, usize, usize)) {
     }
 }
 
-/// `dx = dy W[:, start..start + n]` for a weight `k x (start + n + after)`.
+/// `dx = dy W[:, start..start + n]` for a weight `k x (start + n + after)`, alone and fused with
+/// the backward pass of each activation (with and without the bias gradient).
 fn check_backward_input(rng: &mut Rng, (m, n, k): (usize, usize, usize), (start, after): (usize, usize)) {
     let w_rs = start + n + after;
     let (dy, weight) = (values(rng, m * k), values(rng, k * w_rs));
-    let want: Vec<f32> = (0..m * n)
+    let product: Vec<f32> = (0..m * n)
         .map(|e| chain(0.0, k, |p| (dy[e / n * k + p], weight[p * w_rs + start + e % n])))
-        .chain(std::iter::repeat_n(7.0, GUARD))
         .collect();
-    for level in LEVELS {
-        let mut dx = vec![f32::NAN; m * n + GUARD];
-        dx[m * n..].fill(7.0);
-        backward_input_at(level, (m, n, k), &mut dx, &dy, (&weight[start..], w_rs));
-        assert_same(&format!("backward_input {m}x{n}x{k} cols {start}.. of {w_rs} at {level:?}"), &dx, &want);
+    // Outputs of a previous layer: of either sign with zeros (ReLU), inside (-1, 1) (tanh).
+    let ys: Vec<f32> = values(rng, m * n).iter().map(|v| (v * 0.1).clamp(-0.99, 0.99)).collect();
+    let bias_grad0 = values(rng, n);
+    let derivs = [None, Some(Activation::Identity), Some(Activation::Relu), Some(Activation::Tanh)];
+    for (f, with_sum) in derivs.into_iter().flat_map(|f| [(f, false), (f, true)]) {
+        if f.is_none() && with_sum {
+            continue;
+        }
+        // The reference: the product, then the activation's own backward loop.
+        let (mut want, mut want_bias) = (product.clone(), bias_grad0.clone());
+        match (f, with_sum) {
+            (Some(f), true) => f.backward_sum(&ys, &mut want, &mut want_bias),
+            (Some(f), false) => f.backward(&ys, &mut want),
+            (None, _) => {}
+        }
+        want.extend(std::iter::repeat_n(7.0, GUARD));
+        for level in LEVELS {
+            let mut dx = vec![f32::NAN; m * n + GUARD];
+            dx[m * n..].fill(7.0);
+            let mut bias_grad = bias_grad0.clone();
+            let deriv = f.map(|f| Deriv { ys: &ys, f, bias_grad: with_sum.then_some(&mut bias_grad[..]) });
+            backward_input_at(level, (m, n, k), &mut dx, &dy, (&weight[start..], w_rs), deriv);
+            let what = format!(
+                "backward_input {m}x{n}x{k} cols {start}.. of {w_rs} {f:?} sum {with_sum} at {level:?}"
+            );
+            assert_same(&what, &dx, &want);
+            assert_same(&format!("{what}: bias gradient"), &bias_grad, &want_bias);
+        }
     }
 }
 
@@ -153,7 +176,7 @@ fn empty_products() {
         backward_weight_at(level, (3, 4, 0), &mut dw, &[], &[]);
         assert!(dw.iter().all(|&v| v == 2.5));
         let mut dx = vec![f32::NAN; 12];
-        backward_input_at(level, (3, 4, 0), &mut dx, &[], (&[], 4));
+        backward_input_at(level, (3, 4, 0), &mut dx, &[], (&[], 4), None);
         assert!(dx.iter().all(|v| v.to_bits() == 0));
         let mut y = vec![1.0f32; 4];
         forward_at(level, (0, 4, 3), &mut y, &[], &[0.0; 12], None);
@@ -177,7 +200,7 @@ fn f64_follows_the_same_order() {
         assert_eq!(v.to_bits(), want.to_bits());
     }
     let mut dw = vec![0.5; k * n];
-    backward_weight(k, n, m, &mut dw, &x, &y);
+    backward_weight((k, n, m), &mut dw, &x, &y);
     for (e, &v) in dw.iter().enumerate() {
         let (i, j) = (e / n, e % n);
         let want = (0..m).fold(0.5f64, |acc, p| x[p * k + i].mul_add(y[p * n + j], acc));
