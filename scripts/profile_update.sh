@@ -16,7 +16,8 @@ echo "$algo hidden $hidden: share of the update's samples"
 perf report -i "$data" --no-children --stdio --sort symbol 2>/dev/null | awk '
     /^ *[0-9.]+%/ {
         p = $1; sub("%", "", p); sym = $0
-        if (sym ~ /microkernel/) k = "matrix products (gemm micro-kernels)"
+        if (sym ~ /nn::matmul/) k = "matrix products (nn::matmul kernels, packing included)"
+        else if (sym ~ /microkernel/) k = "matrix products (gemm micro-kernels)"
         else if (sym ~ /pack|vectorize/) k = "packing (gemm)"
         else if (sym ~ /gemm/) k = "gemm set-up and dispatch"
         else if (sym ~ /adam/) k = "Adam"

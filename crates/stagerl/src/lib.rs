@@ -22,8 +22,9 @@
 //!   TensorBoard writer share).
 //! - [`view`]: planned trajectories as a self-contained, animated HTML 3D view.
 //! - [`rng`]: the seeded random generator every stochastic piece uses.
-//! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) on `gemm`; [`par`]:
-//!   the worker threads one run can split its updates over (same bits on any number).
+//! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) with its own
+//!   run-time-dispatched SIMD matrix kernels; [`par`]: the worker threads one run can split its
+//!   updates over (same bits on any number).
 //! - [`agent`]: TD3 (with DDPG as its one-critic case) and SAC; [`replay`]: their replay buffer;
 //!   [`her`]: their hindsight relabelling;
 //!   [`train`]: the off-policy loop and evaluation; [`rundir`]: the run directory; [`checkpoint`],

@@ -1,7 +1,8 @@
 //! Run-time SIMD dispatch for the element-wise loops of the training hot path.
 //!
 //! The release build targets baseline x86-64 (SSE2) so that it runs on any x86-64 CPU. The
-//! matrix products dispatch at run time inside `gemm`; the element-wise loops (bias and
+//! matrix products (`nn::matmul`) have their own AVX-512F and AVX2 + FMA kernels, chosen at
+//! run time by [`simd_level`] as well; the element-wise loops (bias and
 //! activation, their backward passes, Adam, Polyak averaging, norms, the squashed Gaussian head,
 //! the Box-Muller sampler) do the same through
 //! [`multiversion!`]: the loop is written once and compiled three times, for AVX-512F, for

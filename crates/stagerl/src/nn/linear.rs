@@ -2,7 +2,7 @@
 
 use std::ops::Range;
 
-use super::matmul::{matmul, Strides};
+use super::matmul;
 use super::{Activation, Scalar};
 use crate::par;
 use crate::rng::Rng;
@@ -11,8 +11,8 @@ use crate::rng::Rng;
 /// the kernels' row tiles.
 const ROW_ALIGN: usize = 8;
 
-/// Multiply-adds below which a product runs on one thread (about 5 us of work: waking a worker
-/// and waiting for it cost about 1 us).
+/// Multiply-adds below which a product runs on one thread (hidden 64 stays serial: its products
+/// are too short to gain from a second thread, whose results must also travel between caches).
 const PAR_MIN_MACS: usize = 1 << 22;
 
 /// A fully connected layer: `y = x W^T + b`.
@@ -67,35 +67,43 @@ impl Linear {
         }
     }
 
-    /// Forward pass: `y = x W^T + b`.
+    /// Forward pass: `y = x W^T + b`, i.e. `y[b, o] = sum over i of x[b, i] W[o, i]` (one fused
+    /// multiply-add chain in increasing `i`; the exact order: `super::matmul`) `+ bias[o]`.
     ///
     /// `params` is the whole flat parameter vector; `x` holds at least `batch * in` values,
     /// `y` at least `batch * out` values (extra values are left untouched).
     pub fn forward<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
-        self.forward_no_bias(params, x, batch, y);
-        let bias = &params[self.bias_range()];
-        Activation::Identity.add_bias_apply(&mut y[..batch * self.out_features], bias);
+        self.forward_act(params, x, batch, y, Activation::Identity);
     }
 
-    /// The product alone, `y = x W^T` (the caller adds the bias, possibly fused with an
-    /// activation: see [`Activation::add_bias_apply`]).
-    pub fn forward_no_bias<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
+    /// Forward pass with an activation: `y = f(x W^T + b)`, the same values as
+    /// [`Linear::forward_no_bias`] followed by [`Activation::add_bias_apply`] (the bias and
+    /// `Identity` or `Relu` are applied as the product's tiles are stored).
+    pub fn forward_act<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T], f: Activation) {
+        self.forward_rows(params, x, batch, y, Some((&params[self.bias_range()], f)));
+    }
+
+    /// `y = x W^T` (with the bias and activation of `bias_act`), its batch rows split over this
+    /// thread's pool when the product is large ([`par::split_rows_mut`]; the same values).
+    fn forward_rows<T: Scalar>(
+        &self,
+        params: &[T],
+        x: &[T],
+        batch: usize,
+        y: &mut [T],
+        bias_act: Option<(&[T], Activation)>,
+    ) {
         let (n_in, n_out) = (self.in_features, self.out_features);
         let w = &params[self.weight_range()];
         par::split_rows_mut(y, batch, n_out, ROW_ALIGN, n_in * n_out, PAR_MIN_MACS, &|r, y| {
-            matmul(
-                r.len(),
-                n_out,
-                n_in,
-                y,
-                Strides::row_major(n_out),
-                false,
-                &x[r.start * n_in..r.end * n_in],
-                Strides::row_major(n_in),
-                w,
-                Strides::transposed(n_in),
-            )
+            matmul::forward((r.len(), n_out, n_in), y, &x[r.start * n_in..r.end * n_in], w, bias_act)
         });
+    }
+
+    /// The product alone, `y = x W^T` (the caller adds the bias, possibly fused with an
+    /// activation: see [`Activation::add_bias_apply`], or use [`Linear::forward_act`]).
+    pub fn forward_no_bias<T: Scalar>(&self, params: &[T], x: &[T], batch: usize, y: &mut [T]) {
+        self.forward_rows(params, x, batch, y, None);
     }
 
     /// Accumulates the parameter gradients for upstream gradient `dy = dL/dy` (`batch x out`):
@@ -111,26 +119,12 @@ impl Linear {
         self.backward_weight(grads, x, dy, batch);
     }
 
-    /// The weight part of [`Linear::backward_params`] alone: `dW += dy^T x`.
+    /// The weight part of [`Linear::backward_params`] alone: `dW += dy^T x`, i.e.
+    /// `dW[o, i] += sum over b of dy[b, o] x[b, i]` (one chain from the old value, in increasing
+    /// `b`).
     pub fn backward_weight<T: Scalar>(&self, grads: &mut [T], x: &[T], dy: &[T], batch: usize) {
         let (n_in, n_out) = (self.in_features, self.out_features);
-        let (dy, x) = (&dy[..batch * n_out], &x[..batch * n_in]);
-        // Rows of dW (output features) apart: each keeps its whole sum over the batch.
-        let gw = &mut grads[self.weight_range()];
-        par::split_rows_mut(gw, n_out, n_in, 1, batch * n_in, PAR_MIN_MACS, &|r, gw| {
-            matmul(
-                r.len(),
-                n_in,
-                batch,
-                gw,
-                Strides::row_major(n_in),
-                true,
-                &dy[r.start..],
-                Strides::transposed(n_out),
-                x,
-                Strides::row_major(n_in),
-            )
-        });
+        matmul::backward_weight((n_out, n_in, batch), &mut grads[self.weight_range()], dy, x);
     }
 
     /// Gradient with respect to the input: `dx = dy W` (`batch x in`), overwriting `dx`.
@@ -138,8 +132,34 @@ impl Linear {
         self.backward_input_cols(params, dy, batch, 0..self.in_features, dx);
     }
 
+    /// [`Linear::backward_input`] fused with the backward pass of the activation `f` whose
+    /// outputs `ys` (`batch x in`) were this layer's input: `dx = (dy W) * f'` as
+    /// [`Activation::backward`] computes it, i.e. dL/dz of the previous layer; with
+    /// `bias_grad` (the previous layer's bias gradient, `in` values) also its column sums, as
+    /// [`Activation::backward_sum`] adds them. The same values as the separate calls.
+    pub fn backward_input_act<T: Scalar>(
+        &self,
+        params: &[T],
+        dy: &[T],
+        batch: usize,
+        dx: &mut [T],
+        (ys, f, bias_grad): (&[T], Activation, Option<&mut [T]>),
+    ) {
+        let (n_in, n_out) = (self.in_features, self.out_features);
+        let deriv = matmul::Deriv { ys, f, bias_grad };
+        matmul::backward_input(
+            (batch, n_in, n_out),
+            dx,
+            dy,
+            (&params[self.weight_range()], n_in),
+            Some(deriv),
+        );
+    }
+
     /// Gradient with respect to the input columns `cols` only: `dx = dy W[:, cols]`
-    /// (`batch x cols.len()`), overwriting `dx`; e.g. dQ/da when the input is `[obs | action]`.
+    /// (`batch x cols.len()`), overwriting `dx`, i.e. `dx[b, j] = sum over o of dy[b, o]
+    /// W[o, cols.start + j]` (one chain in increasing `o`); e.g. dQ/da when the input is
+    /// `[obs | action]`.
     ///
     /// # Panics
     /// If `cols` is not inside `0..in_features`.
@@ -153,21 +173,11 @@ impl Linear {
     ) {
         let (n_in, n_out) = (self.in_features, self.out_features);
         assert!(cols.start <= cols.end && cols.end <= n_in, "Linear: input columns out of range");
-        let width = cols.len();
-        let w = &params[self.weight_range()][cols.start..];
+        let (width, w) = (cols.len(), &params[self.weight_range()][cols.start..]);
+        // Batch rows apart (each row's values are its own; the same values on any split).
         par::split_rows_mut(dx, batch, width, ROW_ALIGN, width * n_out, PAR_MIN_MACS, &|r, dx| {
-            matmul(
-                r.len(),
-                width,
-                n_out,
-                dx,
-                Strides::row_major(width),
-                false,
-                &dy[r.start * n_out..r.end * n_out],
-                Strides::row_major(n_out),
-                w,
-                Strides::row_major(n_in),
-            )
+            let dy = &dy[r.start * n_out..r.end * n_out];
+            matmul::backward_input((r.len(), width, n_out), dx, dy, (w, n_in), None)
         });
     }
 }

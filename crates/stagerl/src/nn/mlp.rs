@@ -326,21 +326,29 @@ impl<T: Scalar> Mlp<T> {
         grow(&mut ws.grad_in, batch * in_width);
         let (mut cur, mut next) = (&mut ws.grad_a, &mut ws.grad_b);
         cur[..grad_out.len()].copy_from_slice(grad_out);
+        // Whether `cur` already holds dL/dz (the activation's backward pass fused into the
+        // previous step's input gradient).
+        let mut through_act = false;
         for l in (0..n_layers).rev() {
             let layer = layers[l];
             let n_out = batch * layer.out_features;
             let act = activations[usize::from(l + 1 == n_layers)];
             let x: &[T] = if l == 0 { &ws.input } else { &ws.acts[l - 1] };
-            if param_grads {
-                let bias_grad = &mut grads[layer.bias_range()];
-                act.backward_sum(&ws.acts[l][..n_out], &mut cur[..n_out], bias_grad);
-                layer.backward_weight(grads, x, cur, batch);
-            } else {
+            if !through_act && param_grads {
+                act.backward_sum(&ws.acts[l][..n_out], &mut cur[..n_out], &mut grads[layer.bias_range()]);
+            } else if !through_act {
                 act.backward(&ws.acts[l][..n_out], &mut cur[..n_out]);
             }
+            if param_grads {
+                layer.backward_weight(grads, x, cur, batch);
+            }
             if l > 0 {
-                layer.backward_input(params, cur, batch, next);
+                // dL/dz of layer l - 1, whose activation is the hidden one.
+                let bias_grad = param_grads.then(|| &mut grads[layers[l - 1].bias_range()]);
+                let ys = &ws.acts[l - 1][..batch * layer.in_features];
+                layer.backward_input_act(params, cur, batch, next, (ys, activations[0], bias_grad));
                 std::mem::swap(&mut cur, &mut next);
+                through_act = true;
             } else if let Some(cols) = input_cols.clone() {
                 layer.backward_input_cols(params, cur, batch, cols, &mut ws.grad_in);
             }
@@ -368,9 +376,8 @@ impl<T: Scalar> Net<'_, T> {
             let out = &mut rest[0];
             let n = batch * layer.out_features;
             grow(out, n);
-            layer.forward_no_bias(self.params, input, batch, out);
             let act = if l + 1 == n_layers { self.output } else { self.hidden };
-            act.add_bias_apply(&mut out[..n], &self.params[layer.bias_range()]);
+            layer.forward_act(self.params, input, batch, &mut out[..n], act);
         }
     }
 

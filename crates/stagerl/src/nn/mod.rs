@@ -9,10 +9,11 @@
 //!   a few slice helpers.
 //!
 //! Conventions: activations are row-major `batch x features`; weights are `[out, in]` as in
-//! PyTorch. Matrix products are `gemm::gemm` with `Parallelism::None` (single thread,
-//! deterministic); buffers only grow, so after a warm-up pass at the largest batch the engine's
-//! own forward, backward and optimiser code allocates nothing (gemm still allocates its own
-//! packing buffers, about two per large product).
+//! PyTorch. Matrix products run the engine's own kernels (`matmul`: single thread, run-time SIMD
+//! dispatch, every output element one fused multiply-add chain in a documented order, so the
+//! same bits at every SIMD level); buffers only grow, so after a warm-up pass at the largest
+//! batch the forward, backward and optimiser code allocates nothing (the products use stack
+//! buffers only).
 //!
 //! # Example: a critic regression and a DDPG-style actor update
 //! ```

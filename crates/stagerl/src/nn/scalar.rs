@@ -1,7 +1,8 @@
 //! The floating-point element type of the engine: [`Scalar`], implemented for `f32` and `f64`.
 //!
-//! Training runs in `f32`; the gradient checks run in `f64`. The trait is sealed because the
-//! matrix products go through `gemm::gemm`, which supports only these two real types.
+//! Training runs in `f32`; the gradient checks run in `f64`. The trait is sealed: the matrix
+//! products (`super::matmul`) run SIMD kernels for `f32` and portable loops for `f64`, and
+//! know no other type.
 
 use std::fmt::{Debug, Display};
 use std::iter::Sum;
@@ -13,9 +14,35 @@ use serde::Serialize;
 pub use crate::math::tanh_f32;
 
 mod sealed {
-    pub trait Sealed {}
-    impl Sealed for f32 {}
-    impl Sealed for f64 {}
+    /// Only `f32` and `f64`; lets the matrix products find their `f32` kernels.
+    pub trait Sealed: Sized {
+        /// The slice as `f32` values, if `Self` is `f32`.
+        #[doc(hidden)]
+        fn as_f32(s: &[Self]) -> Option<&[f32]>;
+        /// The slice as `f32` values, if `Self` is `f32`.
+        #[doc(hidden)]
+        fn as_f32_mut(s: &mut [Self]) -> Option<&mut [f32]>;
+    }
+    impl Sealed for f32 {
+        #[inline]
+        fn as_f32(s: &[f32]) -> Option<&[f32]> {
+            Some(s)
+        }
+        #[inline]
+        fn as_f32_mut(s: &mut [f32]) -> Option<&mut [f32]> {
+            Some(s)
+        }
+    }
+    impl Sealed for f64 {
+        #[inline]
+        fn as_f32(_: &[f64]) -> Option<&[f32]> {
+            None
+        }
+        #[inline]
+        fn as_f32_mut(_: &mut [f64]) -> Option<&mut [f32]> {
+            None
+        }
+    }
 }
 
 /// A real floating-point type the engine computes in (`f32` or `f64`).
@@ -82,6 +109,9 @@ pub trait Scalar:
     fn min(self, other: Self) -> Self;
     /// Neither infinite nor NaN.
     fn is_finite(self) -> bool;
+    /// `self * a + b` rounded once (a fused multiply-add; computed in software, slowly, where
+    /// the CPU or the build lacks the instruction).
+    fn mul_add(self, a: Self, b: Self) -> Self;
 
     /// softplus(x) = ln(1 + e^x), computed as max(x, 0) + ln(1 + e^-|x|) so that it neither
     /// overflows for large x nor loses precision for very negative x.
@@ -156,6 +186,10 @@ macro_rules! impl_scalar {
             #[inline]
             fn is_finite(self) -> bool {
                 <$t>::is_finite(self)
+            }
+            #[inline]
+            fn mul_add(self, a: Self, b: Self) -> Self {
+                <$t>::mul_add(self, a, b)
             }
         }
     };
