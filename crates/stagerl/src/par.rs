@@ -53,6 +53,8 @@ struct Shared {
     asleep: Vec<AtomicBool>,
     /// The first panic of a worker's task, re-raised by the caller.
     panic: Mutex<Option<Box<dyn std::any::Any + Send>>>,
+    /// Workers that have started running (`Pool::new` waits for all).
+    started: AtomicUsize,
 }
 
 #[derive(Clone, Copy)]
@@ -93,6 +95,7 @@ impl Pool {
             shutdown: AtomicBool::new(false),
             asleep: (1..threads).map(|_| AtomicBool::new(false)).collect(),
             panic: Mutex::new(None),
+            started: AtomicUsize::new(0),
         });
         let mut handles = Vec::with_capacity(threads - 1);
         for w in 0..threads - 1 {
@@ -105,6 +108,11 @@ impl Pool {
                 })?;
             let t = h.thread().clone();
             handles.push((h, t));
+        }
+        // Wait until every worker runs, so that starting a thread (which allocates) is over
+        // before the pool's first job.
+        while shared.started.load(Acquire) < threads - 1 {
+            std::thread::yield_now();
         }
         Ok(Pool { shared, threads: handles, busy: Mutex::new(()) })
     }
@@ -204,6 +212,7 @@ fn run_task(s: &Shared, f: &(dyn Fn(usize) + Sync), k: usize) {
 }
 
 fn worker(s: &Shared, w: usize) {
+    s.started.fetch_add(1, Release);
     let mut seen = 0u64;
     loop {
         let mut spins = 0u32;

@@ -15,8 +15,14 @@ thread_local! {
     static COUNT: Cell<usize> = const { Cell::new(0) };
 }
 
+/// Allocations made by the worker threads of `stagerl::par` pools (only one test makes a pool).
+static WORKERS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
 fn count() {
     let _ = COUNT.try_with(|c| c.set(c.get() + 1));
+    if std::thread::current().name().is_some_and(|n| n.starts_with("stagerl-worker")) {
+        WORKERS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
 }
 
 /// Allocations made by the calling thread so far.
@@ -60,11 +66,17 @@ fn no_allocation_in(algo: Algo, hidden: usize, updates: usize) {
         agent.update(&batch);
     }
     let before = allocs();
+    let workers = WORKERS.load(std::sync::atomic::Ordering::Relaxed);
     let mut loss = 0.0;
     for _ in 0..updates {
         loss += agent.update(&batch).critic_loss;
     }
     let after = allocs();
+    // Only the test with a pool has workers (tests run at once: others' warm-ups would count).
+    if stagerl::par::current_threads() > 1 {
+        let on_workers = WORKERS.load(std::sync::atomic::Ordering::Relaxed) - workers;
+        assert_eq!(on_workers, 0, "allocations on pool workers during {updates} {algo:?} updates");
+    }
     assert!(loss.is_finite());
     assert_eq!(after - before, 0, "allocations during {updates} {algo:?} updates at hidden {hidden}");
     drop(std::hint::black_box(vec![1u8; 8]));
@@ -85,4 +97,19 @@ fn td3_updates_allocate_nothing() {
 #[test]
 fn ddpg_updates_allocate_nothing() {
     no_allocation_in(Algo::Ddpg, 64, 20);
+}
+
+/// On two threads (twin critics at once, wide products split): after the warm-up (whose buffers
+/// may grow on either thread) nothing allocates on the caller or on the pool's worker.
+#[test]
+fn updates_on_two_threads_allocate_nothing() {
+    let pool = stagerl::par::Pool::new(2).unwrap();
+    let split = stagerl::par::split_jobs();
+    stagerl::par::install(Some(&pool), || {
+        for algo in [Algo::Sac, Algo::Td3, Algo::Ddpg] {
+            no_allocation_in(algo, 64, 10);
+        }
+        no_allocation_in(Algo::Sac, 256, 2);
+    });
+    assert!(stagerl::par::split_jobs() > split, "work went to the worker");
 }
