@@ -33,14 +33,16 @@
 //! the last column panel as narrow as its columns allow (8 x 48, 12 x 32, 24 x 16, so outputs of
 //! 1, 6, 12 or 22 columns waste at most one partial vector); AVX2 + FMA: 6 x 16 and 12 x 8.
 //! Partial vectors are masked, the remaining rows one tile of their own. `forward` packs `W^T`
-//! per call into a stack buffer of 128 x 64 values (depth x columns, 8 x 8 transposes), and
-//! fuses the bias and `Identity` or `Relu` into its stores; `backward_weight` and
-//! `backward_input` read their right-hand side in place (its rows are contiguous along the
-//! output columns) unless the rows are 128 values apart or more and there are 32 output rows
-//! or more, where they copy it into the same stack buffer (rows that far apart compete for the
-//! same cache sets). The one-column forward product runs one 16-lane dot product a row, four
-//! rows at a time. `f64` (the gradient checks) and `f32` without AVX2 + FMA use the portable
-//! loops. Nothing allocates. `benches/nn_matmul.rs` times the kernels against `gemm`.
+//! per call into a stack buffer of 8192 values (blocks of 128 x 64, depth x columns, or
+//! 256 x 32 beyond depth 128; 8 x 8 transposes) and fuses the bias and `Identity` or `Relu`
+//! into its stores; `backward_input` likewise fuses the previous layer's activation backward
+//! pass and bias gradient ([`Deriv`]). `backward_weight` and `backward_input` read their
+//! right-hand side in place (its rows are contiguous along the output columns) unless the rows
+//! are 128 values apart or more and there are 32 output rows or more, where they copy it into
+//! the same stack buffer (rows that far apart compete for the same cache sets). The one-column
+//! forward product runs one 16-lane dot product a row, four rows at a time. `f64` (the gradient
+//! checks) and `f32` without AVX2 + FMA use the portable loops. Nothing allocates.
+//! `benches/nn_matmul.rs` times the kernels against `gemm`.
 
 use super::{Activation, Scalar};
 use crate::simd::SimdLevel;
