@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Stable-Baselines3's end-to-end training throughput on stagerl's task, the reference of
 `stagerl bench train` (issue 10): environment steps per second with one gradient step per
-environment step, hidden 64 x 64, batch 256, 1000 random steps first, one thread.
+environment step, hidden 64 x 64, batch 256, 1000 random steps first, one thread (or --threads).
 
 Not part of the tests (torch is heavy). In a venv with torch, stable-baselines3 and this
 project's package (`pip install ./python`), in the same session as the Rust figures:
@@ -27,8 +27,9 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--algo", nargs="+", default=["sac", "ddpg", "td3"])
     p.add_argument("--steps", type=int, default=5000, help="timed steps after the 1000 random ones")
+    p.add_argument("--threads", type=int, default=1, help="torch's intra-op threads (stagerl: --threads)")
     args = p.parse_args()
-    torch.set_num_threads(1)
+    torch.set_num_threads(args.threads)
     for algo in args.algo:
         env = gym.make("stagerl/Reach-v0", reward="sar")
         cls = {"sac": sb3.SAC, "ddpg": sb3.DDPG, "td3": sb3.TD3}[algo]
