@@ -5,8 +5,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::mem::MaybeUninit;
 
-use stagerl::nalgebra::Vector3;
-use stagerl::reward::{RewardConfig, RewardInput, RewardTerms};
+use stagerl::reward::batch::{compute_rows, Rows, COLUMNS};
+use stagerl::reward::{RewardConfig, RewardTerms};
 
 use crate::{bad_arg, contiguous, guard, to_py};
 
@@ -78,7 +78,7 @@ pub fn compute<'py>(
     if cfg.direction == stagerl::reward::DirectionSource::Displacement && prev.is_none() {
         return Err(bad_arg("prev_ee_pos", "None", "an (N, 3) array when direction = \"displacement\""));
     }
-    let rows = Rows { p, q, t, v, j, prev };
+    let rows = Rows::new(p, q, t, v, j, prev).map_err(to_py)?;
     match (out, out_reached) {
         (Some(out), Some(out_reached)) => {
             compute_into(py, &cfg, dt_s, &rows, n, &out, &out_reached)?;
@@ -202,31 +202,6 @@ const KEYS: usize = 12;
 /// Rows of the inputs below which one thread computes them all.
 const ROWS_PER_THREAD: usize = 1 << 16;
 
-/// The inputs of `compute`, row-major: `j` joint velocities per row.
-struct Rows<'a> {
-    p: &'a [f64],
-    q: &'a [f64],
-    t: &'a [f64],
-    v: &'a [f64],
-    j: usize,
-    prev: Option<&'a [f64]>,
-}
-
-impl<'a> Rows<'a> {
-    /// Row `i` as the reward's input.
-    #[inline(always)]
-    fn input(&self, i: usize) -> RewardInput<'a> {
-        let v3 = |a: &[f64]| Vector3::new(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
-        RewardInput {
-            ee_pos: v3(self.p),
-            ee_quat: [self.q[4 * i], self.q[4 * i + 1], self.q[4 * i + 2], self.q[4 * i + 3]],
-            target: v3(self.t),
-            joint_vel: &self.v[self.j * i..self.j * (i + 1)],
-            prev_ee_pos: self.prev.map(v3),
-        }
-    }
-}
-
 /// Every row into `cols` (the reported terms but `reached`, in order) and `reached`, on up to
 /// one thread per core for large inputs (each row is computed alone, so the split changes no
 /// value); the first bad row's error.
@@ -250,60 +225,14 @@ fn compute_parallel(
             let mine: Vec<&mut [MaybeUninit<f64>]> =
                 col_chunks.iter_mut().filter_map(Iterator::next).collect();
             let r = reached_chunks.next().expect("one chunk per thread");
-            handles.push(s.spawn(move || compute_rows(cfg, dt_s, rows, k * chunk, mine, r)));
+            let mut mine: [&mut [MaybeUninit<f64>]; COLUMNS] =
+                mine.try_into().expect("one chunk per reported term but `reached`");
+            handles.push(s.spawn(move || {
+                compute_rows(cfg, dt_s, rows, k * chunk, &mut mine, r)
+                    .map_err(|bad| pyo3::exceptions::PyValueError::new_err(bad.to_string()))
+            }));
         }
         // In row order, so the error returned is the first bad row's.
         handles.into_iter().try_for_each(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
     })
-}
-
-/// The `ValueError` of row `i`, which failed `try_compute`'s checks: its input built again, so
-/// that the caller's copy never needs an address.
-#[cold]
-#[inline(never)]
-fn row_error(cfg: &RewardConfig, dt_s: f64, rows: &Rows<'_>, i: usize) -> PyErr {
-    let e = match RewardTerms::try_compute(cfg, dt_s, &rows.input(i)) {
-        Err(e) => e.to_string(),
-        Ok(_) => {
-            "refused by the batch checks but not by try_compute (a bug in stagerl; please report it)".into()
-        }
-    };
-    pyo3::exceptions::PyValueError::new_err(format!("row {i}: {e}"))
-}
-
-/// Rows `start..start + reached.len()`, every value of `cols` (one column chunk per reported term
-/// but `reached`) written unless a row is refused.
-fn compute_rows(
-    cfg: &RewardConfig,
-    dt_s: f64,
-    rows: &Rows<'_>,
-    start: usize,
-    mut cols: Vec<&mut [MaybeUninit<f64>]>,
-    reached: &mut [bool],
-) -> PyResult<()> {
-    let cols: &mut [&mut [MaybeUninit<f64>]; KEYS - 1] =
-        cols.as_mut_slice().try_into().expect("one chunk per reported term but `reached`");
-    for (k, done) in reached.iter_mut().enumerate() {
-        let i = start + k;
-        let input = rows.input(i);
-        // The checks of `try_compute`, with its error built only for a row that fails them (so
-        // that `input` stays in registers: a 16-byte load of values stored 8 bytes at a time for
-        // the error path stalled each row).
-        if !input.is_valid() {
-            return Err(row_error(cfg, dt_s, rows, i));
-        }
-        let terms = RewardTerms::compute(cfg, dt_s, &input);
-        if !terms.all_finite() {
-            return Err(row_error(cfg, dt_s, rows, i));
-        }
-        *done = terms.reached;
-        // `reached`, the second reported term, has its own bool column (tested from Python:
-        // `test_keys_are_the_cli_order` in python/tests/test_rewards.py).
-        let [(_, distance), _reached, rest @ ..] = terms.reported();
-        cols[0][k].write(distance);
-        for (col, (_, x)) in cols[1..].iter_mut().zip(rest) {
-            col[k].write(x);
-        }
-    }
-    Ok(())
 }

@@ -15,6 +15,8 @@ use std::str::FromStr;
 
 use crate::{Error, Result};
 
+pub mod batch;
+
 /// Which reward the agent is trained on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -311,12 +313,51 @@ impl Serialize for Reported {
 /// degenerate (|V_PT| < 1e-12 or |V_PP'| < 1e-9), as the design notes fix.
 #[inline]
 pub fn angle_between(expected: &Vector3<f64>, actual: &Vector3<f64>) -> f64 {
+    angle_from_cosine(cosine_between(expected, actual))
+}
+
+/// What [`cosine_between`] returns for a degenerate pair: outside acos's domain, so that no
+/// cosine can take its place (a NaN cosine stays NaN).
+pub(crate) const DEGENERATE: f64 = 2.0;
+
+/// cos phi of eq. 5 clamped to [-1, 1] (NaN where the input overflows), or [`DEGENERATE`]: the
+/// half of [`angle_between`] before its `acos` (split so that batches can run the cheap halves
+/// as vector loops).
+#[inline(always)]
+pub(crate) fn cosine_between(expected: &Vector3<f64>, actual: &Vector3<f64>) -> f64 {
     let ne = expected.norm();
     let na = actual.norm();
     if ne < 1e-12 || na < 1e-9 {
-        return 0.0;
+        return DEGENERATE;
     }
-    (expected.dot(actual) / (ne * na)).clamp(-1.0, 1.0).acos()
+    (expected.dot(actual) / (ne * na)).clamp(-1.0, 1.0)
+}
+
+/// phi from [`cosine_between`]'s value: 0 for [`DEGENERATE`], else its `acos`.
+#[inline(always)]
+pub(crate) fn angle_from_cosine(cosine: f64) -> f64 {
+    if cosine > 1.0 {
+        0.0
+    } else {
+        cosine.acos()
+    }
+}
+
+/// cos phi of eqs. 3-5 for `input` (see [`cosine_between`]), `to_target` being `T - P`: the
+/// quaternion's axis against `T - P`, or the step's displacement against `T - P_prev`
+/// ([`DEGENERATE`] without `prev_ee_pos`).
+#[inline(always)]
+pub(crate) fn direction_cosine(cfg: &RewardConfig, input: &RewardInput<'_>, to_target: &Vector3<f64>) -> f64 {
+    match cfg.direction {
+        DirectionSource::Quaternion => {
+            let [x, y, z, _w] = input.ee_quat;
+            cosine_between(to_target, &Vector3::new(x, y, z))
+        }
+        DirectionSource::Displacement => match input.prev_ee_pos {
+            Some(prev) => cosine_between(&(input.target - prev), &(input.ee_pos - prev)),
+            None => DEGENERATE,
+        },
+    }
 }
 
 /// Eq. 6: R_direction = fold(phi) / 2 pi, where fold(phi) = phi when phi < pi/2, else pi - phi.
@@ -363,28 +404,26 @@ impl RewardTerms {
     /// to `sin(acos(w))` for a unit quaternion, and free of its cancellation near w = 1).
     #[inline(always)]
     pub fn compute(cfg: &RewardConfig, dt_s: f64, input: &RewardInput<'_>) -> RewardTerms {
-        // Eqs. 1-2.
         let to_target = input.target - input.ee_pos;
-        let distance = to_target.norm();
+        let distance = to_target.norm(); // eq. 1's D_PT
+        let phi = angle_from_cosine(direction_cosine(cfg, input, &to_target));
+        let movement = movement_reward(input.joint_vel, dt_s);
+        RewardTerms::from_parts(cfg, distance, phi, movement)
+    }
+
+    /// Every term from D_PT (`distance`, metres), phi (radians) and R_move: the rest of
+    /// [`RewardTerms::compute`], eqs. 1-18 in order.
+    #[inline(always)]
+    pub(crate) fn from_parts(cfg: &RewardConfig, distance: f64, phi: f64, movement: f64) -> RewardTerms {
+        // Eqs. 1-2.
         let reached = distance < cfg.beta_m;
         let position = f64::from(u8::from(reached)) - distance;
 
-        // Eqs. 3-6.
-        let phi = match cfg.direction {
-            DirectionSource::Quaternion => {
-                let [x, y, z, _w] = input.ee_quat;
-                angle_between(&to_target, &Vector3::new(x, y, z))
-            }
-            DirectionSource::Displacement => match input.prev_ee_pos {
-                Some(prev) => angle_between(&(input.target - prev), &(input.ee_pos - prev)),
-                None => 0.0,
-            },
-        };
+        // Eqs. 3-6 (phi from `direction_cosine`).
         let direction = direction_reward(phi, cfg.direction_fold);
         let posture = position - direction; // eq. 7
 
-        // Eqs. 8-10.
-        let movement = movement_reward(input.joint_vel, dt_s);
+        // Eqs. 8-10 (R_move from `movement_reward`).
         let stride = position - movement;
 
         // Eqs. 11-12.
