@@ -118,7 +118,7 @@ fn train_whose_output_closes_saves_the_run_and_says_how_to_resume() {
         .unwrap()
         .parse()
         .unwrap();
-    assert!(episode % 5 == 0 && episode < 300, "{err}");
+    assert!(episode.is_multiple_of(5) && episode < 300, "{err}");
     assert!(dir.join("checkpoints/latest.safetensors").exists());
     assert!(!dir.join("checkpoints/final.safetensors").exists());
 

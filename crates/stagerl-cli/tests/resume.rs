@@ -57,7 +57,7 @@ fn sigkills_then_resume(name: &str, config: &str) {
     let mut target = 0u64;
     for k in 0..3 {
         target += 25 + rng.below(60);
-        if target % 20 == 0 {
+        if target.is_multiple_of(20) {
             target += 7;
         }
         let mut cmd = bin();

@@ -195,7 +195,7 @@ mod tests {
             assert_eq!(batch.act[r], -x);
             assert_eq!(batch.reward[r], x);
             assert_eq!(batch.next_obs[2 * r], x + 1.0);
-            assert_eq!(batch.terminal[r], f32::from(u8::from((x as usize) % 3 == 0)));
+            assert_eq!(batch.terminal[r], f32::from(u8::from((x as usize).is_multiple_of(3))));
             assert!(x < 40.0);
         }
     }

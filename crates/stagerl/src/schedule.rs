@@ -68,14 +68,14 @@ impl TrainConfig {
     /// the last one.
     pub fn is_eval_point(&self, episode: u64) -> bool {
         let every = self.eval_every_episodes;
-        every > 0 && (episode % every == 0 || episode == self.episodes)
+        every > 0 && (episode.is_multiple_of(every) || episode == self.episodes)
     }
 
     /// The run writes `latest.safetensors` after this episode: every
     /// `checkpoint_every_episodes`, but the last (the end of the run saves it anyway).
     pub fn is_checkpoint_point(&self, episode: u64) -> bool {
         let k = self.checkpoint_every_episodes;
-        k > 0 && episode % k == 0 && episode < self.episodes
+        k > 0 && episode.is_multiple_of(k) && episode < self.episodes
     }
 }
 

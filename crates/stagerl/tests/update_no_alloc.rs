@@ -1,51 +1,15 @@
 //! A warmed-up SAC, TD3 or DDPG update allocates nothing (the matrix products included: their
 //! packing buffers are on the stack): counted with a global allocator.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+mod common;
 
+use common::allocs;
 use stagerl::agent::{build_off_policy, AgentConfig, Algo};
 use stagerl::replay::Batch;
 use stagerl::rng::Rng;
 
-struct Counting;
-
-thread_local! {
-    /// Allocations made by this thread (tests run in parallel threads).
-    static COUNT: Cell<usize> = const { Cell::new(0) };
-}
-
-/// Allocations made by the worker threads of `stagerl::par` pools (only one test makes a pool).
-static WORKERS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-
-fn count() {
-    let _ = COUNT.try_with(|c| c.set(c.get() + 1));
-    if std::thread::current().name().is_some_and(|n| n.starts_with("stagerl-worker")) {
-        WORKERS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    }
-}
-
-/// Allocations made by the calling thread so far.
-fn allocs() -> usize {
-    COUNT.with(Cell::get)
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: common::Counting = common::Counting;
 
 /// As `stagerl bench update`: observations 16, actions 6, a random batch of 256.
 fn no_allocation_in(algo: Algo, hidden: usize, updates: usize) {
@@ -66,7 +30,7 @@ fn no_allocation_in(algo: Algo, hidden: usize, updates: usize) {
         agent.update(&batch);
     }
     let before = allocs();
-    let workers = WORKERS.load(std::sync::atomic::Ordering::Relaxed);
+    let workers = common::worker_allocs();
     let mut loss = 0.0;
     for _ in 0..updates {
         loss += agent.update(&batch).critic_loss;
@@ -74,7 +38,7 @@ fn no_allocation_in(algo: Algo, hidden: usize, updates: usize) {
     let after = allocs();
     // Only the test with a pool has workers (tests run at once: others' warm-ups would count).
     if stagerl::par::current_threads() > 1 {
-        let on_workers = WORKERS.load(std::sync::atomic::Ordering::Relaxed) - workers;
+        let on_workers = common::worker_allocs() - workers;
         assert_eq!(on_workers, 0, "allocations on pool workers during {updates} {algo:?} updates");
     }
     assert!(loss.is_finite());

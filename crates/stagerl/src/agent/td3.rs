@@ -215,7 +215,7 @@ impl OffPolicy for Td3 {
 
         // 3. Delayed actor and targets.
         let mut actor_loss = None;
-        if self.updates % u64::from(self.family.policy_delay) == 0 {
+        if self.updates.is_multiple_of(u64::from(self.family.policy_delay)) {
             let q1 = &mut self.critics[0];
             let mu = self.actor.forward(&batch.obs, b);
             concat_cols(&batch.obs, od, mu, ad, b, &mut self.critic_in);

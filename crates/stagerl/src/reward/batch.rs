@@ -54,7 +54,7 @@ impl<'a> Rows<'a> {
         if joints == 0 {
             return Err(Error::config("joints", 0, "one or more joints per row"));
         }
-        if ee_pos.len() % 3 != 0 {
+        if !ee_pos.len().is_multiple_of(3) {
             return Err(Error::InvalidInput(format!("ee_pos has {} values, not 3 per row", ee_pos.len())));
         }
         let n = ee_pos.len() / 3;

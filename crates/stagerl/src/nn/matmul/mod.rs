@@ -47,13 +47,11 @@
 use super::{Activation, Scalar};
 use crate::simd::SimdLevel;
 
-// The AVX-512 intrinsics are stable since Rust 1.89, as is the `avx512f` target feature that
-// `crate::simd` already enables: the workspace's declared `rust-version` (1.85) is older.
+// The AVX-512 intrinsics and the `avx512f` target feature are stable since Rust 1.89, the
+// workspace's `rust-version`.
 #[cfg(target_arch = "x86_64")]
-#[clippy::msrv = "1.89"]
 mod kernel;
 #[cfg(target_arch = "x86_64")]
-#[clippy::msrv = "1.89"]
 mod lanes;
 mod portable;
 
