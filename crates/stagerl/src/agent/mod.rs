@@ -162,9 +162,20 @@ pub(crate) fn fit_critic(
     dq: &mut [f32],
     max_grad_norm: f64,
 ) -> f64 {
+    q.forward(input, y.len());
+    fit_forwarded(q, opt, y, dq, max_grad_norm)
+}
+
+/// [`fit_critic`] after its forward pass: `q`'s last forward output against `y`, backward, Adam.
+pub(crate) fn fit_forwarded(
+    q: &mut Mlp<f32>,
+    opt: &mut Adam<f32>,
+    y: &[f32],
+    dq: &mut [f32],
+    max_grad_norm: f64,
+) -> f64 {
     let b = y.len();
-    let pred = q.forward(input, b);
-    let loss = crate::nn::mse_loss(pred, y, &mut dq[..b]);
+    let loss = crate::nn::mse_loss(q.output(), y, &mut dq[..b]);
     q.zero_grad();
     q.backward(&dq[..b]);
     step(q, opt, max_grad_norm);

@@ -18,7 +18,9 @@
 
 use super::noise::ActionNoise;
 use super::parts::learned_parts;
-use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats};
+use super::{
+    fit_forwarded, sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats,
+};
 use crate::nn::{concat_cols, Activation, Adam, Mlp};
 use crate::par;
 use crate::replay::Batch;
@@ -71,20 +73,23 @@ pub struct Td3 {
     noise: ActionNoise,
     rng: Rng,
     updates: u64,
+    /// `[s | a]` rows for the critics (the target side has its own, `critic_in_next`).
     critic_in: Vec<f32>,
+    critic_in_next: Vec<f32>,
     a_next: Vec<f32>,
     /// Standard normal draws of the target policy smoothing (`batch x act`).
     smoothing_noise: Vec<f64>,
     y: Vec<f32>,
     dq: Vec<f32>,
-    /// Per critic: its target's values and its loss gradient (the critics run at once on a
-    /// pool's threads, see `stagerl::par`), and its last loss.
+    /// Per critic: its target's values on the batch.
+    q_next: Vec<Vec<f32>>,
+    /// Per critic: its loss gradient (the critics run at once on a pool's threads, see
+    /// `stagerl::par`) and its last loss.
     scratch: Vec<CriticScratch>,
 }
 
 /// One critic's buffers for an update.
 struct CriticScratch {
-    q_next: Vec<f32>,
     dq: Vec<f32>,
     loss: f64,
 }
@@ -115,12 +120,14 @@ impl Td3 {
             rng: Rng::derived(seed, family.salts.1),
             updates: 0,
             critic_in: vec![0.0; b * (obs_dim + act_dim)],
+            critic_in_next: vec![0.0; b * (obs_dim + act_dim)],
             a_next: vec![0.0; b * act_dim],
             smoothing_noise: vec![0.0; b * act_dim],
             y: vec![0.0; b],
             dq: vec![0.0; b],
+            q_next: vec![vec![0.0; b]; family.critics.len()],
             scratch: (0..family.critics.len())
-                .map(|_| CriticScratch { q_next: vec![0.0; b], dq: vec![0.0; b], loss: 0.0 })
+                .map(|_| CriticScratch { dq: vec![0.0; b], loss: 0.0 })
                 .collect(),
             family,
             cfg: cfg.clone(),
@@ -168,12 +175,108 @@ impl Agent for Td3 {
 
 impl OffPolicy for Td3 {
     fn update(&mut self, batch: &Batch) -> UpdateStats {
-        let (b, od, ad) = (batch.size, self.obs_dim, self.act_dim);
-        let gamma = self.cfg.gamma as f32;
+        let b = batch.size;
         self.updates += 1;
+        let actor_due = self.updates.is_multiple_of(u64::from(self.family.policy_delay));
+        let Td3 { actor, critics, critic_opts, scratch, critic_in, .. } = self;
 
+        // 1-2. The targets y (steps 1 and 2's target), while the critics' forward passes on
+        // (s, a) run on a second thread (with a pool; the results do not depend on it).
+        let (od, ad) = (self.obs_dim, self.act_dim);
+        let mut targets = Targets {
+            family: &self.family,
+            gamma: self.cfg.gamma as f32,
+            actor: &mut self.actor_target,
+            critics: &mut self.critic_targets,
+            rng: &mut self.rng,
+            smoothing_noise: &mut self.smoothing_noise,
+            a_next: &mut self.a_next,
+            critic_in: &mut self.critic_in_next,
+            q_next: &mut self.q_next,
+            y: &mut self.y,
+        };
+        par::join(
+            || targets.compute(batch, od, ad),
+            || {
+                concat_cols(&batch.obs, od, &batch.act, ad, b, critic_in);
+                for q in critics.iter_mut() {
+                    q.forward(critic_in, b);
+                }
+            },
+        );
+
+        // 2. Each critic minimises its error. One critic shares the step with the actor's forward
+        // pass mu(s) when the actor is due; two run at once.
+        let n = self.cfg.max_grad_norm;
+        let y = &self.y[..b];
+        let mut mu_done = false;
+        if let ([q], [opt], [s]) = (&mut critics[..], &mut critic_opts[..], &mut scratch[..]) {
+            let actor_forward = || {
+                if actor_due {
+                    actor.forward(&batch.obs, b);
+                    mu_done = true;
+                }
+            };
+            par::join(|| s.loss = fit_forwarded(q, opt, y, &mut s.dq, n), actor_forward);
+        } else {
+            par::for_each_mut3(critics, critic_opts, scratch, &|_, q, opt, s| {
+                s.loss = fit_forwarded(q, opt, y, &mut s.dq, n)
+            });
+        }
+        let mut critic_loss = 0.0;
+        for s in scratch.iter() {
+            critic_loss += s.loss;
+        }
+
+        // 3. Delayed actor and targets.
+        let mut actor_loss = None;
+        if actor_due {
+            if !mu_done {
+                actor.forward(&batch.obs, b);
+            }
+            concat_cols(&batch.obs, od, actor.output(), ad, b, critic_in);
+            let q1 = &mut critics[0];
+            let q = q1.forward(critic_in, b);
+            actor_loss = Some(-q.iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64);
+            self.dq[..b].fill(-1.0 / b as f32);
+            let da = q1.input_grad_cols(&self.dq[..b], od..od + ad);
+            actor.zero_grad();
+            actor.backward(da);
+            step(actor, &mut self.actor_opt, n);
+            let tau = self.cfg.tau as f32;
+            self.actor_target.polyak_from(actor, tau);
+            let critics = &*critics;
+            par::for_each_mut(&mut self.critic_targets, &mut scratch[..], &|k, t, _| {
+                t.polyak_from(&critics[k], tau)
+            });
+        }
+
+        let critic_loss = critic_loss / critics.len() as f64;
+        UpdateStats { critic_loss, actor_loss, alpha: None, entropy: None }
+    }
+}
+
+/// The target side of an update: the target networks and their buffers.
+struct Targets<'a> {
+    family: &'a Family,
+    gamma: f32,
+    actor: &'a mut Mlp<f32>,
+    critics: &'a mut [Mlp<f32>],
+    rng: &'a mut Rng,
+    smoothing_noise: &'a mut [f64],
+    a_next: &'a mut [f32],
+    critic_in: &'a mut Vec<f32>,
+    /// Per target critic: its values on the batch.
+    q_next: &'a mut [Vec<f32>],
+    y: &'a mut [f32],
+}
+
+impl Targets<'_> {
+    /// Steps 1 and 2's target: `y = r + gamma (1 - d) min_i Q_i'(s', a')`.
+    fn compute(&mut self, batch: &Batch, od: usize, ad: usize) {
+        let b = batch.size;
         // 1. Target action, smoothed for TD3.
-        let mu_next = self.actor_target.predict(&batch.next_obs, b);
+        let mu_next = self.actor.predict(&batch.next_obs, b);
         let a_next = match self.family.target_smoothing {
             Some((sigma, c)) => {
                 let z = &mut self.smoothing_noise[..b * ad];
@@ -186,56 +289,21 @@ impl OffPolicy for Td3 {
             }
             None => mu_next,
         };
-        concat_cols(&batch.next_obs, od, a_next, ad, b, &mut self.critic_in);
+        concat_cols(&batch.next_obs, od, a_next, ad, b, self.critic_in);
 
-        // 2. Critics, towards the smallest target critic.
-        let ci = &self.critic_in;
-        par::for_each_mut(&mut self.critic_targets, &mut self.scratch, &|_, t, s| {
-            s.q_next[..b].copy_from_slice(t.predict(ci, b))
-        });
-        self.y[..b].copy_from_slice(&self.scratch[0].q_next[..b]);
-        for s in &self.scratch[1..] {
-            for (y, &q) in self.y[..b].iter_mut().zip(&s.q_next[..b]) {
+        // 2. Towards the smallest target critic.
+        let ci = &*self.critic_in;
+        par::for_each_mut(self.critics, self.q_next, &|_, t, q| q[..b].copy_from_slice(t.predict(ci, b)));
+        let y = &mut self.y[..b];
+        y.copy_from_slice(&self.q_next[0][..b]);
+        for q in &self.q_next[1..] {
+            for (y, &q) in y.iter_mut().zip(&q[..b]) {
                 *y = y.min(q);
             }
         }
         for i in 0..b {
-            self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * self.y[i];
+            y[i] = batch.reward[i] + self.gamma * (1.0 - batch.terminal[i]) * y[i];
         }
-        concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
-        let n = self.cfg.max_grad_norm;
-        let (ci, y) = (&self.critic_in, &self.y[..b]);
-        par::for_each_mut3(&mut self.critics, &mut self.critic_opts, &mut self.scratch, &|_, q, opt, s| {
-            s.loss = fit_critic(q, opt, ci, y, &mut s.dq, n)
-        });
-        let mut critic_loss = 0.0;
-        for s in &self.scratch {
-            critic_loss += s.loss;
-        }
-
-        // 3. Delayed actor and targets.
-        let mut actor_loss = None;
-        if self.updates.is_multiple_of(u64::from(self.family.policy_delay)) {
-            let q1 = &mut self.critics[0];
-            let mu = self.actor.forward(&batch.obs, b);
-            concat_cols(&batch.obs, od, mu, ad, b, &mut self.critic_in);
-            let q = q1.forward(&self.critic_in, b);
-            actor_loss = Some(-q.iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64);
-            self.dq[..b].fill(-1.0 / b as f32);
-            let da = q1.input_grad_cols(&self.dq[..b], od..od + ad);
-            self.actor.zero_grad();
-            self.actor.backward(da);
-            step(&mut self.actor, &mut self.actor_opt, self.cfg.max_grad_norm);
-            let tau = self.cfg.tau as f32;
-            self.actor_target.polyak_from(&self.actor, tau);
-            let critics = &self.critics;
-            par::for_each_mut(&mut self.critic_targets, &mut self.scratch, &|k, t, _| {
-                t.polyak_from(&critics[k], tau)
-            });
-        }
-
-        let critic_loss = critic_loss / self.critics.len() as f64;
-        UpdateStats { critic_loss, actor_loss, alpha: None, entropy: None }
     }
 }
 
