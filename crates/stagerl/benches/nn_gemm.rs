@@ -85,6 +85,11 @@ fn main() {
         );
         black_box(&c);
     }
+    if let Some((gflops, isa)) = fma_peak() {
+        println!(
+            "peak: independent {isa} fused multiply-adds, no memory traffic {gflops:.1} GFLOP/s (one thread)"
+        );
+    }
     let b = 256;
     println!("batch {b}, f32, best of 7 means (us) and GFLOP/s");
     for (n_in, n_out) in [(24, 64), (64, 64), (64, 1), (24, 256), (256, 256), (256, 12)] {
@@ -127,4 +132,68 @@ fn main() {
         );
         black_box((&y, &gw, &dx));
     }
+}
+
+/// The core's f32 fused multiply-add rate with no memory traffic at all (12 independent vector
+/// accumulators, so latency is hidden): the hardware's ceiling, above any matrix kernel's.
+/// `None` off x86-64 or without AVX2 + FMA.
+fn fma_peak() -> Option<(f64, &'static str)> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let iters = 20_000_000usize;
+        let (lanes, isa, run): (usize, &str, fn(usize) -> f32) =
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                (16, "AVX-512", |n| unsafe { fma512(n) })
+            } else if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                (8, "AVX2", |n| unsafe { fma256(n) })
+            } else {
+                return None;
+            };
+        run(iters / 10);
+        let mut best = f64::INFINITY;
+        for _ in 0..5 {
+            let t = Instant::now();
+            black_box(run(black_box(iters)));
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        let flop = (iters * 12 * lanes * 2) as f64;
+        Some((flop / best * 1e-9, isa))
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    None
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn fma512(iters: usize) -> f32 {
+    use std::arch::x86_64::*;
+    let m = _mm512_set1_ps(0.999_999);
+    let c = _mm512_set1_ps(1e-7);
+    let mut acc = [_mm512_set1_ps(1.0); 12];
+    for _ in 0..iters {
+        for a in acc.iter_mut() {
+            *a = _mm512_fmadd_ps(*a, m, c);
+        }
+    }
+    acc.iter().map(|&a| _mm512_reduce_add_ps(a)).sum()
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fma256(iters: usize) -> f32 {
+    use std::arch::x86_64::*;
+    let m = _mm256_set1_ps(0.999_999);
+    let c = _mm256_set1_ps(1e-7);
+    let mut acc = [_mm256_set1_ps(1.0); 12];
+    for _ in 0..iters {
+        for a in acc.iter_mut() {
+            *a = _mm256_fmadd_ps(*a, m, c);
+        }
+    }
+    let mut out = [0f32; 8];
+    let s = acc.iter().fold(_mm256_setzero_ps(), |s, &a| _mm256_add_ps(s, a));
+    _mm256_storeu_ps(out.as_mut_ptr(), s);
+    out.iter().sum()
 }

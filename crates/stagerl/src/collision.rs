@@ -545,7 +545,7 @@ fn point_segment_distance2(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// Squared distance between segments `p1`-`q1` and `p2`-`q2` (Ericson, Real-Time Collision
 /// Detection, 5.1.9: the closest points' parameters, clamped).
-fn segment_segment_distance2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3], q2: [f64; 3]) -> f64 {
+pub(crate) fn segment_segment_distance2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3], q2: [f64; 3]) -> f64 {
     let (d1, d2, r) = (sub(q1, p1), sub(q2, p2), sub(p1, p2));
     let (a, e, f) = (dot(d1, d1), dot(d2, d2), dot(d2, r));
     const EPS: f64 = 1e-18;

@@ -164,6 +164,8 @@ pub struct DynamicArm {
     /// The template's world as built, which fresh worlds are copies of.
     snapshot: Snapshot,
     world: PhysicsWorld,
+    /// The bounding shapes of the world's colliders (the same handles in every copy).
+    far_pairs: FarPairs,
     multibody: MultibodyIndex,
     dofs: Vec<Dof>,
     /// Joint positions (rad or m) and velocities (rad/s or m/s), chain order: the state.
@@ -177,6 +179,8 @@ pub struct DynamicArm {
     exact_resume: bool,
     /// Build a new world for every step (what exact resume is equivalent to; for tests).
     rebuild_every_step: bool,
+    /// Step with the far-pair filter (always, but in a test of what it changes).
+    filter_far_pairs: bool,
     /// The world needs the state written into it before the next step.
     dirty: bool,
     /// The world was built afresh and has not stepped since.
@@ -196,6 +200,7 @@ impl Clone for DynamicArm {
             template: self.template.clone(),
             snapshot: self.snapshot.clone(),
             world: self.snapshot.world(self.template.params),
+            far_pairs: self.far_pairs.clone(),
             multibody: self.snapshot.multibody,
             dofs: self.dofs.clone(),
             q: self.q.clone(),
@@ -205,6 +210,7 @@ impl Clone for DynamicArm {
             qdot_before: self.qdot_before.clone(),
             exact_resume: self.exact_resume,
             rebuild_every_step: self.rebuild_every_step,
+            filter_far_pairs: self.filter_far_pairs,
             dirty: true,
             fresh: false,
             contact: self.contact,
@@ -265,6 +271,11 @@ impl DynamicArm {
             make_roots_fixed: true,
             // A sleeping arm would not wake up for a new motor command.
             rigid_body_blueprint: RigidBodyBuilder::dynamic().can_sleep(false),
+            // The loader's default (massless colliders: the URDF's `<inertial>` gives the mass),
+            // with the far-pair filter (see `FarPairs`).
+            collider_blueprint: ColliderBuilder::default()
+                .density(0.0)
+                .active_hooks(ActiveHooks::FILTER_CONTACT_PAIRS),
             ..UrdfLoaderOptions::default()
         };
         let (mut robot, urdf) = UrdfRobot::from_str(urdf_xml, options, Path::new("."))
@@ -285,6 +296,7 @@ impl DynamicArm {
         let ndofs = world.multibody_joints.get_multibody(multibody).map_or(0, |m| m.ndofs());
         Ok(DynamicArm {
             snapshot: Snapshot::of(&world, multibody),
+            far_pairs: FarPairs::of(&world.colliders),
             template,
             world,
             multibody,
@@ -296,6 +308,7 @@ impl DynamicArm {
             qdot_before: vec![0.0; n],
             exact_resume: true,
             rebuild_every_step: false,
+            filter_far_pairs: true,
             dirty: true,
             fresh: false,
             contact: false,
@@ -397,7 +410,8 @@ impl DynamicArm {
             let link = mb.link_mut(d.link).expect("the joint's link");
             link.joint.data.set_motor_velocity(d.axis, v, MOTOR_DAMPING);
         }
-        self.world.step();
+        let hooks: &dyn PhysicsHooks = if self.filter_far_pairs { &self.far_pairs } else { &() };
+        self.world.step_with_events(hooks, &());
         self.read_state();
         self.contact = self.world.narrow_phase.contact_pairs().any(|p| p.has_any_active_contact());
     }
@@ -410,6 +424,7 @@ impl DynamicArm {
             if self.stale {
                 self.snapshot = Snapshot::of(&world, multibody);
             }
+            self.far_pairs = FarPairs::of(&world.colliders);
             self.world = world;
             self.multibody = multibody;
         } else {
@@ -476,6 +491,117 @@ impl DynamicArm {
     }
 }
 
+/// Pairs farther apart than this (m, between bounding shapes) are not handed to rapier's narrow
+/// phase: ten times its prediction distance (0.002 m), beyond which it makes no contact.
+const FAR_M: f64 = 0.02;
+
+/// A collider's bounding shape in its own frame.
+#[derive(Clone, Copy, Debug)]
+enum Bound {
+    /// The points within `radius` (m) of the segment `a`-`b`: exact for a capsule, the smallest
+    /// capsule around a cylinder (parry's lie along y), a sphere around a box.
+    Capsule { a: Vector, b: Vector, radius: f32 },
+    /// The half-space `normal . p <= 0`.
+    HalfSpace { normal: Vector },
+}
+
+/// A bounding shape placed in the world (f64, m).
+#[derive(Clone, Copy, Debug)]
+enum Placed {
+    Capsule { a: [f64; 3], b: [f64; 3], radius: f64 },
+    HalfSpace { normal: [f64; 3], offset: f64 },
+}
+
+/// Rapier's contact-pair filter (a [`PhysicsHooks`]): a pair of colliders whose bounding shapes
+/// are more than [`FAR_M`] apart cannot make a contact within the narrow phase's prediction
+/// distance, so the narrow phase, whose general convex test (GJK on the arm's cylinders) was
+/// the largest part of a step after the solver, skips it. The bounds contain the shapes, so a
+/// pair that could touch is never dropped; a dropped pair would have given no contact, and the
+/// solver sees the same constraints (the step's bits are unchanged: tested). Colliders of other
+/// shapes are never filtered.
+#[derive(Clone, Debug, Default)]
+struct FarPairs {
+    /// By collider handle index.
+    bounds: Vec<Option<Bound>>,
+}
+
+impl FarPairs {
+    fn of(colliders: &ColliderSet) -> FarPairs {
+        let mut bounds = Vec::new();
+        for (h, co) in colliders.iter() {
+            let i = h.into_raw_parts().0 as usize;
+            if bounds.len() <= i {
+                bounds.resize(i + 1, None);
+            }
+            let shape = co.shape();
+            bounds[i] = if let Some(c) = shape.as_cylinder() {
+                let h = Vector::new(0.0, c.half_height, 0.0);
+                Some(Bound::Capsule { a: -h, b: h, radius: c.radius })
+            } else if let Some(c) = shape.as_capsule() {
+                Some(Bound::Capsule { a: c.segment.a, b: c.segment.b, radius: c.radius })
+            } else if let Some(b) = shape.as_ball() {
+                Some(Bound::Capsule { a: Vector::ZERO, b: Vector::ZERO, radius: b.radius })
+            } else if let Some(b) = shape.as_cuboid() {
+                Some(Bound::Capsule { a: Vector::ZERO, b: Vector::ZERO, radius: b.half_extents.length() })
+            } else {
+                shape.as_halfspace().map(|hs| Bound::HalfSpace { normal: hs.normal })
+            };
+        }
+        FarPairs { bounds }
+    }
+
+    /// The bounding shape of collider `h` where it is now.
+    fn placed(&self, colliders: &ColliderSet, h: ColliderHandle) -> Option<Placed> {
+        let bound = (*self.bounds.get(h.into_raw_parts().0 as usize)?)?;
+        let pose = colliders.get(h)?.position();
+        let f = |v: Vector| [v.x as f64, v.y as f64, v.z as f64];
+        Some(match bound {
+            Bound::Capsule { a, b, radius } => Placed::Capsule {
+                a: f(pose.transform_point(a)),
+                b: f(pose.transform_point(b)),
+                radius: radius as f64,
+            },
+            Bound::HalfSpace { normal } => {
+                let n = f(pose.rotation * normal);
+                let t = f(pose.translation);
+                Placed::HalfSpace { normal: n, offset: n[0] * t[0] + n[1] * t[1] + n[2] * t[2] }
+            }
+        })
+    }
+}
+
+/// The gap (m) between two placed bounds, or `None` if it is not computed (two half-spaces).
+fn gap_m(x: Placed, y: Placed) -> Option<f64> {
+    let below = |normal: [f64; 3], offset: f64, a: [f64; 3], b: [f64; 3], r: f64| {
+        let h = |p: [f64; 3]| normal[0] * p[0] + normal[1] * p[1] + normal[2] * p[2] - offset;
+        h(a).min(h(b)) - r
+    };
+    match (x, y) {
+        (Placed::Capsule { a, b, radius }, Placed::Capsule { a: c, b: d, radius: s }) => {
+            Some(crate::collision::segment_segment_distance2(a, b, c, d).sqrt() - radius - s)
+        }
+        (Placed::Capsule { a, b, radius }, Placed::HalfSpace { normal, offset })
+        | (Placed::HalfSpace { normal, offset }, Placed::Capsule { a, b, radius }) => {
+            Some(below(normal, offset, a, b, radius))
+        }
+        (Placed::HalfSpace { .. }, Placed::HalfSpace { .. }) => None,
+    }
+}
+
+impl PhysicsHooks for FarPairs {
+    fn filter_contact_pair(&self, context: &PairFilterContext) -> Option<SolverFlags> {
+        let placed = |h| self.placed(context.colliders, h);
+        let gap = match (placed(context.collider1), placed(context.collider2)) {
+            (Some(x), Some(y)) => gap_m(x, y),
+            _ => None,
+        };
+        // Dropped only when surely far (a NaN gap keeps the pair); kept with what rapier uses
+        // without a filter.
+        let far = gap.is_some_and(|g| g > FAR_M);
+        (!far).then(SolverFlags::default)
+    }
+}
+
 /// A joint's generalized coordinate (rad or m).
 fn coord(mb: &Multibody, d: &Dof) -> f32 {
     mb.link(d.link).map_or(0.0, |l| l.joint().coords()[d.axis as usize])
@@ -513,7 +639,11 @@ fn params(dt_s: f64) -> IntegrationParameters {
 fn static_colliders(obstacles: &[Obstacle], floor: bool) -> Vec<Collider> {
     let mut out = Vec::new();
     if floor {
-        out.push(ColliderBuilder::halfspace(nalgebra::Unit::new_unchecked(Vector::Z)).build());
+        out.push(
+            ColliderBuilder::halfspace(nalgebra::Unit::new_unchecked(Vector::Z))
+                .active_hooks(ActiveHooks::FILTER_CONTACT_PAIRS)
+                .build(),
+        );
     }
     for o in obstacles {
         let p = o.position_m;
@@ -527,7 +657,7 @@ fn static_colliders(obstacles: &[Obstacle], floor: bool) -> Vec<Collider> {
             }
             ObstacleShape::Sphere => ColliderBuilder::ball(o.radius_m.unwrap_or(0.0) as f32),
         };
-        out.push(builder.position(pose).build());
+        out.push(builder.position(pose).active_hooks(ActiveHooks::FILTER_CONTACT_PAIRS).build());
     }
     out
 }
@@ -922,6 +1052,77 @@ mod tests {
         // A clone starts from a copy of the snapshot: the same bits again.
         let mut c = a.clone();
         assert_eq!(bits(&both_trajectories(&mut c)), bits(&both_trajectories(&mut a)));
+    }
+
+    /// Positions and velocities of `steps` steps from the UR5's home pose under commands of
+    /// 1.5 rad/s that press the arm into the floor and itself most of the time; the steps in
+    /// contact.
+    fn rough(arm: &mut DynamicArm, steps: usize) -> (Vec<Vec<f64>>, usize) {
+        arm.set_state(&HOME, &[0.0; 6]).unwrap();
+        let (mut out, mut contacts) = (Vec::new(), 0);
+        for t in 0..steps {
+            let cmd: Vec<f64> =
+                (0..6).map(|j| 1.5 * ((t as f64) * 0.03 * (1.0 + j as f64 * 0.37)).sin()).collect();
+            arm.step(&cmd);
+            contacts += arm.in_contact() as usize;
+            let mut s = vec![0.0; 12];
+            arm.joint_positions(&mut s[..6]);
+            arm.joint_velocities(&mut s[6..]);
+            out.push(s);
+        }
+        (out, contacts)
+    }
+
+    #[test]
+    fn far_pair_filter_changes_no_bit() {
+        let obstacles = four_boxes();
+        let mut a = ur5(&obstacles, true);
+        let mut b = ur5(&obstacles, true);
+        b.filter_far_pairs = false;
+        assert_eq!(bits(&both_trajectories(&mut a)), bits(&both_trajectories(&mut b)));
+        let ((ta, ca), (tb, cb)) = (rough(&mut a, 600), rough(&mut b, 600));
+        assert!(ca > 100, "the rough motion makes contact ({ca} steps)");
+        assert_eq!((bits(&ta), ca), (bits(&tb), cb));
+        // It is not idle: at the home pose it drops most pairs of the arm's 14 colliders, the
+        // floor and the boxes (rapier hands it those whose boxes overlap).
+        a.set_state(&HOME, &[0.0; 6]).unwrap();
+        a.step(&[0.0; 6]);
+        let w = &a.world;
+        let handles: Vec<ColliderHandle> = w.colliders.iter().map(|(h, _)| h).collect();
+        let (mut dropped, mut pairs) = (0, 0);
+        for (i, &collider1) in handles.iter().enumerate() {
+            for &collider2 in &handles[i + 1..] {
+                let context = PairFilterContext {
+                    bodies: &w.bodies,
+                    colliders: &w.colliders,
+                    collider1,
+                    collider2,
+                    rigid_body1: None,
+                    rigid_body2: None,
+                };
+                pairs += 1;
+                dropped += a.far_pairs.filter_contact_pair(&context).is_none() as usize;
+            }
+        }
+        assert!(dropped * 10 > pairs * 8, "{dropped} of {pairs} pairs dropped");
+        assert!(dropped < pairs);
+    }
+
+    #[test]
+    fn gaps_between_bounds() {
+        let cap = |a: [f64; 3], b: [f64; 3], radius: f64| Placed::Capsule { a, b, radius };
+        let floor = Placed::HalfSpace { normal: [0.0, 0.0, 1.0], offset: 0.0 };
+        // Parallel segments 1 m apart, radii 0.1 and 0.2.
+        let g = gap_m(cap([0.0; 3], [1.0, 0.0, 0.0], 0.1), cap([0.0, 1.0, 0.0], [1.0, 1.0, 0.0], 0.2));
+        assert!((g.unwrap() - 0.7).abs() < 1e-12);
+        // A tilted capsule above the floor: its lower end, less the radius.
+        let c = cap([0.0, 0.0, 0.5], [0.3, 0.0, 0.2], 0.05);
+        assert!((gap_m(c, floor).unwrap() - 0.15).abs() < 1e-12);
+        assert!((gap_m(floor, c).unwrap() - 0.15).abs() < 1e-12);
+        // A floor raised to z = 0.3 (offset along its normal) is in the capsule: negative.
+        let raised = Placed::HalfSpace { normal: [0.0, 0.0, 1.0], offset: 0.3 };
+        assert!((gap_m(c, raised).unwrap() + 0.15).abs() < 1e-12);
+        assert_eq!(gap_m(floor, raised), None);
     }
 
     /// A command swaying every joint around where it starts (at most 0.4 rad away), rad/s.
