@@ -471,8 +471,13 @@ impl ReachEnv {
             slot.fill(0.0);
             slot[6] = self.far_obs;
         }
+        let range = self.task.obstacle_range_m.unwrap_or(f64::INFINITY);
         for (&(distance, i), slot) in self.nearest.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN))
         {
+            if distance > range {
+                // Nearest first: the rest are farther still, and stay empty.
+                break;
+            }
             let o = &self.obstacles[i];
             let (p, h) = (o.position_m, o.half_size_m());
             for k in 0..3 {
@@ -1109,6 +1114,68 @@ pub(crate) mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("task.obstacle_observation") && e.contains("observe_obstacles"), "{e}");
+    }
+
+    /// `task.obstacle_range_m`: the nearest encoding without the obstacles beyond the range,
+    /// whose slots read as empty; the same slots as without it otherwise; checked settings.
+    #[test]
+    fn obstacle_range_leaves_far_obstacles_out() {
+        let chain = Arc::new(Chain::ur5());
+        let make = |range| {
+            let task = TaskConfig {
+                random_obstacles: Some(task::RandomObstacles { count: [1, 3], ..Default::default() }),
+                observe_obstacles: true,
+                obstacle_observation: ObstacleObservation::Nearest,
+                obstacle_range_m: range,
+                ..TaskConfig::default()
+            };
+            ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), 5).unwrap()
+        };
+        let range = 0.3;
+        let (mut gated, mut all) = (make(Some(range)), make(None));
+        let far = gated.task().obstacle_obs_bounds(chain.reach_bound_m())[6].1 as f32;
+        let (mut kept, mut dropped) = (0, 0);
+        for _ in 0..40 {
+            gated.reset();
+            all.reset();
+            for step in 0..15 {
+                let k = gated.task().obs_delta_scale;
+                let (g, a) = (gated.observation().to_vec(), all.observation().to_vec());
+                assert_eq!(g[..16], a[..16]);
+                for (gs, as_) in g[16..].chunks_exact(7).zip(a[16..].chunks_exact(7)) {
+                    if as_[6] <= (k * range) as f32 {
+                        assert_eq!(gs, as_);
+                        kept += usize::from(as_[6] < far);
+                    } else {
+                        assert_eq!(gs, &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, far]);
+                        dropped += usize::from(as_[6] < far);
+                    }
+                }
+                let act = [0.6, -0.3, 0.4, 0.2, 0.0, 0.0];
+                assert_eq!(gated.step(&act).unwrap(), all.step(&act).unwrap());
+                if gated.is_done() || step == 14 {
+                    break;
+                }
+            }
+        }
+        assert!(kept > 0 && dropped > 0, "{kept} obstacle slots kept, {dropped} dropped");
+        let check = |t: TaskConfig| t.validate().unwrap_err().to_string();
+        let near = || TaskConfig {
+            random_obstacles: Some(task::RandomObstacles::default()),
+            observe_obstacles: true,
+            obstacle_observation: ObstacleObservation::Nearest,
+            ..TaskConfig::default()
+        };
+        for bad in [0.0, -0.1, f64::NAN, f64::INFINITY] {
+            let e = check(TaskConfig { obstacle_range_m: Some(bad), ..near() });
+            assert!(e.contains("task.obstacle_range_m") && e.contains("> 0"), "{e}");
+        }
+        let e = check(TaskConfig {
+            obstacle_observation: ObstacleObservation::Absolute,
+            obstacle_range_m: Some(0.2),
+            ..near()
+        });
+        assert!(e.contains("task.obstacle_range_m") && e.contains("nearest"), "{e}");
     }
 
     #[test]
