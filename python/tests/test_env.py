@@ -83,6 +83,30 @@ def test_observed_obstacles_stay_within_the_space(encoding):
         gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball], "obstacle_observation": "nearest"}})
 
 
+def test_obstacle_range_empties_far_slots():
+    """task.obstacle_range_m: with the nearest encoding, an obstacle farther than the range
+    from the end effector reads as an empty slot (zeros, then the far distance); out of range
+    settings are ValueErrors naming the field."""
+    far_ball = {"shape": "sphere", "radius_m": 0.05, "position_m": [0.0, 3.0, 0.3]}
+    task = {"obstacles": [far_ball], "observe_obstacles": True, "obstacle_observation": "nearest"}
+    seen = gym.make("stagerl/Reach-v0", config={"task": task})
+    gated = gym.make("stagerl/Reach-v0", config={"task": {**task, "obstacle_range_m": 0.5}})
+    o_seen, _ = seen.reset(seed=4)
+    o_gated, _ = gated.reset(seed=4)
+    np.testing.assert_array_equal(o_seen[:16], o_gated[:16])
+    assert o_seen[16:22].any(), o_seen[16:]  # the ball, about 3 m away, 10 x scaled
+    np.testing.assert_array_equal(o_gated[16:22], np.zeros(6, dtype=np.float32))
+    # An empty slot's distance: farther than any obstacle can be, inside the space.
+    assert o_seen[22] < o_gated[22] <= gated.observation_space.high[22], (o_seen[22], o_gated[22])
+    assert gated.observation_space.contains(o_gated)
+    for bad in [0.0, -1.0]:  # (a NaN is refused before, as any non-finite number in `config`)
+        with pytest.raises(ValueError, match="task.obstacle_range_m"):
+            gym.make("stagerl/Reach-v0", config={"task": {**task, "obstacle_range_m": bad}})
+    with pytest.raises(ValueError, match="task.obstacle_range_m"):
+        gym.make("stagerl/Reach-v0", config={"task": {**task, "obstacle_observation": "absolute",
+                                                       "obstacle_range_m": 0.5}})
+
+
 def test_info_holds_every_term_and_the_reward_is_the_chosen_one():
     for reward in ["posture", "stride", "har", "sar", "basic"]:
         env = gym.make("stagerl/Reach-v0", reward=reward)
