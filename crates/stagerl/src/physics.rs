@@ -984,6 +984,11 @@ mod tests {
             arm.set_state(&HOME, &[0.0; 6]).unwrap();
         }
         arm.step(&pushing(t));
+        state(arm)
+    }
+
+    /// A UR5's joint positions then velocities.
+    fn state(arm: &DynamicArm) -> Vec<f64> {
         let mut out = vec![0.0; 12];
         arm.joint_positions(&mut out[..6]);
         arm.joint_velocities(&mut out[6..]);
@@ -1031,10 +1036,7 @@ mod tests {
         arm.set_state(&HOME, &[0.0; 6]).unwrap();
         for t in 0..200 {
             arm.step(&swaying(t, 6));
-            let mut s = vec![0.0; 12];
-            arm.joint_positions(&mut s[..6]);
-            arm.joint_velocities(&mut s[6..]);
-            out.push(s);
+            out.push(state(arm));
         }
         out
     }
@@ -1066,10 +1068,7 @@ mod tests {
                 (0..6).map(|j| 1.5 * ((t as f64) * 0.03 * (1.0 + j as f64 * 0.37)).sin()).collect();
             arm.step(&cmd);
             contacts += arm.in_contact() as usize;
-            let mut s = vec![0.0; 12];
-            arm.joint_positions(&mut s[..6]);
-            arm.joint_velocities(&mut s[6..]);
-            out.push(s);
+            out.push(state(arm));
         }
         (out, contacts)
     }
