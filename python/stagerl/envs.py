@@ -16,6 +16,11 @@ in [-1, 1], scaled by the joint's speed limit. The episode terminates when the t
 ``stride``, ``gamma_posture``, ``har``, ``alpha1``, ``alpha2``, ``sar``, ``basic``, ``reward``,
 ``bonus``, ``total``) and ``is_success``; ``reset`` returns ``distance`` and ``is_success``.
 
+With ``[task.random_obstacles]``, the config's ``train.obstacles_in_path`` (a probability,
+default 0) places each episode's first random obstacle across the straight line from the start
+end effector to the target, a training curriculum as in ``stagerl train``; leave it 0 in an
+environment that evaluates, so that its obstacles are drawn as the task says.
+
 ``reset(options={"target": [x, y, z], "start": [q1, ..]})`` starts the episode at ``start``
 (radians; default: the home pose) with the given target (metres) instead of a random one (as
 ``stagerl plan`` does); the target stream is not advanced.

@@ -107,6 +107,34 @@ def test_obstacle_range_empties_far_slots():
                                                        "obstacle_range_m": 0.5}})
 
 
+def _in_path_share(fraction, resets=200):
+    """Share of resets whose random obstacle's centre (its absolute observation slot) is
+    within 18 cm of the straight line from the end effector to the target."""
+    config = {"task": {"random_obstacles": {"count": [1, 1]}, "observe_obstacles": True},
+              "train": {"obstacles_in_path": fraction}}
+    env = gym.make("stagerl/Reach-v0", config=config)
+    near = 0
+    for seed in range(resets):
+        obs, _ = env.reset(seed=seed)
+        a, b, c = env.unwrapped.ee_position, env.unwrapped.target, obs[16:19].astype(np.float64)
+        u = np.clip(np.dot(c - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        near += np.linalg.norm(a + u * (b - a) - c) <= 0.18
+    return near / resets
+
+
+def test_obstacles_in_path_stand_in_the_way():
+    """train.obstacles_in_path in an env's config: with 1, the first random obstacle is drawn
+    in the way from the end effector to the target; bad values are ValueErrors naming it."""
+    never, always = _in_path_share(0.0), _in_path_share(1.0)
+    assert never < 0.25 and always > 0.8, (never, always)
+    for bad in [1.5, -0.2]:
+        with pytest.raises(ValueError, match="train.obstacles_in_path"):
+            gym.make("stagerl/Reach-v0", config={"task": {"random_obstacles": {}},
+                                                 "train": {"obstacles_in_path": bad}})
+    with pytest.raises(ValueError, match="train.obstacles_in_path"):
+        gym.make("stagerl/Reach-v0", config={"train": {"obstacles_in_path": 0.5}})
+
+
 def test_info_holds_every_term_and_the_reward_is_the_chosen_one():
     for reward in ["posture", "stride", "har", "sar", "basic"]:
         env = gym.make("stagerl/Reach-v0", reward=reward)

@@ -133,7 +133,9 @@ impl ReachCore {
     ) -> PyResult<Self> {
         guard("ReachEnv", || {
             let cfg = build_config(config_path, config_json, reward, robot)?;
-            Ok(ReachCore { env: ReachEnv::from_config(&cfg, 0).map_err(to_py)? })
+            let mut env = ReachEnv::from_config(&cfg, 0).map_err(to_py)?;
+            env.set_obstacles_in_path(cfg.train.obstacles_in_path).map_err(to_py)?;
+            Ok(ReachCore { env })
         })
     }
 

@@ -148,7 +148,9 @@ impl VecCore {
         }
         let env = guard("ReachVectorEnv", || {
             let cfg = build_config(config_path, config_json, reward, robot)?;
-            VecEnv::from_config(num_envs, &cfg, 0).map_err(to_py)
+            let mut env = VecEnv::from_config(num_envs, &cfg, 0).map_err(to_py)?;
+            env.set_obstacles_in_path(cfg.train.obstacles_in_path).map_err(to_py)?;
+            Ok(env)
         })?;
         let keys = STEP_KEYS
             .iter()

@@ -166,6 +166,10 @@ impl Config {
         crate::env::check_collision_settings(self.task.on_collision, &self.reward)?;
         self.agent.validate_values()?;
         self.train.validate()?;
+        crate::env::check_obstacles_in_path(
+            self.train.obstacles_in_path,
+            self.task.random_obstacles.is_some(),
+        )?;
         self.check_memory(ESTIMATE_DOF)
     }
 }

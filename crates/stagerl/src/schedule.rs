@@ -25,6 +25,17 @@ pub struct TrainConfig {
     pub eval_seed: u64,
     /// Write `checkpoints/latest.safetensors` every this many episodes; 0 only at the end.
     pub checkpoint_every_episodes: u64,
+    /// A curriculum for `[task.random_obstacles]`: the probability that a training episode's
+    /// first random obstacle is placed in the way, across the straight line from the start
+    /// pose's end effector to the target (`ResolvedTask::place_obstacles`), rather than anywhere
+    /// in the region. Evaluations draw their obstacles as the task says, unbiased. In [0, 1];
+    /// 0 (the default, left out of a written config) changes nothing.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub obstacles_in_path: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl Default for TrainConfig {
@@ -36,6 +47,7 @@ impl Default for TrainConfig {
             eval_trials: 100,
             eval_seed: 1_000_003,
             checkpoint_every_episodes: 250,
+            obstacles_in_path: 0.0,
         }
     }
 }

@@ -169,6 +169,9 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[agent.sac]\npolicy_delay = 2\n", expect: "unknown field `policy_delay`" },
     Cfg { toml: "[train]\nepisodes = 0\n", expect: "train.episodes" },
     Cfg { toml: "[train]\neval_trials = 0\n", expect: "train.eval_trials" },
+    Cfg { toml: "[train]\nobstacles_in_path = 0.5\n", expect: "train.obstacles_in_path" },
+    Cfg { toml: "[train]\nobstacles_in_path = 2\n[task.random_obstacles]\n", expect: "train.obstacles_in_path" },
+    Cfg { toml: "[train]\nobstacles_in_path = nan\n[task.random_obstacles]\n", expect: "train.obstacles_in_path" },
 ];
 
 const TWO_JOINT_URDF: &str = r#"<robot name="two">

@@ -84,6 +84,23 @@ pub fn check_collision_settings(on_collision: OnCollision, reward: &RewardConfig
     }
 }
 
+/// Check `train.obstacles_in_path`: a probability, and positive only when the task has random
+/// obstacles to place.
+pub fn check_obstacles_in_path(fraction: f64, random_obstacles: bool) -> Result<()> {
+    let field = "train.obstacles_in_path";
+    if !(0.0..=1.0).contains(&fraction) {
+        return Err(Error::config(field, fraction, "a probability in [0, 1]"));
+    }
+    if fraction > 0.0 && !random_obstacles {
+        return Err(Error::config(
+            field,
+            fraction,
+            "0 for a task without [task.random_obstacles] (there is no random obstacle to place)",
+        ));
+    }
+    Ok(())
+}
+
 /// Number of observation values for an arm with `dof` joints and `obstacle_slots` observed
 /// obstacles ([`TaskConfig::observe_obstacles`]).
 pub fn observation_dim(kind: ObservationKind, dof: usize, obstacle_slots: usize) -> usize {
@@ -182,6 +199,9 @@ pub struct ReachEnv {
     far_obs: f32,
     /// The rigid-body simulation (`task.sim = "dynamic"`), boxed: it is large.
     physics: Option<Box<DynamicArm>>,
+    /// The probability that an episode's first random obstacle is placed in the way
+    /// ([`ReachEnv::set_obstacles_in_path`]; 0 unless set).
+    obstacles_in_path: f64,
 }
 
 impl ReachEnv {
@@ -239,6 +259,7 @@ impl ReachEnv {
             far_obs,
             obstacles,
             physics,
+            obstacles_in_path: 0.0,
             chain,
             rng: Rng::new(seed),
             joint_vel: vec![0.0; n],
@@ -308,6 +329,7 @@ impl ReachEnv {
                 collider,
                 &self.q,
                 self.target,
+                self.obstacles_in_path,
                 &mut self.rng,
                 &mut self.obstacles,
             );
@@ -547,6 +569,19 @@ impl ReachEnv {
     pub fn chain(&self) -> &Arc<Chain> {
         &self.chain
     }
+    /// From the next reset on, place an episode's first random obstacle in the way from the
+    /// start pose's end effector to the target with probability `fraction` (the trainer's
+    /// `train.obstacles_in_path`; see [`ResolvedTask::place_obstacles`]). 0, the default, draws
+    /// every obstacle from the region.
+    ///
+    /// Errors: a fraction outside [0, 1] (or NaN), or a positive one for a task without
+    /// `[task.random_obstacles]`.
+    pub fn set_obstacles_in_path(&mut self, fraction: f64) -> Result<()> {
+        check_obstacles_in_path(fraction, self.task.random_obstacles.is_some())?;
+        self.obstacles_in_path = fraction;
+        Ok(())
+    }
+
     /// The resolved task.
     pub fn task(&self) -> &ResolvedTask {
         &self.task
@@ -982,6 +1017,60 @@ pub(crate) mod tests {
             ..TaskConfig::default()
         };
         ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed).unwrap()
+    }
+
+    /// `set_obstacles_in_path`: with 1, the first random obstacle stands across the straight
+    /// line from the start end effector to the target in most episodes (with 0, in few), still
+    /// clear of the start pose and of the target; 0 spends no random number (the same episodes
+    /// as an environment never set); bad fractions are refused by name.
+    #[test]
+    fn obstacles_in_path_stand_in_the_way() {
+        let chain = Arc::new(Chain::ur5());
+        let task = TaskConfig {
+            random_obstacles: Some(task::RandomObstacles { count: [1, 1], ..Default::default() }),
+            ..TaskConfig::default()
+        };
+        let env = |seed| {
+            ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed)
+                .unwrap()
+        };
+        let mut checker = ArmCollider::new(&chain, crate::collision::Checks::default());
+        let mut blocked_share = |fraction: f64| {
+            let mut e = env(11);
+            e.set_obstacles_in_path(fraction).unwrap();
+            let mut blocked = 0;
+            for _ in 0..400 {
+                e.reset();
+                let (o, from, to) = (&e.obstacles()[0], e.ee_pose().position, e.target());
+                assert!(o.distance_to_point_m(to.into()) >= 0.05);
+                assert!(!checker.touches(&chain, e.joint_positions(), o));
+                let on_line = |u: f64| o.distance_to_point_m((from + u * (to - from)).into());
+                blocked += usize::from((0..=100).any(|i| on_line(f64::from(i) / 100.0) <= 0.01));
+            }
+            blocked as f64 / 400.0
+        };
+        let (never, half, always) = (blocked_share(0.0), blocked_share(0.5), blocked_share(1.0));
+        assert!(
+            never < 0.2 && always > 0.6 && half > never + 0.15 && half < always - 0.15,
+            "{never} {half} {always}"
+        );
+
+        let (mut a, mut b) = (env(5), env(5));
+        b.set_obstacles_in_path(0.0).unwrap();
+        for _ in 0..50 {
+            a.reset();
+            b.reset();
+            assert_eq!((a.obstacles(), a.target()), (b.obstacles(), b.target()));
+        }
+        for bad in [-0.1, 1.5, f64::NAN] {
+            let e = a.set_obstacles_in_path(bad).unwrap_err().to_string();
+            assert!(e.contains("train.obstacles_in_path") && e.contains("[0, 1]"), "{e}");
+        }
+        let plain_task = TaskConfig::default().resolve(&chain).unwrap();
+        let mut plain = ReachEnv::new(chain.clone(), plain_task, RewardConfig::default(), 1).unwrap();
+        let e = plain.set_obstacles_in_path(0.5).unwrap_err().to_string();
+        assert!(e.contains("train.obstacles_in_path") && e.contains("task.random_obstacles"), "{e}");
+        plain.set_obstacles_in_path(0.0).unwrap();
     }
 
     /// Random obstacles: a count in range each episode, each clear of the start pose and of the

@@ -219,8 +219,30 @@ impl RandomObstacles {
         Ok(())
     }
 
-    /// One candidate obstacle from `rng`.
+    /// One candidate obstacle from `rng`: its shape and size, then its centre uniform in the
+    /// region.
     fn draw(&self, rng: &mut Rng) -> Obstacle {
+        let mut o = self.draw_body(rng);
+        let (lo, hi) = (self.region_min_m, self.region_max_m);
+        o.position_m = [0, 1, 2].map(|k| rng.uniform_range(lo[k], hi[k]));
+        o
+    }
+
+    /// One candidate obstacle in the way from `from` to `to` (metres, base frame): its shape and
+    /// size as [`RandomObstacles::draw`], its centre on the segment at a uniform fraction in
+    /// [1/4, 3/4] of its length, then moved along each axis by up to its radius (largest half
+    /// extent), so that it stands across the straight line or touches it. The region does not
+    /// bound it.
+    fn draw_in_path(&self, rng: &mut Rng, from: [f64; 3], to: [f64; 3]) -> Obstacle {
+        let mut o = self.draw_body(rng);
+        let reach = o.half_size_m().into_iter().fold(0.0, f64::max);
+        let u = rng.uniform_range(0.25, 0.75);
+        o.position_m = [0, 1, 2].map(|k| from[k] + u * (to[k] - from[k]) + rng.uniform_range(-reach, reach));
+        o
+    }
+
+    /// A candidate's shape and size, at the origin.
+    fn draw_body(&self, rng: &mut Rng) -> Obstacle {
         let shape = self.shapes[rng.below(self.shapes.len() as u64) as usize];
         let [a, b] = self.size_m;
         let mut size = || rng.uniform_range(a, b);
@@ -228,9 +250,7 @@ impl RandomObstacles {
             ObstacleShape::Sphere => (Some(size()), None),
             ObstacleShape::Cuboid => (None, Some([size(), size(), size()])),
         };
-        let (lo, hi) = (self.region_min_m, self.region_max_m);
-        let position_m = [0, 1, 2].map(|k| rng.uniform_range(lo[k], hi[k]));
-        Obstacle { shape, half_extents_m: half, radius_m: radius, position_m, rotation_xyzw: None }
+        Obstacle { shape, half_extents_m: half, radius_m: radius, position_m: [0.0; 3], rotation_xyzw: None }
     }
 }
 
@@ -528,14 +548,20 @@ impl ResolvedTask {
 
     /// Draw the episode's random obstacles after the fixed ones into `out` (cleared first, fixed
     /// ones copied): each clear of the arm at `q` (the start pose) and of `target` by the
-    /// clearance; a placement that fails [`PLACEMENT_TRIES`] times is left out. No allocation
-    /// once `out` has the capacity of [`ResolvedTask::max_obstacles`].
+    /// clearance; a placement that fails [`PLACEMENT_TRIES`] times is left out. With probability
+    /// `in_path` (in [0, 1]; `train.obstacles_in_path`), the first one is drawn in the way from
+    /// the start pose's end effector to the target ([`RandomObstacles::draw_in_path`]), and from
+    /// the region as usual if no such candidate fits in [`PLACEMENT_TRIES`] tries; with 0 no
+    /// random number is spent on it. No allocation once `out` has the capacity of
+    /// [`ResolvedTask::max_obstacles`].
+    #[allow(clippy::too_many_arguments)]
     pub fn place_obstacles(
         &self,
         chain: &Chain,
         collider: Option<&mut ArmCollider>,
         q: &[f64],
         target: nalgebra::Vector3<f64>,
+        in_path: f64,
         rng: &mut Rng,
         out: &mut Vec<Obstacle>,
     ) {
@@ -543,16 +569,20 @@ impl ResolvedTask {
         out.extend(self.obstacles.iter().cloned());
         let Some(r) = &self.random_obstacles else { return };
         let n = r.count[0] + rng.below(u64::from(r.count[1] - r.count[0]) + 1) as u32;
+        let first_in_path = in_path > 0.0 && rng.uniform() < in_path;
         let mut collider = collider;
-        for _ in 0..n {
-            for _ in 0..PLACEMENT_TRIES {
-                let o = r.draw(rng);
-                let clear_of_target = o.distance_to_point_m(target.into()) >= r.target_clearance_m;
-                if clear_of_target && !collider.as_deref_mut().is_some_and(|c| c.touches(chain, q, &o)) {
-                    out.push(o);
-                    break;
-                }
-            }
+        let mut fits = |o: &Obstacle| {
+            o.distance_to_point_m(target.into()) >= r.target_clearance_m
+                && !collider.as_deref_mut().is_some_and(|c| c.touches(chain, q, o))
+        };
+        for i in 0..n {
+            let from = (i == 0 && first_in_path).then(|| chain.fk(q).position.into());
+            let o = from
+                .and_then(|from| {
+                    (0..PLACEMENT_TRIES).map(|_| r.draw_in_path(rng, from, target.into())).find(&mut fits)
+                })
+                .or_else(|| (0..PLACEMENT_TRIES).map(|_| r.draw(rng)).find(&mut fits));
+            out.extend(o);
         }
     }
 

@@ -67,6 +67,12 @@ impl VecEnv {
         Ok(v)
     }
 
+    /// [`ReachEnv::set_obstacles_in_path`] for every environment, from its next episode on
+    /// (each environment's first episode was drawn by [`VecEnv::new`]).
+    pub fn set_obstacles_in_path(&mut self, fraction: f64) -> Result<()> {
+        self.envs.iter_mut().try_for_each(|e| e.set_obstacles_in_path(fraction))
+    }
+
     /// Step every environment with `actions` (`len() * act_dim()` values, row-major).
     /// Allocation-free. On an error (bad action) no environment has been stepped.
     pub fn step(&mut self, actions: &[f32]) -> Result<()> {

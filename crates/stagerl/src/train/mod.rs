@@ -227,13 +227,17 @@ impl Trainer {
             her: cfg.agent.her.map(|_| HerState::new(Rng::derived(seed, 4))),
             on_policy: None,
         };
+        // Evaluations draw obstacles as the task says; only training places them in the way.
+        let eval_env = env.clone();
+        let mut env = env;
+        env.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
         let on_policy =
             if cfg.agent.algo.is_off_policy() { None } else { Some(on_policy::OnPolicy::new(cfg, &env)?) };
         // PPO keeps no replay buffer.
         let capacity = if on_policy.is_none() { cfg.agent.buffer_size } else { 1 };
         Ok(Trainer {
             hash: config_hash(cfg),
-            eval_env: env.clone(),
+            eval_env,
             buffer: ReplayBuffer::new(capacity, od, ad)?,
             on_policy,
             batch: Batch::new(cfg.agent.batch_size, od, ad),

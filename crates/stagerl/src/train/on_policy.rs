@@ -62,13 +62,14 @@ impl OnPolicy {
     pub(super) fn new(cfg: &Config, env: &ReachEnv) -> Result<OnPolicy> {
         let p = cfg.agent.ppo();
         let seed = Rng::derived(cfg.train.seed, 5).next_u64();
-        let vec = VecEnv::new(
+        let mut vec = VecEnv::new(
             p.num_envs,
             env.chain().clone(),
             env.task().clone(),
             env.reward_config().clone(),
             seed,
         )?;
+        vec.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
         let (n, ad) = (p.num_envs, env.act_dim());
         Ok(OnPolicy {
             rollout: Rollout::new(&p, env.obs_dim(), ad),
