@@ -109,13 +109,15 @@ def test_obstacle_range_empties_far_slots():
 
 def _in_path_share(fraction, resets=200):
     """Share of resets whose random obstacle's centre (its absolute observation slot) is
-    within 18 cm of the straight line from the end effector to the target."""
+    within 18 cm of the straight line from the end effector to the target; every observation
+    inside the observation space."""
     config = {"task": {"random_obstacles": {"count": [1, 1]}, "observe_obstacles": True},
               "train": {"obstacles_in_path": fraction}}
     env = gym.make("stagerl/Reach-v0", config=config)
     near = 0
     for seed in range(resets):
         obs, _ = env.reset(seed=seed)
+        assert env.observation_space.contains(obs), obs[16:]  # centres stay in the region
         a, b, c = env.unwrapped.ee_position, env.unwrapped.target, obs[16:19].astype(np.float64)
         u = np.clip(np.dot(c - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
         near += np.linalg.norm(a + u * (b - a) - c) <= 0.18

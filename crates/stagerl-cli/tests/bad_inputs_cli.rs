@@ -65,6 +65,7 @@ const ARGS: &[Case] = &[
     Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/nan.safetensors"], stdin: "", expect: &["nan.safetensors", "`actor.layer1.weight`[3] = NaN is not finite"] },
     Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/missing.safetensors"], stdin: "", expect: &["missing.safetensors", "No such file"] },
     Case { args: &["eval", "--run", "$RUN", "--trials", "0"], stdin: "", expect: &["--trials", "0 is not in 1..=10000000"] },
+    Case { args: &["eval", "--run", "$RUN", "--obstacles-in-path", "0.5"], stdin: "", expect: &["--obstacles-in-path", "task.random_obstacles"] },
     Case { args: &["eval", "--run", "$RUN", "--trials", "4000000000"], stdin: "", expect: &["--trials", "4000000000"] },
     // Robots.
     Case { args: &["fk", "--robot", "$DIR/missing.urdf"], stdin: "", expect: &["missing.urdf"] },

@@ -144,3 +144,50 @@ fn reproduce_refuses_before_writing_and_reevaluates_only_when_evaluation_setting
     assert_eq!(names(&out), before);
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// Trial records of a per-trial CSV: (target columns, collision steps) per trial.
+fn trials(csv: &Path) -> Vec<(String, u32)> {
+    let text = std::fs::read_to_string(csv).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[6..9].join(","), f[9].parse().unwrap())
+        })
+        .collect()
+}
+
+/// `train.obstacles_in_path` trains, and `eval --obstacles-in-path` evaluates on the same
+/// targets with the first obstacle in the way: its own file beside the plain evaluation, which
+/// it leaves alone, and more trials in contact; bad probabilities are refused by name.
+#[test]
+fn eval_with_obstacles_in_the_way_writes_its_own_file() {
+    let root = scratch("stale-in-path");
+    let cfg = root.join("c.toml");
+    let config = "[agent]\nhidden = [16, 16]\nlearning_starts = 100\nbatch_size = 32\n\
+        [task.random_obstacles]\ncount = [1, 1]\n\
+        [train]\nepisodes = 20\neval_every_episodes = 10\neval_trials = 5\nobstacles_in_path = 1\n";
+    std::fs::write(&cfg, config).unwrap();
+    let dir = root.join("run");
+    ok(&["train", "--config", s(&cfg), "--out", s(&dir), "--seed", "1"]);
+    ok(&["eval", "--run", s(&dir), "--trials", "150"]);
+    let plain = dir.join("eval-best-trials150-seed0.csv");
+    let before = std::fs::read(&plain).unwrap();
+    let o = ok(&["eval", "--run", s(&dir), "--trials", "150", "--obstacles-in-path", "1"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("first obstacle in the way with probability 1"), "{text}");
+    let (a, b) = (trials(&plain), trials(&dir.join("eval-best-trials150-seed0-in-path-1.csv")));
+    assert_eq!(std::fs::read(&plain).unwrap(), before, "the plain evaluation is left as it was");
+    assert_eq!(a.iter().map(|t| &t.0).collect::<Vec<_>>(), b.iter().map(|t| &t.0).collect::<Vec<_>>());
+    let touched = |v: &[(String, u32)]| v.iter().filter(|t| t.1 > 0).count();
+    assert!(touched(&b) >= touched(&a) + 20, "in contact: {} plain, {} in the way", touched(&a), touched(&b));
+    for bad in ["1.5", "-1", "nan"] {
+        let o =
+            bin().args(["eval", "--run", s(&dir), &format!("--obstacles-in-path={bad}")]).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && err.contains("--obstacles-in-path") && err.contains("[0, 1]"),
+            "{bad}: {err}"
+        );
+    }
+}

@@ -29,6 +29,17 @@ use std::path::{Path, PathBuf};
 use crate::config::Config;
 use crate::{Error, Result};
 
+/// How a `stagerl eval` differs from the run's own task; its file is named for it
+/// ([`RunDir::eval_command_in`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EvalVariant {
+    /// Another simulator than the run's (`--sim`).
+    pub sim: Option<Sim>,
+    /// The first random obstacle in the way with this probability (`--obstacles-in-path`,
+    /// `train.obstacles_in_path`'s placement), where the run's evaluations draw them unbiased.
+    pub obstacles_in_path: Option<f64>,
+}
+
 /// Paths inside a run directory.
 #[derive(Clone, Debug)]
 pub struct RunDir {
@@ -103,15 +114,22 @@ impl RunDir {
     /// and the seed, `eval-<checkpoint>-trials<T>-seed<N>.csv`, so that evaluations of other
     /// settings sit side by side and none replaces the closing evaluation a report reads.
     pub fn eval_command(&self, checkpoint: &Path, trials: u32, seed: u64) -> PathBuf {
-        self.eval_command_in(checkpoint, trials, seed, None)
+        self.eval_command_in(checkpoint, trials, seed, EvalVariant::default())
     }
-    /// [`RunDir::eval_command`] in another simulator than the run's (`stagerl eval --sim`):
-    /// `eval-<checkpoint>-trials<T>-seed<S>-sim-<sim>.csv`, which no report takes for the run's
-    /// own evaluation.
-    pub fn eval_command_in(&self, checkpoint: &Path, trials: u32, seed: u64, sim: Option<Sim>) -> PathBuf {
+    /// [`RunDir::eval_command`] on another task than the run's ([`EvalVariant`]):
+    /// `eval-<checkpoint>-trials<T>-seed<S>[-sim-<sim>][-in-path-<p>].csv`, which no report takes
+    /// for the run's own evaluation.
+    pub fn eval_command_in(
+        &self,
+        checkpoint: &Path,
+        trials: u32,
+        seed: u64,
+        variant: EvalVariant,
+    ) -> PathBuf {
         let stem = checkpoint.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let sim = sim.map(|s| format!("-sim-{}", s.name())).unwrap_or_default();
-        self.root.join(format!("eval-{stem}-trials{trials}-seed{seed}{sim}.csv"))
+        let sim = variant.sim.map(|s| format!("-sim-{}", s.name())).unwrap_or_default();
+        let in_path = variant.obstacles_in_path.map(|p| format!("-in-path-{p}")).unwrap_or_default();
+        self.root.join(format!("eval-{stem}-trials{trials}-seed{seed}{sim}{in_path}.csv"))
     }
     /// The per-trial evaluation on the targets of seed `seed` of older versions: `eval-seed<seed>.csv`.
     pub fn trial_eval(&self, seed: u64) -> PathBuf {
@@ -196,9 +214,14 @@ mod tests {
     #[test]
     fn trial_eval_names_round_trip() {
         let d = RunDir::new(Path::new("/r"));
-        let other = d.eval_command_in(Path::new("c/best.safetensors"), 50, 3, Some(Sim::Dynamic));
+        let dynamic = EvalVariant { sim: Some(Sim::Dynamic), obstacles_in_path: None };
+        let other = d.eval_command_in(Path::new("c/best.safetensors"), 50, 3, dynamic);
         assert_eq!(other, Path::new("/r/eval-best-trials50-seed3-sim-dynamic.csv"));
         assert_eq!(trial_eval_kind("eval-best-trials50-seed3-sim-dynamic.csv"), None, "not the run's own");
+        let both = EvalVariant { obstacles_in_path: Some(0.5), ..dynamic };
+        let in_path = d.eval_command_in(Path::new("c/best.safetensors"), 50, 3, both);
+        assert_eq!(in_path, Path::new("/r/eval-best-trials50-seed3-sim-dynamic-in-path-0.5.csv"));
+        assert_eq!(trial_eval_kind("eval-best-trials50-seed3-in-path-1.csv"), None, "not the run's own");
         assert_eq!(trial_eval_kind("eval-best-trials50-seed3.csv"), Some((2, 3)));
         assert_eq!(d.trial_eval(1_000_003), Path::new("/r/eval-seed1000003.csv"));
         assert_eq!(d.final_eval(7), Path::new("/r/eval-final-seed7.csv"));

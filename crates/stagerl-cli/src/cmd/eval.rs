@@ -1,6 +1,6 @@
 use anyhow::{Context, Result};
 use stagerl::env::Sim;
-use stagerl::train::{self, EvalSummary, RunDir};
+use stagerl::train::{self, EvalSummary, EvalVariant, RunDir};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -16,6 +16,12 @@ pub struct Args {
     /// trained kinematically to the dynamic arm, or back. Its per-trial CSV is named for it.
     #[arg(long, value_parser = ["kinematic", "dynamic"])]
     sim: Option<String>,
+    /// Place each trial's first random obstacle in the way from the start end effector to the
+    /// target with this probability (0 to 1; the placement of `train.obstacles_in_path`), where
+    /// the run's own evaluations draw them anywhere in the region: how well the policy goes round
+    /// an obstacle. Needs `[task.random_obstacles]`. Its per-trial CSV is named for it.
+    #[arg(long, value_name = "P")]
+    obstacles_in_path: Option<f64>,
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
@@ -34,7 +40,12 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(s) = sim {
         cfg.task.sim = s;
     }
-    let loaded = train::eval::load_run_agent(&dir, &cfg, args.run.checkpoint.as_deref())?;
+    let mut loaded = train::eval::load_run_agent(&dir, &cfg, args.run.checkpoint.as_deref())?;
+    let in_path = args.obstacles_in_path.filter(|&p| p != 0.0);
+    if let Some(p) = in_path {
+        loaded.1.set_obstacles_in_path(p).context("--obstacles-in-path")?;
+    }
+    let variant = EvalVariant { sim, obstacles_in_path: in_path };
     // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
     // directory untouched).
     let _lock = super::train::lock_run(&args.run.run)?;
@@ -49,13 +60,15 @@ pub fn run(args: Args) -> Result<()> {
     };
     // Its own file, named by checkpoint, trials and seed: never the closing evaluation
     // (eval-final-seed<N>.csv) a report reads.
-    let (csv, written) = train::eval::write_command_eval(&dir, &e, args.seed, sim, args.force)?;
+    let (csv, written) = train::eval::write_command_eval(&dir, &e, args.seed, variant, args.force)?;
     if !args.json {
         let other = sim.map(|s| format!(" in the {} simulation (trained {})", s.name(), trained_in.name()));
+        let in_path = in_path.map(|p| format!(" with the first obstacle in the way with probability {p}"));
         outln!(
-            "{}{} on {} trials (seed {}), per-trial CSV {} ({written})",
+            "{}{}{} on {} trials (seed {}), per-trial CSV {} ({written})",
             e.checkpoint.display(),
             other.unwrap_or_default(),
+            in_path.unwrap_or_default(),
             args.trials,
             args.seed,
             csv.display()

@@ -1044,6 +1044,8 @@ pub(crate) mod tests {
                 let (o, from, to) = (&e.obstacles()[0], e.ee_pose().position, e.target());
                 assert!(o.distance_to_point_m(to.into()) >= 0.05);
                 assert!(!checker.touches(&chain, e.joint_positions(), o));
+                let region = [(-0.6, 0.6), (-0.6, 0.6), (0.0, 0.7)];
+                assert!(o.position_m.iter().zip(region).all(|(p, (lo, hi))| (lo..=hi).contains(p)));
                 let on_line = |u: f64| o.distance_to_point_m((from + u * (to - from)).into());
                 blocked += usize::from((0..=100).any(|i| on_line(f64::from(i) / 100.0) <= 0.01));
             }
@@ -1062,6 +1064,27 @@ pub(crate) mod tests {
             b.reset();
             assert_eq!((a.obstacles(), a.target()), (b.obstacles(), b.target()));
         }
+        // Placed in the way from a side stream: the same targets and the same later obstacles.
+        let two = TaskConfig {
+            random_obstacles: Some(task::RandomObstacles { count: [2, 2], ..Default::default() }),
+            ..TaskConfig::default()
+        };
+        let env2 = || {
+            ReachEnv::new(chain.clone(), two.resolve(&chain).unwrap(), RewardConfig::default(), 8).unwrap()
+        };
+        let (mut plain, mut biased) = (env2(), env2());
+        biased.set_obstacles_in_path(1.0).unwrap();
+        let mut moved = 0;
+        for _ in 0..50 {
+            plain.reset();
+            biased.reset();
+            assert_eq!(
+                (plain.target(), &plain.obstacles()[1..]),
+                (biased.target(), &biased.obstacles()[1..])
+            );
+            moved += usize::from(plain.obstacles()[0] != biased.obstacles()[0]);
+        }
+        assert!(moved > 40, "{moved} of 50 first obstacles placed in the way");
         for bad in [-0.1, 1.5, f64::NAN] {
             let e = a.set_obstacles_in_path(bad).unwrap_err().to_string();
             assert!(e.contains("train.obstacles_in_path") && e.contains("[0, 1]"), "{e}");

@@ -159,6 +159,9 @@ pub struct RandomObstacles {
 /// Candidates drawn for one random obstacle before it is left out of the episode.
 pub const PLACEMENT_TRIES: u32 = 100;
 
+/// The index of the side stream of the obstacles placed in the way ([`Rng::derived`]).
+const IN_PATH_STREAM: u64 = 0x0B57_AC1E;
+
 impl Default for RandomObstacles {
     fn default() -> Self {
         RandomObstacles {
@@ -231,13 +234,16 @@ impl RandomObstacles {
     /// One candidate obstacle in the way from `from` to `to` (metres, base frame): its shape and
     /// size as [`RandomObstacles::draw`], its centre on the segment at a uniform fraction in
     /// [1/4, 3/4] of its length, then moved along each axis by up to its radius (largest half
-    /// extent), so that it stands across the straight line or touches it. The region does not
-    /// bound it.
+    /// extent), so that it stands across the straight line or touches it; then clamped to the
+    /// region, which bounds every random obstacle's centre (and the observation's entries).
     fn draw_in_path(&self, rng: &mut Rng, from: [f64; 3], to: [f64; 3]) -> Obstacle {
         let mut o = self.draw_body(rng);
         let reach = o.half_size_m().into_iter().fold(0.0, f64::max);
         let u = rng.uniform_range(0.25, 0.75);
-        o.position_m = [0, 1, 2].map(|k| from[k] + u * (to[k] - from[k]) + rng.uniform_range(-reach, reach));
+        let (lo, hi) = (self.region_min_m, self.region_max_m);
+        o.position_m = [0, 1, 2].map(|k| {
+            (from[k] + u * (to[k] - from[k]) + rng.uniform_range(-reach, reach)).clamp(lo[k], hi[k])
+        });
         o
     }
 
@@ -548,12 +554,15 @@ impl ResolvedTask {
 
     /// Draw the episode's random obstacles after the fixed ones into `out` (cleared first, fixed
     /// ones copied): each clear of the arm at `q` (the start pose) and of `target` by the
-    /// clearance; a placement that fails [`PLACEMENT_TRIES`] times is left out. With probability
-    /// `in_path` (in [0, 1]; `train.obstacles_in_path`), the first one is drawn in the way from
-    /// the start pose's end effector to the target ([`RandomObstacles::draw_in_path`]), and from
-    /// the region as usual if no such candidate fits in [`PLACEMENT_TRIES`] tries; with 0 no
-    /// random number is spent on it. No allocation once `out` has the capacity of
-    /// [`ResolvedTask::max_obstacles`].
+    /// clearance; a placement that fails [`PLACEMENT_TRIES`] times is left out.
+    ///
+    /// With `in_path > 0` (a probability; `train.obstacles_in_path`), the first random obstacle
+    /// is, with that probability, one drawn in the way from the start pose's end effector to the
+    /// target instead ([`RandomObstacles::draw_in_path`]; the region's if none fits in
+    /// [`PLACEMENT_TRIES`] tries). Those draws come from a side stream seeded by the next value
+    /// of `rng`, which they leave where it would be without them: the episode's other obstacles
+    /// and the following targets are those of `in_path = 0`. No allocation once `out` has the
+    /// capacity of [`ResolvedTask::max_obstacles`].
     #[allow(clippy::too_many_arguments)]
     pub fn place_obstacles(
         &self,
@@ -569,20 +578,24 @@ impl ResolvedTask {
         out.extend(self.obstacles.iter().cloned());
         let Some(r) = &self.random_obstacles else { return };
         let n = r.count[0] + rng.below(u64::from(r.count[1] - r.count[0]) + 1) as u32;
-        let first_in_path = in_path > 0.0 && rng.uniform() < in_path;
+        let mut side = (in_path > 0.0).then(|| Rng::derived(rng.clone().next_u64(), IN_PATH_STREAM));
         let mut collider = collider;
         let mut fits = |o: &Obstacle| {
             o.distance_to_point_m(target.into()) >= r.target_clearance_m
                 && !collider.as_deref_mut().is_some_and(|c| c.touches(chain, q, o))
         };
         for i in 0..n {
-            let from = (i == 0 && first_in_path).then(|| chain.fk(q).position.into());
-            let o = from
-                .and_then(|from| {
-                    (0..PLACEMENT_TRIES).map(|_| r.draw_in_path(rng, from, target.into())).find(&mut fits)
-                })
-                .or_else(|| (0..PLACEMENT_TRIES).map(|_| r.draw(rng)).find(&mut fits));
-            out.extend(o);
+            let anywhere = (0..PLACEMENT_TRIES).map(|_| r.draw(rng)).find(&mut fits);
+            let mut in_the_way = None;
+            if let Some(side) = side.as_mut().filter(|_| i == 0) {
+                if side.uniform() < in_path {
+                    let from = chain.fk(q).position.into();
+                    in_the_way = (0..PLACEMENT_TRIES)
+                        .map(|_| r.draw_in_path(side, from, target.into()))
+                        .find(&mut fits);
+                }
+            }
+            out.extend(in_the_way.or(anywhere));
         }
     }
 

@@ -207,17 +207,17 @@ pub use crate::io::Written;
 /// ([`RunDir::eval_command`], never the closing evaluation a report reads), unless it already
 /// holds these results; a file with other results is replaced only with `force`. Returns the file.
 ///
-/// `sim`: the simulator, when it is not the run's own (`stagerl eval --sim`); the file is then
-/// [`RunDir::eval_command_in`]'s.
+/// `variant`: how the evaluated task differs from the run's own (`stagerl eval --sim`,
+/// `--obstacles-in-path`); the file is [`RunDir::eval_command_in`]'s.
 pub fn write_command_eval(
     run: &RunDir,
     e: &RunEval,
     seed: u64,
-    sim: Option<crate::env::Sim>,
+    variant: crate::rundir::EvalVariant,
     force: bool,
 ) -> Result<(PathBuf, Written)> {
     let trials = u32::try_from(e.trials.len()).expect("at most MAX_EVAL_TRIALS trials");
-    let csv = run.eval_command_in(&e.checkpoint, trials, seed, sim);
+    let csv = run.eval_command_in(&e.checkpoint, trials, seed, variant);
     let written = if !csv.exists() {
         Written::New
     } else if read_trials_csv(&csv).ok().as_deref() == Some(&e.trials[..]) {

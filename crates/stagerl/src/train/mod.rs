@@ -45,7 +45,7 @@ use crate::replay::{Batch, ReplayBuffer};
 use crate::rng::Rng;
 use crate::{Error, Result};
 
-pub use crate::rundir::RunDir;
+pub use crate::rundir::{EvalVariant, RunDir};
 pub use crate::schedule::{TrainConfig, MAX_EVAL_TRIALS};
 pub use eval::{evaluate, evaluate_run, evaluate_until, EvalSummary, RunEval, TrialRecord};
 
