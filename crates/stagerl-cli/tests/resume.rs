@@ -35,6 +35,19 @@ fn sigkill_then_resume_with_ppo_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-ppo", &config);
 }
 
+/// The same among random obstacles placed in the way half the time (`train.obstacles_in_path`,
+/// a side stream of the environment's): a checkpoint mid-episode holds the episode's obstacles,
+/// and the placements after a resume are those of the uninterrupted run.
+#[test]
+fn sigkill_then_resume_with_obstacles_in_the_way_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[task]\non_collision = \"terminate\"\nobserve_obstacles = true\nobstacle_observation = \"nearest\"\n\
+         [task.random_obstacles]\ncount = [1, 3]\n[reward]\ncollision_penalty = 10.0\n",
+        CONFIG.replace("[train]\n", "[train]\nobstacles_in_path = 0.5\n")
+    );
+    sigkills_then_resume("resume-kill-in-path", &config);
+}
+
 fn sigkills_then_resume(name: &str, config: &str) {
     let root = scratch(name);
     let cfg = root.join("c.toml");
