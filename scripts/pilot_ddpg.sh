@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The DDPG pilot of the paper regime (issue 13.6), in two stages (the rule is in the README,
-# "Paper regime"): presets in configs/pilot-ddpg/, each DDPG on the four dense rewards, seed 1,
+# "Paper regime"): presets in configs/studies/pilot-ddpg/, each DDPG on the four dense rewards, seed 1,
 # 2000 episodes, 200 evaluation trials.
 #   1. hidden 64: learning rate 1e-3 | 3e-4 x Gaussian 0.1 | OU 0.2 noise (four cells);
 #   2. hidden 256 with the learning rate and noise of stage 1's best cell.
@@ -31,13 +31,13 @@ cell_summary() {
 
 best="" best_final=-1
 for cell in h64-lr1e-3-gaussian h64-lr1e-3-ou h64-lr3e-4-gaussian h64-lr3e-4-ou; do
-    "$bin" reproduce --preset "configs/pilot-ddpg/$cell.toml" --out "$out/$cell" "$@"
+    "$bin" reproduce --preset "configs/studies/pilot-ddpg/$cell.toml" --out "$out/$cell" "$@"
     final=$(cell_summary "$out/$cell" | cut -d'|' -f1)
     # Strictly higher wins, so a tie keeps the earlier cell.
     if awk -v a="$final" -v b="$best_final" 'BEGIN { exit !(a > b) }'; then best=$cell best_final=$final; fi
 done
 wide=h256-${best#h64-}
-"$bin" reproduce --preset "configs/pilot-ddpg/$wide.toml" --out "$out/$wide" "$@"
+"$bin" reproduce --preset "configs/studies/pilot-ddpg/$wide.toml" --out "$out/$wide" "$@"
 
 printf '%-22s %-12s %-12s %-26s %s\n' cell "final mean" "best mean" "final per run" "best per run"
 for cell in h64-lr1e-3-gaussian h64-lr1e-3-ou h64-lr3e-4-gaussian h64-lr3e-4-ou "$wide"; do

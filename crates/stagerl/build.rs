@@ -1,6 +1,6 @@
 //! Records the git commit the library is built from, and whether the work tree had changes, as
 //! `STAGERL_GIT_COMMIT` and `STAGERL_GIT_DIRTY` (empty when not built from a git checkout), for
-//! the provenance of results (`stagerl::provenance`).
+//! the provenance of results (`stagerl::run::provenance`).
 
 use std::path::Path;
 use std::process::Command;

@@ -34,11 +34,11 @@ pub fn text(text: &str) -> Result<()> {
 }
 
 /// Write one line to standard error, with any long echoed input cut to an excerpt
-/// ([`stagerl::text::bound_message`]: a 100 MB input line never becomes 100 MB of messages).
+/// ([`stagerl::base::text::bound_message`]: a 100 MB input line never becomes 100 MB of messages).
 /// (A closed standard error is not reported: there is nowhere to report it; the exit code still
 /// tells.)
 pub fn err_line(args: fmt::Arguments<'_>) -> Result<()> {
-    let text = stagerl::text::bound_message(&args.to_string());
+    let text = stagerl::base::text::bound_message(&args.to_string());
     let mut e = io::stderr().lock();
     e.write_all(text.as_bytes())
         .and_then(|()| e.write_all(b"\n"))

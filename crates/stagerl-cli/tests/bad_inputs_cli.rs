@@ -15,9 +15,10 @@ use std::path::Path;
 use std::process::Output;
 
 use stagerl::agent::Algo;
-use stagerl::checkpoint::Checkpoint;
 use stagerl::config::Config;
-use stagerl::train::{train, RunDir};
+use stagerl::io::checkpoint::Checkpoint;
+use stagerl::run::dir::RunDir;
+use stagerl::train::train;
 
 struct Case {
     args: &'static [&'static str],

@@ -66,7 +66,7 @@ fn sigkills_then_resume(name: &str, config: &str) {
 
     // Kill at moments tied to progress (not to wall time, so any machine speed works): when
     // episodes.csv has reached an episode drawn from a fixed seed, never a checkpoint boundary.
-    let mut rng = stagerl::rng::Rng::new(2026);
+    let mut rng = stagerl::base::rng::Rng::new(2026);
     let mut target = 0u64;
     for k in 0..3 {
         target += 25 + rng.below(60);

@@ -59,7 +59,7 @@ fn sigterms_then_resume_n(name: &str, config: &str, seed: u64, episodes: u64) {
     // fixed seed), then a short random delay so the signal lands anywhere inside the episode (or
     // its update, or an evaluation). Waiting for a new row also means the process is past its
     // start-up, signal handler installed.
-    let mut rng = stagerl::rng::Rng::new(seed);
+    let mut rng = stagerl::base::rng::Rng::new(seed);
     let rows =
         || std::fs::read_to_string(cut.join("episodes.csv")).map(|t| t.lines().count() as u64).unwrap_or(0);
     let mut stops = Vec::new();

@@ -5,7 +5,7 @@
 mod common;
 
 use common::{assert_steps_once, bin, episodes_without_wall, scratch, tb_scalars};
-use stagerl::checkpoint::Checkpoint;
+use stagerl::io::checkpoint::Checkpoint;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};

@@ -152,7 +152,7 @@ fn the_view_loads_runs_and_draws_in_a_headless_browser() {
     let data = view_data(&html);
     let trajectories = data["trajectories"].as_array().unwrap();
     assert_eq!(trajectories.len(), 4);
-    let cfg = stagerl::rundir::RunDir::new(&run).load_config().unwrap();
+    let cfg = stagerl::run::dir::RunDir::new(&run).load_config().unwrap();
     let targets = stagerl::view::eval_targets(&cfg, 4, 9).unwrap();
     for (t, want) in trajectories.iter().zip(&targets) {
         let target: Vec<f64> = t["target"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();

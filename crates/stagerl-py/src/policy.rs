@@ -8,7 +8,7 @@ use std::sync::{Mutex, MutexGuard};
 
 use stagerl::agent::Agent;
 use stagerl::plan::Planner;
-use stagerl::rundir::RunDir;
+use stagerl::run::dir::RunDir;
 
 use crate::vec::array2;
 use crate::{bad_arg, contiguous, guard, to_py};
@@ -36,8 +36,8 @@ impl PolicyCore {
     fn new(path: &str) -> PyResult<Self> {
         guard("Policy.load", || {
             let (checkpoint, _, agent) = stagerl::train::eval::load_policy(Path::new(path)).map_err(to_py)?;
-            let ck = stagerl::checkpoint::Checkpoint::load(&checkpoint).map_err(to_py)?;
-            let spec = ck.meta(stagerl::policy::POLICY_KEY).map_err(to_py)?.to_string();
+            let ck = stagerl::io::checkpoint::Checkpoint::load(&checkpoint).map_err(to_py)?;
+            let spec = ck.meta(stagerl::run::policy::POLICY_KEY).map_err(to_py)?.to_string();
             Ok(PolicyCore { agent: Mutex::new(agent), checkpoint, spec })
         })
     }
@@ -58,7 +58,7 @@ impl PolicyCore {
     fn checkpoint(&self) -> String {
         self.checkpoint.display().to_string()
     }
-    /// The checkpoint's policy description (`stagerl::policy::PolicySpec`) as JSON.
+    /// The checkpoint's policy description (`stagerl::run::policy::PolicySpec`) as JSON.
     #[getter]
     fn spec_json(&self) -> &str {
         &self.spec

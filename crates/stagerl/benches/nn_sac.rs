@@ -13,8 +13,8 @@ use std::hint::black_box;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
+use stagerl::base::rng::Rng;
 use stagerl::nn::{add_assign, concat_cols, mse_loss, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
-use stagerl::rng::Rng;
 
 const BATCH: usize = 256;
 

@@ -8,9 +8,9 @@ use std::hint::black_box;
 use std::mem::MaybeUninit;
 use std::time::Instant;
 
+use stagerl::base::rng::Rng;
 use stagerl::reward::batch::{compute_rows, Rows, COLUMNS};
 use stagerl::reward::{RewardConfig, RewardTerms};
-use stagerl::rng::Rng;
 
 const N: usize = 1_000_000;
 

@@ -9,11 +9,12 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 
 use stagerl::agent::Algo;
-use stagerl::checkpoint::Checkpoint;
 use stagerl::config::Config;
 use stagerl::env::ReachEnv;
+use stagerl::io::checkpoint::Checkpoint;
 use stagerl::robot::Chain;
-use stagerl::train::{load_agent, train, RunDir};
+use stagerl::run::dir::RunDir;
+use stagerl::train::{load_agent, train};
 
 /// A scratch directory, removed when dropped.
 struct Scratch(PathBuf);

@@ -1,6 +1,7 @@
-//! The shape of the code itself: no function in `crates/*/src` longer than 100 lines, and no
-//! import cycle between the library's top-level modules (module A uses B and B uses A, directly
-//! or through others), as the project's standards require.
+//! The shape of the code itself: no function in `crates/*/src` longer than 100 lines; the
+//! library's folders in the pipeline's order, each importing only the folders below it (which
+//! also rules out any import cycle between them); re-exports only in `lib.rs`; and no import
+//! cycle between the command-line tool's commands.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -200,4 +201,59 @@ fn no_import_cycle_between_modules() {
         }
     }
     assert!(cycles.is_empty(), "import cycles:\n{}", cycles.join("\n"));
+}
+
+/// The library's folders from the bottom up: each may import only those before it. `nn` and `agent`
+/// sit below the arm and the task, so that the learners see arrays only.
+const ORDER: [&str; 16] = [
+    "base", "nn", "io", "agent", "robot", "sim", "reward", "env", "config", "run", "train", "plan", "export",
+    "view", "report", "sweep",
+];
+
+#[test]
+fn folders_import_only_the_folders_below_them() {
+    let uses = module_uses();
+    let declared: BTreeSet<String> = uses.keys().cloned().collect();
+    let ordered: BTreeSet<String> = ORDER.iter().map(|s| s.to_string()).collect();
+    assert_eq!(declared, ordered, "the library's top-level modules are the folders of ORDER");
+    let lib = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("src/lib.rs")).unwrap();
+    let mods: BTreeSet<String> = lib
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("pub mod ").or(l.trim().strip_prefix("mod ")))
+        .map(|m| m.trim_end_matches(';').to_string())
+        .collect();
+    assert_eq!(mods, ordered, "lib.rs declares exactly the folders of ORDER");
+    let mut wrong = Vec::new();
+    for (i, m) in ORDER.iter().enumerate() {
+        for used in &uses[*m] {
+            match ORDER.iter().position(|o| o == used) {
+                Some(j) if j < i => {}
+                _ => wrong.push(format!("{m} imports {used}")),
+            }
+        }
+    }
+    assert!(
+        uses["train"].contains("agent") && uses["agent"].contains("nn"),
+        "the scan sees imports: {uses:?}"
+    );
+    assert!(wrong.is_empty(), "imports against the pipeline's order:\n{}", wrong.join("\n"));
+}
+
+#[test]
+fn re_exports_only_in_lib_rs() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let offenders: Vec<String> = files
+        .iter()
+        .filter(|f| !f.ends_with("lib.rs"))
+        .filter(|f| {
+            std::fs::read_to_string(f)
+                .unwrap()
+                .lines()
+                .any(|l| code_of(l).trim_start().starts_with("pub use crate::"))
+        })
+        .map(|f| f.display().to_string())
+        .collect();
+    assert!(offenders.is_empty(), "`pub use crate::` outside lib.rs: {offenders:?}");
 }

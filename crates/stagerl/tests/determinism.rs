@@ -3,11 +3,12 @@
 
 use stagerl::agent::obs_norm::ObsNormConfig;
 use stagerl::agent::{Algo, PpoConfig};
-use stagerl::checkpoint::Checkpoint;
+use stagerl::agent::{HerConfig, HerStrategy};
 use stagerl::config::Config;
-use stagerl::her::{HerConfig, HerStrategy};
+use stagerl::io::checkpoint::Checkpoint;
 use stagerl::reward::RewardFunction;
-use stagerl::train::{train, RunDir};
+use stagerl::run::dir::RunDir;
+use stagerl::train::train;
 
 fn run(algo: Algo, seed: u64, tag: &str) -> (Vec<String>, Checkpoint) {
     run_with(algo, seed, tag, None, RewardFunction::Sar)
@@ -123,12 +124,12 @@ fn ppo_with_observation_normalisation_is_deterministic_and_differs_from_plain_pp
     assert_ne!(a, plain, "normalisation changed nothing");
 }
 
-/// Splitting an update over worker threads (`stagerl::par`) changes no bit: the same
+/// Splitting an update over worker threads (`stagerl::base::par`) changes no bit: the same
 /// episodes.csv and networks on 1 and 2 threads, for every algorithm, with networks and batches
 /// large enough that the products are split (hidden 128, batch 256), and twin critics at once.
 #[test]
 fn threads_do_not_change_the_run() {
-    let pool = stagerl::par::Pool::new(2).unwrap();
+    let pool = stagerl::base::par::Pool::new(2).unwrap();
     for algo in Algo::ALL {
         let big = |cfg: &mut Config| {
             cfg.agent.hidden = vec![128, 128];
@@ -139,9 +140,9 @@ fn threads_do_not_change_the_run() {
             }
         };
         let one = run_sized(algo, 7, "t1", big);
-        let split = stagerl::par::split_jobs();
-        let two = stagerl::par::install(Some(&pool), || run_sized(algo, 7, "t2", big));
-        assert!(stagerl::par::split_jobs() > split + 100, "{algo}: the updates were split");
+        let split = stagerl::base::par::split_jobs();
+        let two = stagerl::base::par::install(Some(&pool), || run_sized(algo, 7, "t2", big));
+        assert!(stagerl::base::par::split_jobs() > split + 100, "{algo}: the updates were split");
         assert_eq!(one.0, two.0, "{algo}: episodes.csv differs between 1 and 2 threads");
         for n in one.1.tensor_names() {
             assert_eq!(one.1.tensor(n).unwrap(), two.1.tensor(n).unwrap(), "{algo}: tensor {n}");

@@ -16,7 +16,7 @@ fn stepping_and_resetting_allocate_nothing() {
 #[test]
 fn random_obstacles_allocate_nothing() {
     let mut cfg = stagerl::config::Config::default();
-    cfg.task.random_obstacles = Some(stagerl::env::task::RandomObstacles::default());
+    cfg.task.random_obstacles = Some(stagerl::env::RandomObstacles::default());
     cfg.task.observe_obstacles = true;
     cfg.task.on_collision = stagerl::env::OnCollision::Terminate;
     no_allocation_in(cfg.clone());
@@ -51,7 +51,7 @@ fn rollouts_allocate_nothing() {
     use stagerl::env::{rollout, Flow, Observed, Outcome, Scratch, Transition};
     let cfg = stagerl::config::Config::default();
     let mut env = stagerl::env::ReachEnv::from_config(&cfg, 2).unwrap();
-    let mut ctl = stagerl::controller::JacobianController::new(env.chain());
+    let mut ctl = stagerl::plan::controller::JacobianController::new(env.chain());
     let mut scratch = Scratch::new(&env);
     let (mut reached, mut observed, mut total) = (0, 0.0f64, 0.0f64);
     env.reset();

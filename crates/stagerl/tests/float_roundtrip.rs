@@ -2,8 +2,8 @@
 //! and environment states, counters) and the TOML of configs. A lost ulp there made resumed runs
 //! diverge from uninterrupted ones.
 
-use stagerl::checkpoint::Checkpoint;
-use stagerl::rng::Rng;
+use stagerl::base::rng::Rng;
+use stagerl::io::checkpoint::Checkpoint;
 use std::path::Path;
 
 /// Finite f64s: random bit patterns (every exponent, both signs), random subnormals, and the

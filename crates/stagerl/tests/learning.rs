@@ -5,7 +5,9 @@
 
 use stagerl::config::Config;
 use stagerl::env::ReachEnv;
-use stagerl::train::{evaluate, load_agent, train, RunDir};
+use stagerl::run::dir::RunDir;
+use stagerl::train::eval::evaluate;
+use stagerl::train::{load_agent, train};
 
 fn short_run_config(seed: u64) -> Config {
     let mut cfg = Config::default();
@@ -34,7 +36,7 @@ fn train_and_evaluate(cfg: &Config, tag: &str) -> (f64, f64, usize) {
     let mut env = ReachEnv::from_config(cfg, 0).unwrap();
     let mut agent = load_agent(cfg, &env, &summary.final_checkpoint).unwrap();
     let (s, _) = evaluate(agent.as_mut(), &mut env, 200, 77).unwrap();
-    let rows = stagerl::log::csv::read_episodes(&RunDir::new(&dir).episodes()).unwrap();
+    let rows = stagerl::io::csv::read_episodes(&RunDir::new(&dir).episodes()).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     eprintln!(
         "{tag}: success {:.3}, median final distance {:.4} m",
@@ -49,7 +51,7 @@ fn train_and_evaluate(cfg: &Config, tag: &str) -> (f64, f64, usize) {
 fn sac_her_learns_the_sparse_reward_in_a_short_run() {
     let mut cfg = short_run_config(1);
     cfg.reward.function = stagerl::reward::RewardFunction::Basic;
-    cfg.agent.her = Some(stagerl::her::HerConfig::default());
+    cfg.agent.her = Some(stagerl::agent::HerConfig::default());
     let (success, median, rows) = train_and_evaluate(&cfg, "sac-her");
     assert_eq!(rows, 800);
     // Measured for this seed and budget: 93.0 % success over 200 other targets, median final
@@ -81,7 +83,7 @@ fn sac_sar_learns_to_reach_in_a_short_run() {
     let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
     let mut agent = load_agent(&cfg, &env, &summary.final_checkpoint).unwrap();
     let (s, _) = evaluate(agent.as_mut(), &mut env, 200, 77).unwrap();
-    let rows = stagerl::log::csv::read_episodes(&RunDir::new(&dir).episodes()).unwrap();
+    let rows = stagerl::io::csv::read_episodes(&RunDir::new(&dir).episodes()).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     assert_eq!(rows.len(), 800);
     eprintln!(

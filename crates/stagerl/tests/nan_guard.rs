@@ -7,10 +7,11 @@
 //! (or, past f32::MAX, the weights themselves become infinite).
 
 use stagerl::agent::Algo;
-use stagerl::checkpoint::Checkpoint;
 use stagerl::config::Config;
 use stagerl::env::ReachEnv;
-use stagerl::train::{load_agent, train, RunDir};
+use stagerl::io::checkpoint::Checkpoint;
+use stagerl::run::dir::RunDir;
+use stagerl::train::{load_agent, train};
 
 /// A small seeded run with absurd learning rates `lr`; learning starts after `learning_starts`
 /// environment steps (episodes are 50 steps: random actions never reach the target here).

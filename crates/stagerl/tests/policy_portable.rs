@@ -7,10 +7,10 @@ use safetensors::SafeTensors;
 use serde_json::Value;
 use stagerl::agent::obs_norm::ObsNormConfig;
 use stagerl::agent::{Algo, PpoConfig};
+use stagerl::base::rng::Rng;
 use stagerl::config::Config;
 use stagerl::env::ReachEnv;
 use stagerl::nalgebra::Vector3;
-use stagerl::rng::Rng;
 use std::collections::HashMap;
 use std::path::Path;
 

@@ -4,13 +4,13 @@
 
 use serde_json::Value;
 use stagerl::agent::Algo;
+use stagerl::base::rng::Rng;
 use stagerl::config::Config;
-use stagerl::log::{EpisodeCsv, EpisodeRecord};
+use stagerl::io::csv::write_trials_csv;
+use stagerl::io::csv::TrialRecord;
+use stagerl::io::csv::{EpisodeCsv, EpisodeRecord};
 use stagerl::report::{self, ReportOptions};
 use stagerl::reward::RewardFunction;
-use stagerl::rng::Rng;
-use stagerl::train::eval::write_trials_csv;
-use stagerl::train::TrialRecord;
 use std::path::{Path, PathBuf};
 
 const EPISODES: u64 = 600;

@@ -5,7 +5,7 @@
 use std::f64::consts::PI;
 use std::path::Path;
 
-use stagerl::rng::Rng;
+use stagerl::base::rng::Rng;
 use stagerl::robot::{Chain, UR5_URDF};
 
 const TEST_ARM_PATH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/robot_test_arm.urdf");

@@ -4,9 +4,9 @@
 mod common;
 
 use common::allocs;
+use stagerl::agent::replay::Batch;
 use stagerl::agent::{build_off_policy, AgentConfig, Algo};
-use stagerl::replay::Batch;
-use stagerl::rng::Rng;
+use stagerl::base::rng::Rng;
 
 #[global_allocator]
 static GLOBAL: common::Counting = common::Counting;
@@ -37,7 +37,7 @@ fn no_allocation_in(algo: Algo, hidden: usize, updates: usize) {
     }
     let after = allocs();
     // Only the test with a pool has workers (tests run at once: others' warm-ups would count).
-    if stagerl::par::current_threads() > 1 {
+    if stagerl::base::par::current_threads() > 1 {
         let on_workers = common::worker_allocs() - workers;
         assert_eq!(on_workers, 0, "allocations on pool workers during {updates} {algo:?} updates");
     }
@@ -67,13 +67,13 @@ fn ddpg_updates_allocate_nothing() {
 /// may grow on either thread) nothing allocates on the caller or on the pool's worker.
 #[test]
 fn updates_on_two_threads_allocate_nothing() {
-    let pool = stagerl::par::Pool::new(2).unwrap();
-    let split = stagerl::par::split_jobs();
-    stagerl::par::install(Some(&pool), || {
+    let pool = stagerl::base::par::Pool::new(2).unwrap();
+    let split = stagerl::base::par::split_jobs();
+    stagerl::base::par::install(Some(&pool), || {
         for algo in [Algo::Sac, Algo::Td3, Algo::Ddpg] {
             no_allocation_in(algo, 64, 10);
         }
         no_allocation_in(Algo::Sac, 256, 2);
     });
-    assert!(stagerl::par::split_jobs() > split, "work went to the worker");
+    assert!(stagerl::base::par::split_jobs() > split, "work went to the worker");
 }

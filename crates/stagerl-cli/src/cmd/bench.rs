@@ -1,8 +1,8 @@
 use anyhow::{Context, Result};
+use stagerl::base::rng::Rng;
 use stagerl::config::Config;
 use stagerl::env::ReachEnv;
 use stagerl::reward::RewardFunction;
-use stagerl::rng::Rng;
 use std::time::Instant;
 
 #[derive(clap::Subcommand)]
@@ -47,7 +47,7 @@ pub struct UpdateArgs {
     /// Timed updates (after 20 warm-up updates), 1 to 1 000 000.
     #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     updates: u32,
-    /// Threads for the update (the same results on any number, see `stagerl::par`), 1 to 64.
+    /// Threads for the update (the same results on any number, see `stagerl::base::par`), 1 to 64.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     threads: u32,
 }
@@ -62,7 +62,7 @@ pub struct TrainArgs {
     /// too), 1 to 100 000 000.
     #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     steps: u64,
-    /// Threads for the update (the same results on any number, see `stagerl::par`), 1 to 64.
+    /// Threads for the update (the same results on any number, see `stagerl::base::par`), 1 to 64.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     threads: u32,
 }
@@ -91,12 +91,12 @@ pub fn run(b: Bench) -> Result<()> {
     match b {
         Bench::Env(a) => env(a),
         Bench::Update(a) => {
-            let pool = stagerl::par::Pool::new(a.threads as usize)?;
-            stagerl::par::install(Some(&pool), || update(a))
+            let pool = stagerl::base::par::Pool::new(a.threads as usize)?;
+            stagerl::base::par::install(Some(&pool), || update(a))
         }
         Bench::Train(a) => {
-            let pool = stagerl::par::Pool::new(a.threads as usize)?;
-            stagerl::par::install(Some(&pool), || train(a))
+            let pool = stagerl::base::par::Pool::new(a.threads as usize)?;
+            stagerl::base::par::install(Some(&pool), || train(a))
         }
         Bench::Plan(a) => plan(a),
     }
@@ -156,8 +156,8 @@ fn env(a: EnvArgs) -> Result<()> {
 }
 
 fn update(a: UpdateArgs) -> Result<()> {
+    use stagerl::agent::replay::Batch;
     use stagerl::agent::{build_off_policy, AgentConfig};
-    use stagerl::replay::Batch;
     let (od, ad) = (16, 6);
     let cfg = AgentConfig {
         algo: a.algo,
@@ -231,7 +231,7 @@ fn plan(a: PlanArgs) -> Result<()> {
     use stagerl::plan::{PlanPolicy, Planner};
     let (mut planner, what) = match &a.run {
         Some(dir) => {
-            let run = stagerl::rundir::RunDir::new(dir);
+            let run = stagerl::run::dir::RunDir::new(dir);
             let (ck, planner) = Planner::from_run(&run, None, None)?;
             (planner, format!("checkpoint {}", ck.display()))
         }

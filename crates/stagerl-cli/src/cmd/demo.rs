@@ -1,6 +1,6 @@
 use anyhow::{Context, Result};
-use stagerl::controller::JacobianController;
 use stagerl::env::{rollout, Flow, Observed, Outcome, ReachEnv, Scratch, Transition};
+use stagerl::plan::controller::JacobianController;
 use stagerl::train::eval::{evaluate_with, stop_when};
 use std::path::PathBuf;
 

@@ -1,6 +1,8 @@
 use anyhow::{Context, Result};
 use stagerl::env::Sim;
-use stagerl::train::{self, EvalSummary, EvalVariant, RunDir};
+use stagerl::run::dir::{EvalVariant, RunDir};
+use stagerl::train::eval::EvalSummary;
+use stagerl::train::{self};
 
 #[derive(clap::Args)]
 pub struct Args {

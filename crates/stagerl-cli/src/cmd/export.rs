@@ -1,5 +1,5 @@
 use anyhow::{Context, Result};
-use stagerl::rundir::RunDir;
+use stagerl::run::dir::RunDir;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]

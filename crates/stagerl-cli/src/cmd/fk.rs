@@ -37,7 +37,7 @@ mod tests {
     /// in several notations come back from `fk`'s line parser with the same bits.
     #[test]
     fn joints_parse_bit_exactly() {
-        let mut rng = stagerl::rng::Rng::new(4);
+        let mut rng = stagerl::base::rng::Rng::new(4);
         let mut values = vec![f64::MAX, f64::MIN, f64::MIN_POSITIVE, f64::from_bits(1), -0.0, 0.1];
         while values.len() < 60_000 {
             let bits = rng.next_u64();

@@ -1,6 +1,6 @@
 use anyhow::{bail, Context, Result};
 use stagerl::plan::{BatchLine, PlanRequest, Planner};
-use stagerl::rundir::RunDir;
+use stagerl::run::dir::RunDir;
 use stagerl::view::{self, View};
 use std::io::{BufRead, IsTerminal, Write};
 use std::path::PathBuf;

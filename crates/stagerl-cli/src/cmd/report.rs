@@ -1,5 +1,5 @@
 use anyhow::{Context, Result};
-use stagerl::metrics::ConvergenceCriterion;
+use stagerl::report::metrics::ConvergenceCriterion;
 use stagerl::report::{self, claims::Verdict, ReportOptions};
 use std::path::PathBuf;
 

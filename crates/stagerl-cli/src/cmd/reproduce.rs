@@ -1,11 +1,11 @@
 use anyhow::{bail, Result};
-use stagerl::experiment::{self, Preset, RunReport, RunStatus};
+use stagerl::sweep::{self, Preset, RunReport, RunStatus};
 use std::path::PathBuf;
 use std::sync::Arc;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// `smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long` (bundled, see configs/), or a path to a preset TOML file.
+    /// `smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long` (bundled, see configs/presets/), or a path to a preset TOML file.
     #[arg(long)]
     preset: String,
     /// Output directory: one run directory per algorithm x reward x seed.
@@ -29,15 +29,15 @@ pub fn run(args: Args) -> Result<()> {
     }
     let (preset, text) = Preset::resolve(&args.preset)?;
     let (index, count) =
-        experiment::resolve_shard(args.task_index, args.task_count, &|name| std::env::var(name).ok())?;
-    let runs = experiment::shard(preset.runs(), index, count)?;
+        sweep::resolve_shard(args.task_index, args.task_count, &|name| std::env::var(name).ok())?;
+    let runs = sweep::shard(preset.runs(), index, count)?;
     // Check every run first: a refusal writes nothing. preset.toml is written under the sweep's
     // lock, once (left as is when it already holds this text).
-    experiment::check_all_existing(&runs, &args.out)?;
-    experiment::write_preset(&args.out, &text)?;
+    sweep::check_all_existing(&runs, &args.out)?;
+    sweep::write_preset(&args.out, &text)?;
     // provenance.json: this session's command, code version, machine and times.
     let argv: Vec<String> = std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect();
-    let recorder = stagerl::provenance::Recorder::start(&args.out, argv)?;
+    let recorder = stagerl::run::provenance::Recorder::start(&args.out, argv)?;
     let total = runs.len();
     outln!(
         "reproduce `{}`: {} runs in this shard ({} of {}), {} at once -> {}",
@@ -52,7 +52,7 @@ pub fn run(args: Args) -> Result<()> {
     // A failing standard output stops the sweep as SIGINT does: runs save themselves.
     let output = crate::out::RunOutput::new(Arc::clone(&stop));
     let outcome =
-        experiment::run_sweep(&runs, &args.out, &preset.sweep, args.jobs, &stop, &|r| print_run(&output, r));
+        sweep::run_sweep(&runs, &args.out, &preset.sweep, args.jobs, &stop, &|r| print_run(&output, r));
     let ended = if output.failed().is_some() {
         "stopped: standard output failed".to_string()
     } else if outcome.interrupted || stop.load(std::sync::atomic::Ordering::SeqCst) {

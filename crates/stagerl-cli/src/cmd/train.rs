@@ -2,7 +2,8 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use stagerl::agent::Algo;
 use stagerl::reward::RewardFunction;
-use stagerl::train::{self, final_eval, Progress, Resumed, RunDir, TrainOptions};
+use stagerl::run::dir::RunDir;
+use stagerl::train::{self, final_eval, Progress, Resumed, TrainOptions};
 use std::collections::VecDeque;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -48,7 +49,7 @@ pub struct Args {
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(0..=10_000_000))]
     eval_trials: u32,
     /// Threads for this run's updates, 1 to 64. The run is the same, bit for bit, on any number
-    /// (work is split only into parts that write separate values, see `stagerl::par`); wide
+    /// (work is split only into parts that write separate values, see `stagerl::base::par`); wide
     /// networks gain most (hidden 256), hidden 64 less (end to end on two cores: -5 to +40 %,
     /// see the README's Performance section).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
@@ -75,8 +76,9 @@ fn stop_flags() -> Result<(Arc<AtomicBool>, Arc<AtomicBool>)> {
 }
 
 /// Take the lock of the run directory `dir` (created if needed) for this process.
-pub fn lock_run(dir: &Path) -> Result<stagerl::lock::DirLock> {
-    stagerl::lock::DirLock::run(dir).with_context(|| format!("taking the run directory {}", dir.display()))
+pub fn lock_run(dir: &Path) -> Result<stagerl::run::lock::DirLock> {
+    stagerl::run::lock::DirLock::run(dir)
+        .with_context(|| format!("taking the run directory {}", dir.display()))
 }
 
 /// Map an interruption to a message and the interrupted exit code; a stop caused by standard
@@ -120,8 +122,8 @@ fn output_ok(output: &RunOutput, dir: &std::path::Path) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let pool = stagerl::par::Pool::new(args.threads as usize)?;
-    stagerl::par::install(Some(&pool), || run_on_pool(args))
+    let pool = stagerl::base::par::Pool::new(args.threads as usize)?;
+    stagerl::base::par::install(Some(&pool), || run_on_pool(args))
 }
 
 fn run_on_pool(args: Args) -> Result<()> {
@@ -136,8 +138,8 @@ fn run_on_pool(args: Args) -> Result<()> {
         cfg.reward.function = r;
     }
     if let Some(h) = &args.her {
-        let strategy = h.parse::<stagerl::her::HerStrategy>()?;
-        cfg.agent.her = Some(stagerl::her::HerConfig { strategy, ..cfg.agent.her.unwrap_or_default() });
+        let strategy = h.parse::<stagerl::agent::HerStrategy>()?;
+        cfg.agent.her = Some(stagerl::agent::HerConfig { strategy, ..cfg.agent.her.unwrap_or_default() });
     }
     if let Some(s) = args.seed {
         cfg.train.seed = s;
@@ -148,13 +150,13 @@ fn run_on_pool(args: Args) -> Result<()> {
     cfg.validate()?;
     // Without --out, the first free runs/<algo>-<reward>-seed<N>[-k]: running the same command
     // again starts a new run beside the old one instead of failing or overwriting it.
-    let out = args.out.unwrap_or_else(|| {
-        stagerl::rundir::first_free(Path::new("runs"), &stagerl::experiment::run_name(&cfg))
-    });
+    let out = args
+        .out
+        .unwrap_or_else(|| stagerl::run::dir::first_free(Path::new("runs"), &stagerl::sweep::run_name(&cfg)));
     let dir = RunDir::new(&out);
     let refuse_existing = || -> Result<()> {
         if dir.holds_run() && !args.force {
-            stagerl::lock::DirLock::check_free(&out)?; // "in use" says more than "exists"
+            stagerl::run::lock::DirLock::check_free(&out)?; // "in use" says more than "exists"
             bail!(
                 "{} already holds a run (its config.toml exists): pass --force to replace it, or choose another --out",
                 out.display()

@@ -51,7 +51,7 @@ pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
     while let Some(d) = stack.pop() {
         for e in std::fs::read_dir(&d).unwrap() {
             let p = e.unwrap().path();
-            if p.file_name().is_some_and(|n| n == stagerl::rundir::LOCK_FILE) {
+            if p.file_name().is_some_and(|n| n == stagerl::run::dir::LOCK_FILE) {
                 continue;
             }
             if p.is_dir() {
@@ -78,8 +78,9 @@ pub fn assert_same_run(full: &Path, cut: &Path, episodes: usize, evals: usize, w
     let eval = |d: &Path| std::fs::read_to_string(d.join("eval.csv")).unwrap();
     assert_eq!(eval(full).lines().count(), evals + 1);
     assert_eq!(eval(full), eval(cut), "eval.csv differs {what}");
-    let ck =
-        |d: &Path| stagerl::checkpoint::Checkpoint::load(&d.join("checkpoints/final.safetensors")).unwrap();
+    let ck = |d: &Path| {
+        stagerl::io::checkpoint::Checkpoint::load(&d.join("checkpoints/final.safetensors")).unwrap()
+    };
     let (a, b) = (ck(full), ck(cut));
     assert!(a.tensor_names().count() > 15);
     assert!(a.same_contents(&b), "final networks or metadata differ {what}");
@@ -91,7 +92,7 @@ pub fn tb_scalars(dir: &Path) -> Vec<(String, i64, f32)> {
     let mut files: Vec<PathBuf> =
         std::fs::read_dir(dir.join("tb")).unwrap().map(|e| e.unwrap().path()).collect();
     files.sort();
-    files.iter().flat_map(|f| stagerl::log::tensorboard::read_scalars(f).unwrap()).collect()
+    files.iter().flat_map(|f| stagerl::io::tensorboard::read_scalars(f).unwrap()).collect()
 }
 
 /// Panics unless every tag of `scalars` has the steps `1..=n` exactly once each (`eval/` tags:

@@ -9,8 +9,8 @@ use std::fmt;
 use std::str::FromStr;
 
 use super::obs_norm::ObsNormConfig;
-use crate::her::HerConfig;
-use crate::validate::{at_least_one, finite, non_negative, positive};
+use crate::agent::HerConfig;
+use crate::base::validate::{at_least_one, finite, non_negative, positive};
 use crate::{Error, Result};
 
 /// The learning algorithm.
@@ -118,7 +118,7 @@ pub struct AgentConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ppo: Option<PpoConfig>,
     /// `agent.her = { strategy = "future" | "final" | "episode", k = 4 }`: hindsight experience
-    /// replay ([`crate::her`]); unset: off (the paper's agents).
+    /// replay ([`crate::train::her`]); unset: off (the paper's agents).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub her: Option<HerConfig>,
 }

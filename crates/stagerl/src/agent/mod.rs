@@ -2,14 +2,16 @@
 //! DDPG, [`ddpg`], as its one-critic case, as in Stable-Baselines3) and [`sac`], and the
 //! on-policy [`ppo`]. What they share (the [`Agent`] verbs, the one list of learned parts that
 //! drives saving, loading and the non-finite guard, exploration noise) lives here once. The
-//! replay buffer and the training loop are in [`crate::replay`] and [`crate::train`].
+//! replay buffer and the training loop are in [`crate::agent::replay`] and [`crate::train`].
 
 mod config;
 pub mod ddpg;
+mod her_config;
 pub mod noise;
 pub mod obs_norm;
 mod parts;
 pub mod ppo;
+pub mod replay;
 pub mod sac;
 pub mod td3;
 
@@ -17,11 +19,12 @@ pub use config::{
     AgentConfig, Algo, DdpgConfig, NoiseKind, PpoConfig, SacConfig, Td3Config, MAX_BATCH_VALUES,
     MAX_BUFFER_SIZE,
 };
+pub use her_config::{HerConfig, HerStrategy, MAX_HER_K};
 pub use parts::Learned;
 
-use crate::checkpoint::Checkpoint;
+use crate::agent::replay::Batch;
+use crate::io::checkpoint::Checkpoint;
 use crate::nn::{Adam, Mlp};
-use crate::replay::Batch;
 use crate::Result;
 
 /// What one gradient update measured.
@@ -49,7 +52,7 @@ pub trait Agent: Send + Learned {
     /// Action length.
     fn act_dim(&self) -> usize;
     /// The actor network (its output is turned into the deterministic action by the
-    /// algorithm's rule: see [`crate::policy`]).
+    /// algorithm's rule: see [`crate::run::policy`]).
     fn actor(&self) -> &Mlp<f32>;
     /// Exploration action for one observation (training), in [-1, 1].
     fn act(&mut self, obs: &[f32], action: &mut [f32]);

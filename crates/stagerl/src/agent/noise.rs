@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::NoiseKind;
-use crate::rng::Rng;
+use crate::base::rng::Rng;
 
 /// Gaussian or Ornstein-Uhlenbeck action noise, in action units.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -166,10 +166,10 @@ impl ObsNorm {
 
 /// Saved as its [`RunningStats`] (JSON; f64 values round-trip exactly).
 impl crate::agent::parts::State for ObsNorm {
-    fn save_json(&self, ck: &mut crate::checkpoint::Checkpoint, name: &str) {
+    fn save_json(&self, ck: &mut crate::io::checkpoint::Checkpoint, name: &str) {
         ck.put_json(name, &self.stats);
     }
-    fn load_json(&mut self, ck: &crate::checkpoint::Checkpoint, name: &str) -> Result<()> {
+    fn load_json(&mut self, ck: &crate::io::checkpoint::Checkpoint, name: &str) -> Result<()> {
         self.restore(ck.json(name)?)
     }
 }
@@ -183,7 +183,7 @@ mod tests {
     #[test]
     fn batches_merge_to_the_whole_datas_moments() {
         let mut n = ObsNorm::new(2, &ObsNormConfig::default());
-        let mut rng = crate::rng::Rng::new(3);
+        let mut rng = crate::base::rng::Rng::new(3);
         let data: Vec<f32> =
             (0..2 * 300).map(|i| (rng.normal() * 2.0 + (i % 2) as f64 * 5.0) as f32).collect();
         for chunk in data.chunks(2 * 30) {

@@ -27,8 +27,8 @@
 use super::obs_norm::ObsNorm;
 use super::parts::learned_parts;
 use super::{sizes, Agent, AgentConfig, Algo, Learner, PpoConfig, UpdateStats};
+use crate::base::rng::Rng;
 use crate::nn::{Activation, Adam, Mlp};
-use crate::rng::Rng;
 
 /// `1/2 log(2 pi)`.
 const HALF_LOG_2PI: f64 = 0.918_938_533_204_672_7;

@@ -15,10 +15,10 @@
 
 use super::parts::learned_parts;
 use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, Learner, OffPolicy, UpdateStats};
+use crate::agent::replay::Batch;
+use crate::base::par;
+use crate::base::rng::Rng;
 use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
-use crate::par;
-use crate::replay::Batch;
-use crate::rng::Rng;
 
 /// The log-std range of the actor (CleanRL's).
 const LOG_STD: LogStdBound = LogStdBound::Tanh { min: -5.0, max: 2.0 };
@@ -47,7 +47,7 @@ pub struct Sac {
     next_logp: Vec<f32>,
     y: Vec<f32>,
     /// The second critic's values where the first's go to `y`, `dq`, `q1v`, `da` (the twin
-    /// critics run at once on two threads, see `stagerl::par`).
+    /// critics run at once on two threads, see `stagerl::base::par`).
     q2n: Vec<f32>,
     dq: Vec<f32>,
     dq2: Vec<f32>,
@@ -111,7 +111,7 @@ impl Sac {
 
     /// The entropy coefficient alpha.
     pub fn alpha(&self) -> f32 {
-        crate::math::exp_f32(self.log_alpha[0])
+        crate::base::math::exp_f32(self.log_alpha[0])
     }
 
     fn fill_normal(rng: &mut Rng, out: &mut [f32]) {

@@ -21,10 +21,10 @@ use super::parts::learned_parts;
 use super::{
     fit_forwarded, sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats,
 };
+use crate::agent::replay::Batch;
+use crate::base::par;
+use crate::base::rng::Rng;
 use crate::nn::{concat_cols, Activation, Adam, Mlp};
-use crate::par;
-use crate::replay::Batch;
-use crate::rng::Rng;
 
 /// What sets a member of the TD3 family apart.
 #[derive(Clone, Debug, PartialEq)]
@@ -84,7 +84,7 @@ pub struct Td3 {
     /// Per critic: its target's values on the batch.
     q_next: Vec<Vec<f32>>,
     /// Per critic: its loss gradient (the critics run at once on a pool's threads, see
-    /// `stagerl::par`) and its last loss.
+    /// `stagerl::base::par`) and its last loss.
     scratch: Vec<CriticScratch>,
 }
 

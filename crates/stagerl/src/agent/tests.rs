@@ -2,7 +2,7 @@
 
 use super::parts::{Part, PartMut};
 use super::*;
-use crate::rng::Rng;
+use crate::base::rng::Rng;
 
 fn small_cfg(algo: Algo) -> AgentConfig {
     AgentConfig { algo, hidden: vec![32, 32], batch_size: 16, ..AgentConfig::default() }

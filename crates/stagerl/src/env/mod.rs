@@ -9,8 +9,8 @@
 //!
 //! [`ReachEnv::step`] allocates nothing.
 
-pub mod rollout;
-pub mod task;
+mod rollout;
+mod task;
 mod vec;
 
 pub use rollout::{rollout, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
@@ -20,13 +20,17 @@ use nalgebra::Vector3;
 use std::f64::consts::PI;
 use std::sync::Arc;
 
-use crate::collision::{ArmCollider, CollisionKind, Contact};
-use crate::physics::DynamicArm;
+use crate::base::rng::Rng;
 use crate::reward::{RewardConfig, RewardInput, RewardTerms};
-use crate::rng::Rng;
 use crate::robot::{Chain, Pose};
+use crate::sim::collision::{ArmCollider, CollisionKind, Contact};
+use crate::sim::physics::DynamicArm;
 use crate::{Error, Result};
-pub use task::{ObservationKind, ObstacleObservation, OnCollision, ResolvedTask, Sim, TaskConfig};
+pub use task::{
+    ObservationKind, ObstacleObservation, OnCollision, RandomObstacles, ResolvedTask, Sim, TaskConfig,
+    DEFAULT_TARGET_JOINT_RANGE_RAD, MAX_OBSTACLES, MAX_OBS_DELTA_SCALE, MAX_RANDOM_OBSTACLES,
+    OBSTACLE_OBS_LEN, PLACEMENT_TRIES, UR5_HOME_POSE_RAD,
+};
 
 /// The outcome of one step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -112,7 +116,7 @@ pub fn observation_dim(kind: ObservationKind, dof: usize, obstacle_slots: usize)
 /// Write the observation entries that depend on the target (metres, base frame) for an
 /// end-effector at `ee` (metres): for the standard observation of a `dof`-joint arm, the target
 /// (at `dof + 3..dof + 6`), `obs_delta_scale x (target - ee)` and its norm. The environment writes its own observations with it, and hindsight relabelling
-/// ([`crate::her`]) writes those of a substituted goal, so both are the same bits.
+/// ([`crate::train::her`]) writes those of a substituted goal, so both are the same bits.
 pub fn write_target_entries(task: &ResolvedTask, obs: &mut [f32], ee: Vector3<f64>, target: Vector3<f64>) {
     match task.observation {
         ObservationKind::Standard => {
@@ -163,7 +167,7 @@ pub struct EnvState {
     pub collision_steps: u32,
     /// The episode's random obstacles (`[task.random_obstacles]`), after the fixed ones.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub random_obstacles: Vec<crate::collision::Obstacle>,
+    pub random_obstacles: Vec<crate::sim::collision::Obstacle>,
     /// With `task.sim = "dynamic"`: the joints' instantaneous velocities (rad/s), which with
     /// `q` are the simulation's state.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -191,7 +195,7 @@ pub struct ReachEnv {
     collider: Option<ArmCollider>,
     contact: Option<Contact>,
     /// The episode's obstacles: the fixed ones, then the random ones.
-    obstacles: Vec<crate::collision::Obstacle>,
+    obstacles: Vec<crate::sim::collision::Obstacle>,
     /// `task.obstacle_observation = "nearest"`: (distance from the end effector, index) per
     /// obstacle, sorted for the observation's slots (scratch of capacity `max_obstacles`).
     nearest: Vec<(f64, usize)>,
@@ -476,7 +480,7 @@ impl ReachEnv {
                 slot[k] = p[k] as f32;
                 slot[3 + k] = h[k] as f32;
             }
-            slot[6] = f32::from(u8::from(o.shape == crate::collision::ObstacleShape::Sphere));
+            slot[6] = f32::from(u8::from(o.shape == crate::sim::collision::ObstacleShape::Sphere));
         }
     }
 
@@ -511,7 +515,7 @@ impl ReachEnv {
     }
 
     /// The obstacles of this episode: the fixed ones, then the random ones.
-    pub fn obstacles(&self) -> &[crate::collision::Obstacle] {
+    pub fn obstacles(&self) -> &[crate::sim::collision::Obstacle] {
         &self.obstacles
     }
 
@@ -866,15 +870,15 @@ pub(crate) mod tests {
     }
 
     fn panda_env(
-        obstacles: Vec<crate::collision::Obstacle>,
-        checks: Option<crate::collision::Checks>,
+        obstacles: Vec<crate::sim::collision::Obstacle>,
+        checks: Option<crate::sim::collision::Checks>,
     ) -> ReachEnv {
         panda_env_with(obstacles, checks, OnCollision::Record, None)
     }
 
     fn panda_env_with(
-        obstacles: Vec<crate::collision::Obstacle>,
-        checks: Option<crate::collision::Checks>,
+        obstacles: Vec<crate::sim::collision::Obstacle>,
+        checks: Option<crate::sim::collision::Checks>,
         on_collision: OnCollision,
         collision_penalty: Option<f64>,
     ) -> ReachEnv {
@@ -901,7 +905,7 @@ pub(crate) mod tests {
     /// change nothing else: with the checks off, the same steps give the same bits.
     #[test]
     fn collisions_are_recorded_and_change_nothing_else() {
-        use crate::collision::{Checks, CollisionKind, Contact, Obstacle};
+        use crate::sim::collision::{Checks, CollisionKind, Contact, Obstacle};
         let mut env = panda_env(Vec::new(), None);
         env.reset();
         assert_eq!(env.contact(), None, "the home pose is clear");
@@ -1011,7 +1015,7 @@ pub(crate) mod tests {
     fn random_obstacles_env(seed: u64, observe: bool) -> ReachEnv {
         let chain = Arc::new(Chain::ur5());
         let task = TaskConfig {
-            obstacles: vec![crate::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
+            obstacles: vec![crate::sim::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
             random_obstacles: Some(task::RandomObstacles { count: [2, 5], ..Default::default() }),
             observe_obstacles: observe,
             ..TaskConfig::default()
@@ -1034,7 +1038,7 @@ pub(crate) mod tests {
             ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed)
                 .unwrap()
         };
-        let mut checker = ArmCollider::new(&chain, crate::collision::Checks::default());
+        let mut checker = ArmCollider::new(&chain, crate::sim::collision::Checks::default());
         let mut blocked_share = |fraction: f64| {
             let mut e = env(11);
             e.set_obstacles_in_path(fraction).unwrap();
@@ -1102,7 +1106,7 @@ pub(crate) mod tests {
     fn random_obstacles_are_placed_clear_of_the_start_and_the_target() {
         let mut env = random_obstacles_env(4, true);
         assert_eq!(env.obs_dim(), 16 + 7 * (1 + 5));
-        let mut checker = ArmCollider::new(env.chain(), crate::collision::Checks::default());
+        let mut checker = ArmCollider::new(env.chain(), crate::sim::collision::Checks::default());
         let (mut counts, mut hit) = (std::collections::BTreeSet::new(), 0);
         for _ in 0..200 {
             env.reset();
@@ -1168,7 +1172,7 @@ pub(crate) mod tests {
         let chain = Arc::new(Chain::ur5());
         let make = |encoding| {
             let task = TaskConfig {
-                obstacles: vec![crate::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
+                obstacles: vec![crate::sim::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
                 random_obstacles: Some(task::RandomObstacles { count: [1, 3], ..Default::default() }),
                 observe_obstacles: true,
                 obstacle_observation: encoding,
@@ -1309,7 +1313,7 @@ pub(crate) mod tests {
         assert!(e.to_string().contains("task.observe_obstacles"), "{e}");
     }
 
-    fn dynamic_env(seed: u64, obstacles: Vec<crate::collision::Obstacle>) -> ReachEnv {
+    fn dynamic_env(seed: u64, obstacles: Vec<crate::sim::collision::Obstacle>) -> ReachEnv {
         let chain = Arc::new(Chain::ur5());
         let task = TaskConfig { sim: Sim::Dynamic, obstacles, ..TaskConfig::default() };
         ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed).unwrap()
@@ -1368,7 +1372,7 @@ pub(crate) mod tests {
         let home = chain.fk(&task::UR5_HOME_POSE_RAD).position;
         // A box in the way of the base's turn.
         let wall =
-            crate::collision::Obstacle::cuboid([0.05, 0.3, 0.3], [home.x, home.y + 0.25, home.z], None);
+            crate::sim::collision::Obstacle::cuboid([0.05, 0.3, 0.3], [home.x, home.y + 0.25, home.z], None);
         let mut a = dynamic_env(3, vec![wall.clone()]);
         a.reset();
         let push = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0];

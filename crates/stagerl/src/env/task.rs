@@ -5,9 +5,9 @@
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 
-use crate::collision::{ArmCollider, Checks, Obstacle, ObstacleShape};
-use crate::rng::Rng;
+use crate::base::rng::Rng;
 use crate::robot::{Chain, JointKind};
+use crate::sim::collision::{ArmCollider, Checks, Obstacle, ObstacleShape};
 use crate::{Error, Result};
 
 /// What the policy observes.
@@ -45,7 +45,7 @@ pub struct TaskConfig {
     pub obs_delta_scale: f64,
     /// `[[task.obstacles]]`: boxes (`shape = "cuboid"`, `half_extents_m`) and spheres
     /// (`shape = "sphere"`, `radius_m`) at `position_m` (base frame, metres), optionally turned by
-    /// `rotation_xyzw`. The arm's contacts with them are recorded ([`crate::collision`]).
+    /// `rotation_xyzw`. The arm's contacts with them are recorded ([`crate::sim::collision`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub obstacles: Vec<Obstacle>,
     /// `[task.collision]`: which contacts are looked for (`floor`, `self_collision`); unset:
@@ -81,7 +81,7 @@ pub struct TaskConfig {
     /// How a joint-velocity command moves the arm: `"kinematic"` (the default: integrated and
     /// clamped to the limits, no inertia) or `"dynamic"` (a rigid-body simulation, rapier3d:
     /// velocity motors capped at each joint's URDF effort, gravity, contacts with the floor, the
-    /// obstacles and the arm itself; see [`crate::physics`]). Either way the reward sees the
+    /// obstacles and the arm itself; see [`crate::sim::physics`]). Either way the reward sees the
     /// velocity actually achieved, `(q_new - q_old) / dt_s`.
     #[serde(default, skip_serializing_if = "Sim::is_kinematic")]
     pub sim: Sim,
@@ -95,7 +95,7 @@ pub enum Sim {
     /// scene approximated without inertia): the default.
     #[default]
     Kinematic,
-    /// A rigid-body simulation of the arm ([`crate::physics::DynamicArm`]).
+    /// A rigid-body simulation of the arm ([`crate::sim::physics::DynamicArm`]).
     Dynamic,
 }
 

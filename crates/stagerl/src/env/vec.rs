@@ -4,8 +4,8 @@ use std::sync::Arc;
 
 use super::ResolvedTask;
 use super::{ReachEnv, Step};
+use crate::base::rng::Rng;
 use crate::reward::RewardConfig;
-use crate::rng::Rng;
 use crate::robot::Chain;
 use crate::{Error, Result};
 

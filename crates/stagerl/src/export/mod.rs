@@ -5,8 +5,8 @@ pub mod onnx;
 
 use std::path::{Path, PathBuf};
 
-use crate::policy::PolicySpec;
-use crate::rundir::RunDir;
+use crate::run::dir::RunDir;
+use crate::run::policy::PolicySpec;
 use crate::Result;
 
 /// The ONNX model of a run directory's checkpoint (`checkpoint`, else the best available: best,

@@ -1,6 +1,6 @@
-//! The actor as an ONNX model (opset 13, IR version 7), encoded by hand with [`crate::proto`].
+//! The actor as an ONNX model (opset 13, IR version 7), encoded by hand with [`crate::io::proto`].
 //!
-//! Input `observation` (f32, `[batch, obs_dim]`, the standard layout of [`crate::policy`]),
+//! Input `observation` (f32, `[batch, obs_dim]`, the standard layout of [`crate::run::policy`]),
 //! output `joint_velocity` (f32, `[batch, dof]`, rad/s; m/s for prismatic joints). The graph:
 //! for a normalised observation (PPO with `norm_obs`) `Sub` the means, `Div` by the standard
 //! deviations and `Clip`; per actor layer `Gemm(x, W, b, transB=1)` then `Relu` or `Tanh` (none for identity); for SAC
@@ -10,9 +10,9 @@
 //! the joints, the control period, the config hash and the stagerl version.
 
 use crate::agent::obs_norm::ObsNorm;
+use crate::io::proto::{put_int, put_len_delimited, put_str};
 use crate::nn::Mlp;
-use crate::policy::PolicySpec;
-use crate::proto::{put_int, put_len_delimited, put_str};
+use crate::run::policy::PolicySpec;
 use crate::{Error, Result};
 
 /// The ONNX opset the model imports.

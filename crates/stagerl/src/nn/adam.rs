@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::Scalar;
-use crate::simd::multiversion;
+use crate::base::simd::multiversion;
 
 /// Adam over one flat parameter slice.
 ///

@@ -4,8 +4,8 @@ use std::ops::Range;
 
 use super::matmul;
 use super::{Activation, Scalar};
-use crate::par;
-use crate::rng::Rng;
+use crate::base::par;
+use crate::base::rng::Rng;
 
 /// Batch rows per piece when a product is split over threads ([`par::split`]): a multiple of
 /// the kernels' row tiles.

@@ -4,7 +4,7 @@ use std::ops::Range;
 
 use super::ops::{grow, polyak_update};
 use super::{Activation, Linear, Scalar};
-use crate::rng::Rng;
+use crate::base::rng::Rng;
 
 /// Name, shape and place of one tensor inside a network's flat parameter vector (for
 /// checkpoints): e.g. `layer0.weight` with shape `[out, in]`, `layer0.bias` with shape `[out]`.

@@ -18,7 +18,7 @@
 //! # Example: a critic regression and a DDPG-style actor update
 //! ```
 //! use stagerl::nn::{concat_cols, mse_loss, Activation, Adam, Mlp};
-//! use stagerl::rng::Rng;
+//! use stagerl::base::rng::Rng;
 //!
 //! let (obs, act, batch) = (4, 2, 8);
 //! let mut rng = Rng::new(0);
@@ -77,4 +77,4 @@ pub use ops::{
     add_assign, axpy, clip_grad_norm, concat_cols, copy_cols, copy_row, first_non_finite, l2_norm,
     polyak_update, scale, sum_of_squares,
 };
-pub use scalar::{tanh_f32, Scalar};
+pub use scalar::Scalar;

@@ -4,7 +4,7 @@
 //! All of them are single passes over slices and allocate nothing.
 
 use super::Scalar;
-use crate::simd::multiversion;
+use crate::base::simd::multiversion;
 
 /// Lanes of the independent partial sums in reductions, so that the loops vectorise.
 const LANES: usize = 16;

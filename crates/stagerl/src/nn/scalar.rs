@@ -11,7 +11,7 @@ use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssi
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
-pub use crate::math::tanh_f32;
+use crate::base::math::tanh_f32;
 
 mod sealed {
     /// Only `f32` and `f64`; lets the matrix products find their `f32` kernels.
@@ -86,12 +86,12 @@ pub trait Scalar:
     fn from_usize(n: usize) -> Self {
         Self::from_f64(n as f64)
     }
-    /// e^self (for `f32` the vectorisable [`crate::math::exp_f32`], for `f64` the standard
+    /// e^self (for `f32` the vectorisable [`crate::base::math::exp_f32`], for `f64` the standard
     /// library's).
     fn exp(self) -> Self;
     /// e^self - 1, accurate near 0.
     fn exp_m1(self) -> Self;
-    /// Natural logarithm (for `f32` the vectorisable [`crate::math::ln_f32`], for `f64` the
+    /// Natural logarithm (for `f32` the vectorisable [`crate::base::math::ln_f32`], for `f64` the
     /// standard library's).
     fn ln(self) -> Self;
     /// ln(1 + self), accurate near 0.
@@ -195,7 +195,7 @@ macro_rules! impl_scalar {
     };
 }
 
-impl_scalar!(f32, tanh_f32, crate::math::exp_f32, crate::math::ln_f32);
+impl_scalar!(f32, tanh_f32, crate::base::math::exp_f32, crate::base::math::ln_f32);
 impl_scalar!(f64, f64::tanh, f64::exp, f64::ln);
 
 #[cfg(test)]

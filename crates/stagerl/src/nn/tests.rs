@@ -3,7 +3,7 @@
 //! and buffer reuse.
 
 use super::*;
-use crate::rng::Rng;
+use crate::base::rng::Rng;
 
 /// Central-difference step.
 const H: f64 = 1e-6;
@@ -507,14 +507,14 @@ fn polyak_between_networks() {
     assert_eq!(target.params(), source.params());
 }
 
-/// The multiversioned loops of the engine (see `crate::simd`) give the same bits at every level.
+/// The multiversioned loops of the engine (see `crate::base::simd`) give the same bits at every level.
 mod simd_levels {
+    use crate::base::rng::Rng;
+    use crate::base::simd::SimdLevel;
     use crate::nn::activation::{backward_kernel_at, backward_sum_kernel_at, bias_apply_kernel_at};
     use crate::nn::adam::{adam_kernel_at, Coefs};
     use crate::nn::ops::{polyak_kernel_at, scale_at, sum_of_squares_at};
     use crate::nn::Activation;
-    use crate::rng::Rng;
-    use crate::simd::SimdLevel;
 
     const LEVELS: [SimdLevel; 3] = [SimdLevel::Avx512, SimdLevel::Avx2, SimdLevel::Baseline];
 

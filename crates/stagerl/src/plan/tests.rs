@@ -76,7 +76,7 @@ fn jacobian_plans_keep_the_invariants_and_reach() {
     let mut reached = 0;
     for t in targets(100, 1) {
         let p = planner.plan(&t, None).unwrap();
-        assert_eq!(p.row(0).q, &crate::env::task::UR5_HOME_POSE_RAD);
+        assert_eq!(p.row(0).q, &crate::env::UR5_HOME_POSE_RAD);
         assert!(p.warning.is_none());
         check_plan(&p, &planner, &t);
         reached += usize::from(p.summary.reached);
@@ -97,7 +97,7 @@ fn agent_plans_follow_the_evaluation_rollout_and_start_anywhere() {
         let s = (k % 2 == 1).then_some(&start[..]);
         let p = planner.plan(&t, s).unwrap();
         check_plan(&p, &planner, &t);
-        assert_eq!(p.row(0).q, s.unwrap_or(&crate::env::task::UR5_HOME_POSE_RAD));
+        assert_eq!(p.row(0).q, s.unwrap_or(&crate::env::UR5_HOME_POSE_RAD));
         // The same rollout as evaluation's, from the same state.
         env.reset_to(s.unwrap_or(&env.task().home_pose.clone()), Vector3::from(t)).unwrap();
         let mut scratch = Scratch::new(&env);

@@ -11,8 +11,8 @@ use std::fmt::Write as _;
 use super::claims::Metric;
 use super::table::{algo_title, primary, reward_title, GroupSummary, ALGO_ORDER};
 use crate::agent::Algo;
+use crate::report::stats;
 use crate::reward::RewardFunction;
-use crate::stats;
 
 /// Bootstrap resamples of every interval here.
 pub const RESAMPLES: usize = 10_000;
@@ -82,7 +82,7 @@ pub fn iqm_estimate(xs: &[f64], seed: u64) -> Estimate {
 
 /// The probability of improvement of `x` over `y` with a bootstrap CI (both resampled).
 pub fn improvement_estimate(x: &[f64], y: &[f64], seed: u64) -> Estimate {
-    let mut rng = crate::rng::Rng::new(seed);
+    let mut rng = crate::base::rng::Rng::new(seed);
     let (mut rx, mut ry) = (vec![0.0; x.len()], vec![0.0; y.len()]);
     let mut draws: Vec<f64> = (0..RESAMPLES)
         .map(|_| {

@@ -2,7 +2,7 @@
 //! paper's own Table 1, which does not always support the text).
 //!
 //! Every comparison "A is better than B on an indicator" takes one value per seed from each
-//! group and gets (see [`crate::stats`]):
+//! group and gets (see [`crate::report::stats`]):
 //! - the effect: difference and relative difference of the means;
 //! - a 95 % percentile-bootstrap CI of the difference ([`BOOTSTRAP_RESAMPLES`] resamples, seeded);
 //! - a two-sided permutation test of the difference of means (exact for small groups, else
@@ -26,9 +26,9 @@ use std::fmt::Write as _;
 use super::paper::{self, PaperRow};
 use super::table::{algo_title, primary, reward_title, GroupSummary};
 use crate::agent::Algo;
-use crate::metrics::MeanStd;
+use crate::report::metrics::MeanStd;
+use crate::report::stats::{self, BOOTSTRAP_RESAMPLES};
 use crate::reward::RewardFunction::{self, Basic, Har, Posture, Sar, Stride};
-use crate::stats::{self, BOOTSTRAP_RESAMPLES};
 
 /// Our verdict on a comparison or a claim.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -873,9 +873,10 @@ pub fn render_markdown(claims: &[Claim]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::{Convergence, ConvergenceOutcome, EvalSummary, TrainMetrics};
+    use crate::base::rng::Rng;
+    use crate::report::metrics::{Convergence, ConvergenceOutcome, TrainMetrics};
     use crate::report::table::RunSummary;
-    use crate::rng::Rng;
+    use crate::train::eval::EvalSummary;
 
     #[test]
     fn verdicts_combine() {

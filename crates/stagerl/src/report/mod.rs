@@ -3,7 +3,7 @@
 //! Figures 7 and 8 and evaluation trajectories as PNG and SVG.
 //!
 //! - [`runs`]: finding and reading run directories;
-//! - [`table`]: grouping over seeds, the indicators of [`crate::metrics`], Table 1 as Markdown/CSV;
+//! - [`table`]: grouping over seeds, the indicators of [`crate::report::metrics`], Table 1 as Markdown/CSV;
 //! - [`claims`]: the claims of section VI and our statistical verdicts;
 //! - [`aggregate`]: IQM, probability of improvement and performance profiles over seeds;
 //! - [`plot`], [`trajectory`]: the figures;
@@ -13,17 +13,19 @@
 
 pub mod aggregate;
 pub mod claims;
+pub mod metrics;
 pub mod paper;
 pub mod plot;
 pub mod reference;
 pub mod runs;
+pub mod stats;
 pub mod table;
 pub mod trajectory;
 
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-use crate::metrics::ConvergenceCriterion;
+use crate::report::metrics::ConvergenceCriterion;
 use crate::{Error, Result};
 use claims::Claim;
 use paper::PaperRow;
@@ -96,11 +98,11 @@ pub fn sensitivity(groups: &[Group], criterion: &ConvergenceCriterion) -> Result
             for r in &g.runs {
                 let rewards: Vec<f64> = r.episodes.iter().map(|e| e.reward).collect();
                 // Invalid rewards are reported by the table; here they count as not converged.
-                if let Ok(Some(i)) = crate::metrics::e_start(&rewards, &c) {
+                if let Ok(Some(i)) = crate::report::metrics::e_start(&rewards, &c) {
                     starts.push(r.episodes[i as usize - 1].episode as f64);
                 }
             }
-            row.push((k, crate::metrics::mean(&starts), starts.len()));
+            row.push((k, crate::base::math::mean(&starts), starts.len()));
         }
         out.push(Sensitivity {
             algo: g.algo,
@@ -239,7 +241,7 @@ fn table1_markdown(dir: &Path, report: &Report, opts: &ReportOptions) -> Result<
 
 /// Where the runs came from (the sweep's `provenance.json`, if any) and what writes this report.
 fn provenance_markdown(dir: &Path) -> Result<String> {
-    let sweep = crate::provenance::Provenance::load(dir)?;
+    let sweep = crate::run::provenance::Provenance::load(dir)?;
     let mut s = if sweep.sessions.is_empty() {
         "\n## Provenance\n\nThe input directory has no `provenance.json` (not written by `stagerl reproduce`): \
          the code version of its runs is unknown.\n"
@@ -249,7 +251,7 @@ fn provenance_markdown(dir: &Path) -> Result<String> {
     };
     s.push_str(&format!(
         "\nThis report: `{}`; `provenance.json` beside it lists every command with its times.\n",
-        crate::provenance::Code::current().describe()
+        crate::run::provenance::Code::current().describe()
     ));
     Ok(s)
 }
@@ -266,7 +268,7 @@ pub fn pick_trajectory_runs<'a>(
     summaries: &[GroupSummary],
 ) -> Vec<(&'a runs::RunData, &'static str, Option<f64>)> {
     fn has_ckpt(g: &Group) -> Option<&runs::RunData> {
-        g.runs.iter().find(|r| crate::train::RunDir::new(&r.dir).best_available_checkpoint().is_some())
+        g.runs.iter().find(|r| crate::run::dir::RunDir::new(&r.dir).best_available_checkpoint().is_some())
     }
     let candidates: Vec<(&Group, &GroupSummary)> =
         groups.iter().zip(summaries).filter(|(g, _)| g.primary && has_ckpt(g).is_some()).collect();
@@ -277,7 +279,7 @@ pub fn pick_trajectory_runs<'a>(
         .map(|(_, a)| a);
     let Some(algo) = algo else { return Vec::new() };
     let score = |s: &GroupSummary| {
-        let tail = crate::metrics::mean(&s.runs.iter().map(|r| r.tail_mean_reward).collect::<Vec<_>>());
+        let tail = crate::base::math::mean(&s.runs.iter().map(|r| r.tail_mean_reward).collect::<Vec<_>>());
         (
             s.success_rate.map_or(-1.0, |m| m.mean),
             s.eval_reward.map_or(f64::NEG_INFINITY, |m| m.mean),
@@ -305,7 +307,7 @@ pub fn pick_trajectory_runs<'a>(
 /// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}` and
 /// `view-best.html`, `view-worst.html` (animated 3D views of those runs' plans).
 pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
-    let clock = crate::provenance::Clock::now();
+    let clock = crate::run::provenance::Clock::now();
     check_options(dir, opts)?;
     let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
     if groups.is_empty() {
@@ -350,8 +352,8 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     }
     let command =
         if opts.command.is_empty() { vec!["(library call)".to_string()] } else { opts.command.clone() };
-    crate::provenance::record_report(dir, &opts.out, command, clock)?;
-    files.push(out(crate::provenance::FILE));
+    crate::run::provenance::record_report(dir, &opts.out, command, clock)?;
+    files.push(out(crate::run::provenance::FILE));
     let json_path = out("table1.json");
     files.push(json_path.clone());
     // Named relative to the output directory, as the trajectories' checkpoints are relative to
@@ -386,7 +388,8 @@ fn write_trajectories(
                 let count = opts.trajectories.min(crate::view::MAX_TRAJECTORIES as u32);
                 let source = crate::view::ViewSource::Targets { count, seed };
                 let ckpt = dir.join(&r.checkpoint);
-                match crate::view::view_of_run(&crate::rundir::RunDir::new(&run.dir), Some(&ckpt), &source) {
+                match crate::view::view_of_run(&crate::run::dir::RunDir::new(&run.dir), Some(&ckpt), &source)
+                {
                     Ok(mut v) => {
                         v.title = r.title.clone();
                         let p = out(&format!("view-{role}.html"));

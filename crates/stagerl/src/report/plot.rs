@@ -9,12 +9,14 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
-use super::runs::{EvalPoint, RunData};
+use super::runs::RunData;
 use super::table::{algo_title, reward_title, Group, GroupSummary, ALGO_ORDER};
 use super::trajectory::Rollouts;
 use crate::agent::Algo;
-use crate::metrics::{trailing_moving_average, EvalSummary};
+use crate::io::csv::EvalPoint;
+use crate::report::metrics::trailing_moving_average;
 use crate::reward::RewardFunction;
+use crate::train::eval::EvalSummary;
 use crate::{Error, Result};
 
 /// DejaVu Sans (Bitstream Vera licence, `assets/fonts/LICENSE-DejaVu.txt`).

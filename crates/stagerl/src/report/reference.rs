@@ -6,10 +6,10 @@ use serde::Serialize;
 
 use super::runs::RunData;
 use super::table::{reward_title, Group, GroupSummary};
-use crate::controller::JacobianController;
 use crate::env::{Policy, ReachEnv};
-use crate::metrics::EvalSummary;
+use crate::plan::controller::JacobianController;
 use crate::reward::RewardFunction;
+use crate::train::eval::EvalSummary;
 use crate::Result;
 
 /// Which settings a study's runs use.
@@ -120,7 +120,7 @@ pub fn render_markdown(rows: &[ReferenceRow]) -> String {
     }
     let mut s = String::from(
         "\n## Reference: the scripted Jacobian controller\n\nA damped-least-squares controller \
-         (`stagerl::controller`, no learning) on the same targets as each reward function's closing \
+         (`stagerl::plan::controller`, no learning) on the same targets as each reward function's closing \
          evaluation: what a learned planner is measured against.\n\n\
          | Method | Reward | Trials (seed) | Evaluation reward | Evaluation steps | Success rate |\n|---|---|---|---|---|---|\n",
     );

@@ -1,17 +1,17 @@
 //! Finding run directories and reading what a run wrote: `config.toml`, `episodes.csv`,
 //! `eval.csv` and the per-trial evaluation CSV (`eval-final-seed<N>.csv`, else `eval-seed<N>.csv`,
-//! else one of `stagerl eval`; the readers are beside their writers in [`crate::log::csv`], the
-//! file names in [`crate::rundir`]).
+//! else one of `stagerl eval`; the readers are beside their writers in [`crate::io::csv`], the
+//! file names in [`crate::run::dir`]).
 
 use std::path::{Path, PathBuf};
 
 use crate::config::Config;
-use crate::log::csv::{read_episodes, read_eval_points, read_trials_csv};
-use crate::log::{EpisodeRecord, TrialRecord};
-use crate::rundir::RunDir;
+use crate::io::csv::{read_episodes, read_eval_points, read_trials_csv};
+use crate::io::csv::{EpisodeRecord, TrialRecord};
+use crate::run::dir::RunDir;
 use crate::{Error, Result};
 
-pub use crate::log::EvalPoint;
+use crate::io::csv::EvalPoint;
 
 /// The per-trial evaluation a run holds.
 #[derive(Clone, Debug, PartialEq)]

@@ -10,9 +10,10 @@ use super::paper::{self, PaperRow};
 use super::runs::RunData;
 use crate::agent::Algo;
 use crate::config::Config;
-use crate::log::csv::{to_csv, CsvRow};
-use crate::metrics::{self, Convergence, ConvergenceCriterion, EvalSummary, MeanStd, TrainMetrics};
+use crate::io::csv::{to_csv, CsvRow};
+use crate::report::metrics::{self, Convergence, ConvergenceCriterion, MeanStd, TrainMetrics};
 use crate::reward::RewardFunction;
+use crate::train::eval::EvalSummary;
 use crate::Result;
 
 /// Config keys that do not change what a run learns: runs that differ only in these are seeds of
@@ -255,7 +256,7 @@ fn summarize_run(run: &RunData, criterion: &ConvergenceCriterion) -> RunSummary 
         episodes: run.episodes.len() as u64,
         convergence,
         train,
-        tail_mean_reward: metrics::mean(tail).unwrap_or(f64::NAN),
+        tail_mean_reward: crate::base::math::mean(tail).unwrap_or(f64::NAN),
         eval,
         eval_final_checkpoint: run.final_checkpoint_eval.as_ref().and_then(|f| EvalSummary::of(&f.trials)),
         eval_file,
@@ -516,7 +517,7 @@ fn intro_markdown(s: &mut String, groups: &[GroupSummary], criterion: &Convergen
     let _ = writeln!(
         s,
         "E_start (the paper gives no formula): the first episode from which every {w}-episode window mean stays \
-         within ± max({k} × std, {f}) of the mean of the last {t:.0} % of episodes (see `stagerl::metrics::ConvergenceCriterion`). \
+         within ± max({k} × std, {f}) of the mean of the last {t:.0} % of episodes (see `stagerl::report::metrics::ConvergenceCriterion`). \
          \"n.c.\": no seed converged.\n",
         w = criterion.window,
         k = criterion.band_k,
@@ -796,7 +797,7 @@ mod tests {
         c.agent.gamma = 0.99;
         c.train.episodes = 1500;
         assert_eq!(variant_label(&c), "agent.gamma=0.99, train.episodes=1500");
-        c.agent.her = Some(crate::her::HerConfig::default());
+        c.agent.her = Some(crate::agent::HerConfig::default());
         assert_eq!(variant_label(&c), "HER (future, k=4), agent.gamma=0.99, train.episodes=1500");
     }
 

@@ -8,8 +8,8 @@ use std::path::Path;
 use super::runs::RunData;
 use super::table::{algo_title, reward_title};
 use crate::env::{Driver, Flow, ReachEnv, Transition};
-use crate::log::csv::{self, CsvRow};
-use crate::rundir::RunDir;
+use crate::io::csv::{self, CsvRow};
+use crate::run::dir::RunDir;
 use crate::train::eval;
 use crate::Result;
 

@@ -6,7 +6,7 @@
 //! for most of a row. Here the rows go in blocks of [`BLOCK`], in three passes that each call
 //! the same functions as `compute`: the distance, eq. 5's cosine and eq. 9's movement of every
 //! row of the block, compiled for the widest SIMD level the CPU has (the same IEEE operations
-//! per row, so the same bits, see [`crate::simd`]); then every `acos`; then the remaining terms
+//! per row, so the same bits, see [`crate::base::simd`]); then every `acos`; then the remaining terms
 //! ([`RewardTerms::from_parts`]), written to their columns. A block with a bad row is scanned
 //! again a row at a time, so the error is that of the first bad row, as with
 //! [`RewardTerms::try_compute`] row by row.
@@ -16,7 +16,7 @@ use std::mem::MaybeUninit;
 use nalgebra::Vector3;
 
 use super::{angle_from_cosine, direction_cosine, movement_reward, RewardConfig, RewardInput, RewardTerms};
-use crate::simd::{multiversion, SimdLevel};
+use crate::base::simd::{multiversion, SimdLevel};
 use crate::{Error, Result};
 
 /// The float columns of [`compute_rows`]: the names of [`RewardTerms::reported`] but `reached`,
@@ -138,7 +138,7 @@ pub fn compute_rows(
     cols: &mut [&mut [MaybeUninit<f64>]; COLUMNS],
     reached: &mut [bool],
 ) -> std::result::Result<(), BadRow> {
-    compute_rows_at(crate::simd::simd_level(), cfg, dt_s, rows, start, cols, reached)
+    compute_rows_at(crate::base::simd::simd_level(), cfg, dt_s, rows, start, cols, reached)
 }
 
 /// [`compute_rows`] with its vector loops at SIMD level `level` (for the tests that compare
@@ -340,8 +340,8 @@ fn first_bad(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::base::rng::Rng;
     use crate::reward::{DirectionSource, RewardFunction};
-    use crate::rng::Rng;
 
     /// Random rows: positions within 1.5 m, unit quaternions, joint speeds within 3 rad/s; some
     /// rows at the target, with a zero axis, or exactly at the success radius.

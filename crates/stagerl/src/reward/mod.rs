@@ -135,7 +135,7 @@ impl Default for RewardConfig {
 impl RewardConfig {
     /// Check every value; the error names the field, the value and what is allowed.
     pub fn validate(&self) -> Result<()> {
-        use crate::validate::{finite, non_negative, positive};
+        use crate::base::validate::{finite, non_negative, positive};
         positive("reward.beta_m", self.beta_m)?;
         finite("reward.success_bonus", self.success_bonus)?;
         non_negative("reward.har_boundary_m", self.har_boundary_m)?;

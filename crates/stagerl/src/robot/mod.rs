@@ -98,7 +98,7 @@ pub struct JointInfo {
     pub velocity: f64,
     /// Effort limit (N m for a revolute joint, N for a prismatic one), positive: the URDF's
     /// `<limit effort>`, or `f64::INFINITY` when the URDF gives none or 0 (unlimited). Only the
-    /// dynamic simulation ([`crate::physics`]) reads it.
+    /// dynamic simulation ([`crate::sim::physics`]) reads it.
     pub effort: f64,
 }
 

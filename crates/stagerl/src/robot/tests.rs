@@ -8,7 +8,7 @@ use nalgebra::{Matrix3, Matrix4, Rotation3, UnitQuaternion, Vector3};
 
 use super::kin;
 use super::*;
-use crate::rng::Rng;
+use crate::base::rng::Rng;
 use crate::Error;
 
 /// The test arm of `tests/robot_test_arm.urdf` (tip `tool`).

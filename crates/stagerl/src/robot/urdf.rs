@@ -24,7 +24,7 @@ pub const MAX_LENGTH_M: f64 = 1e6;
 
 /// A URDF error; names echoed from the document are cut to excerpts.
 fn urdf_err(msg: impl Into<String>) -> Error {
-    Error::Urdf(crate::text::bound_message(&msg.into()))
+    Error::Urdf(crate::base::text::bound_message(&msg.into()))
 }
 
 /// `a`, `b`, `c` as "`a`, `b`, `c`".

@@ -1,17 +1,67 @@
 //! Evaluation: the deterministic policy on random targets (the paper's 500 trials), and the one
 //! path that evaluates a run directory's checkpoint and writes its per-trial CSV.
 
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::agent::Agent;
 use crate::config::Config;
 use crate::env::{rollout, Driver, Flow, Observed, Outcome, ReachEnv, Scratch, Transition};
-use crate::rundir::RunDir;
+use crate::run::dir::RunDir;
 use crate::{Error, Result};
 
-pub use crate::log::csv::{read_trials_csv, write_trials_csv, TrialRecord};
-pub use crate::metrics::EvalSummary;
+use crate::base::math::mean;
+use crate::io::csv::{read_trials_csv, write_trials_csv, TrialRecord};
+
+/// Evaluation indicators of one run (the paper's 500 trials): what an evaluation measured.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct EvalSummary {
+    pub trials: u32,
+    /// Mean eq. 16 reward over all trials.
+    pub mean_reward: f64,
+    /// Mean steps of the successful trials; `None` when none succeeded.
+    #[serde(rename = "mean_steps_success")]
+    pub mean_steps: Option<f64>,
+    /// Fraction of trials that reached the target, in [0, 1].
+    pub success_rate: f64,
+    /// Median final distance, metres.
+    pub median_final_distance_m: f64,
+    /// Mean final distance, metres.
+    pub mean_final_distance_m: f64,
+    /// Fraction of trials with at least one step in contact (floor, self, obstacle), in [0, 1];
+    /// `None` when a trial's file predates contact recording.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub collision_rate: Option<f64>,
+}
+
+impl EvalSummary {
+    /// The summary of per-trial records; `None` for no trials.
+    pub fn of(trials: &[TrialRecord]) -> Option<EvalSummary> {
+        if trials.is_empty() {
+            return None;
+        }
+        let rewards: Vec<f64> = trials.iter().map(|t| t.reward).collect();
+        let ok: Vec<f64> = trials.iter().filter(|t| t.success).map(|t| f64::from(t.steps)).collect();
+        let mut d: Vec<f64> = trials.iter().map(|r| r.final_distance_m).collect();
+        d.sort_by(f64::total_cmp);
+        let k = d.len();
+        let median = if k % 2 == 1 { d[k / 2] } else { 0.5 * (d[k / 2 - 1] + d[k / 2]) };
+        Some(EvalSummary {
+            trials: trials.len() as u32,
+            mean_reward: mean(&rewards)?,
+            mean_steps: mean(&ok),
+            success_rate: ok.len() as f64 / trials.len() as f64,
+            median_final_distance_m: median,
+            mean_final_distance_m: mean(&d)?,
+            collision_rate: trials
+                .iter()
+                .map(|t| t.collision_steps.map(|c| u32::from(c > 0)))
+                .sum::<Option<u32>>()
+                .map(|n| f64::from(n) / trials.len() as f64),
+        })
+    }
+}
 
 /// The largest evaluation asked for at once (its per-trial records are kept in memory).
 pub const MAX_EVAL_TRIALS: u32 = 10_000_000;
@@ -155,7 +205,7 @@ pub fn load_policy(path: &Path) -> Result<(PathBuf, ReachEnv, Box<dyn Agent>)> {
         let run = RunDir::new(path);
         return load_run_agent(&run, &run.load_config()?, None);
     }
-    let ck = crate::checkpoint::Checkpoint::load(path)?;
+    let ck = crate::io::checkpoint::Checkpoint::load(path)?;
     let cfg = Config::from_toml_str(ck.meta("config")?, path)?;
     let env = ReachEnv::from_config(&cfg, 0)?;
     let agent = super::load_agent(&cfg, &env, path)?;
@@ -201,7 +251,7 @@ pub fn evaluate_loaded(
 }
 
 /// What [`write_command_eval`] did with the per-trial CSV.
-pub use crate::io::Written;
+use crate::io::Written;
 
 /// Write the per-trial CSV of an evaluation by `stagerl eval`, its own file
 /// ([`RunDir::eval_command`], never the closing evaluation a report reads), unless it already
@@ -213,7 +263,7 @@ pub fn write_command_eval(
     run: &RunDir,
     e: &RunEval,
     seed: u64,
-    variant: crate::rundir::EvalVariant,
+    variant: crate::run::dir::EvalVariant,
     force: bool,
 ) -> Result<(PathBuf, Written)> {
     let trials = u32::try_from(e.trials.len()).expect("at most MAX_EVAL_TRIALS trials");

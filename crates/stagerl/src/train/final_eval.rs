@@ -14,8 +14,10 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
-use super::{config_hash, evaluate_run, EvalSummary, RunDir};
+use super::config_hash;
+use super::eval::{evaluate_run, EvalSummary};
 use crate::config::Config;
+use crate::run::dir::RunDir;
 use crate::{Error, Result};
 
 /// What a closing evaluation was made with.
@@ -103,9 +105,9 @@ pub fn run(
     };
     // The record goes last: without it the run is not evaluated, whatever else is on disk.
     let _ = std::fs::remove_file(run.final_eval_record(seed));
-    super::eval::write_trials_csv(&run.final_eval(seed), &e.trials)?;
+    crate::io::csv::write_trials_csv(&run.final_eval(seed), &e.trials)?;
     if let Some(t) = &final_trials {
-        super::eval::write_trials_csv(&run.final_checkpoint_eval(seed), t)?;
+        crate::io::csv::write_trials_csv(&run.final_checkpoint_eval(seed), t)?;
     }
     let json = serde_json::to_string_pretty(&record).expect("the record serialises");
     crate::io::write_atomic(&run.final_eval_record(seed), json.as_bytes())?;

@@ -18,7 +18,7 @@
 //!   (as Stable-Baselines3's `EvalCallback`). Test it on other targets than it was chosen on.
 //! - `eval-final-seed<N>.csv` and its record `eval-final-seed<N>.json`: the closing evaluation
 //!   (see [`final_eval`]); `eval-<checkpoint>-trials<T>-seed<N>.csv`: evaluations by `stagerl eval`;
-//! - `.stagerl.lock`: the advisory lock of the process writing the run (see [`crate::lock`]).
+//! - `.stagerl.lock`: the advisory lock of the process writing the run (see [`crate::run::lock`]).
 //!
 //! Metadata in both names the algorithm, the shapes and the config hash. [`resume`] continues a
 //! run from `latest.safetensors` so that its `episodes.csv` (but the wall time) and its networks
@@ -26,6 +26,7 @@
 
 pub mod eval;
 pub mod final_eval;
+pub mod her;
 mod on_policy;
 pub mod replace;
 
@@ -34,20 +35,20 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
+use crate::agent::replay::{Batch, ReplayBuffer};
 use crate::agent::{self, Agent, AgentConfig, Learner, OffPolicy, UpdateStats};
-use crate::checkpoint::Checkpoint;
+use crate::base::rng::Rng;
 use crate::config::Config;
 use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
-use crate::her::{HerState, Relabeller};
-use crate::log::csv::{parse_line, push_row, CsvRecord, CsvRow};
-use crate::log::{EpisodeCsv, EpisodeRecord, EvalPoint, EventWriter};
-use crate::replay::{Batch, ReplayBuffer};
-use crate::rng::Rng;
+use crate::io::checkpoint::Checkpoint;
+use crate::io::csv::{parse_line, push_row, CsvRecord, CsvRow};
+use crate::io::csv::{EpisodeCsv, EpisodeRecord, EvalPoint};
+use crate::io::tensorboard::EventWriter;
+use crate::train::her::{HerState, Relabeller};
 use crate::{Error, Result};
 
-pub use crate::rundir::{EvalVariant, RunDir};
-pub use crate::schedule::{TrainConfig, MAX_EVAL_TRIALS};
-pub use eval::{evaluate, evaluate_run, evaluate_until, EvalSummary, RunEval, TrialRecord};
+use crate::run::dir::RunDir;
+use eval::{evaluate_until, EvalSummary};
 
 /// What the loop reports after each episode.
 pub struct Progress<'a> {
@@ -94,7 +95,7 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
         return Err(Error::InvalidInput(format!(
             "{}: checkpoint of algorithm `{}`, the config says `{}`",
             path.display(),
-            crate::text::excerpt(algo),
+            crate::base::text::excerpt(algo),
             cfg.agent.algo
         )));
     }
@@ -274,8 +275,8 @@ impl Trainer {
         self.agent.save(&mut ck);
         ck.put_meta("algorithm", self.agent.algo().name());
         ck.put_json(
-            crate::policy::POLICY_KEY,
-            &crate::policy::PolicySpec::new(&self.cfg, &self.env, self.agent.as_ref()),
+            crate::run::policy::POLICY_KEY,
+            &crate::run::policy::PolicySpec::new(&self.cfg, &self.env, self.agent.as_ref()),
         );
         ck.put_json("obs_dim", &self.env.obs_dim());
         ck.put_json("act_dim", &self.env.act_dim());
@@ -362,14 +363,14 @@ impl Trainer {
                 path.display()
             )));
         }
-        crate::io::write_atomic(&path, crate::log::csv::to_csv(&rows).as_bytes())?;
+        crate::io::write_atomic(&path, crate::io::csv::to_csv(&rows).as_bytes())?;
         crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
         // The TensorBoard log too: each tag's steps up to the checkpoint, once (but an evaluation
         // still due at the checkpoint's episode, which runs again).
         let (ep, eval_due) = (self.state.episode as i64, self.state.eval_due);
         let keep =
             |tag: &str, step: i64| step < ep || (step == ep && !(eval_due && tag.starts_with("eval/")));
-        crate::log::tensorboard::rewind(&self.dir.tb(), keep).map(|_| ())
+        crate::io::tensorboard::rewind(&self.dir.tb(), keep).map(|_| ())
     }
 
     /// Train until `train.episodes` episodes are done or `stop` is set.

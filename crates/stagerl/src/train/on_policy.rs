@@ -14,10 +14,10 @@ use std::collections::VecDeque;
 use super::{EpisodeEnd, LoopState};
 use crate::agent::ppo::{Ppo, Rollout};
 use crate::agent::UpdateStats;
-use crate::checkpoint::Checkpoint;
+use crate::base::rng::Rng;
 use crate::config::Config;
 use crate::env::{EnvState, ReachEnv, VecEnv};
-use crate::rng::Rng;
+use crate::io::checkpoint::Checkpoint;
 use crate::{Error, Result};
 
 /// The saved state of [`OnPolicy`] (with the rollout's arrays as tensors).

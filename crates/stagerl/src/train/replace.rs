@@ -32,7 +32,7 @@ pub fn remove_previous_run(dir: &RunDir) -> Result<Vec<PathBuf>> {
             }
         }
     }
-    doomed.extend(crate::log::tensorboard::event_files(&dir.tb())?);
+    doomed.extend(crate::io::tensorboard::event_files(&dir.tb())?);
     let mut removed = Vec::new();
     for p in doomed {
         match std::fs::remove_file(&p) {

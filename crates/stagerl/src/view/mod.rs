@@ -15,7 +15,7 @@ use crate::config::Config;
 use crate::env::ReachEnv;
 use crate::plan::{Plan, PlanRequest, Planner};
 use crate::robot::Chain;
-use crate::rundir::RunDir;
+use crate::run::dir::RunDir;
 use crate::{Error, Result};
 
 /// The page, with `/*STAGERL_DATA*/` where the JSON goes.

@@ -14,7 +14,7 @@ thread_local! {
     static COUNT: Cell<usize> = const { Cell::new(0) };
 }
 
-/// Allocations made by the worker threads of `stagerl::par` pools.
+/// Allocations made by the worker threads of `stagerl::base::par` pools.
 static WORKERS: AtomicUsize = AtomicUsize::new(0);
 
 fn count() {
@@ -29,7 +29,7 @@ pub fn allocs() -> usize {
     COUNT.with(Cell::get)
 }
 
-/// Allocations made by `stagerl::par` workers so far (all pools of the test binary).
+/// Allocations made by `stagerl::base::par` workers so far (all pools of the test binary).
 #[allow(dead_code)] // not every test makes a pool
 pub fn worker_allocs() -> usize {
     WORKERS.load(Ordering::Relaxed)

@@ -27,7 +27,7 @@
 //! loop's), and a NaN's payload may differ between levels.
 //!
 //! # Kernels
-//! `f32` at run time on x86-64 ([`crate::simd::simd_level`]; the build stays baseline x86-64),
+//! `f32` at run time on x86-64 ([`crate::base::simd::simd_level`]; the build stays baseline x86-64),
 //! in `kernel`: register tiles of outer products, which broadcast one left-hand scalar a row
 //! and load the right-hand rows as vectors. AVX-512F: 6 rows x 64 columns (24 accumulators),
 //! the last column panel as narrow as its columns allow (8 x 48, 12 x 32, 24 x 16, so outputs of
@@ -45,7 +45,7 @@
 //! `benches/nn_matmul.rs` times the kernels against `gemm`.
 
 use super::{Activation, Scalar};
-use crate::simd::SimdLevel;
+use crate::base::simd::SimdLevel;
 
 // The AVX-512 intrinsics and the `avx512f` target feature are stable since Rust 1.89, the
 // workspace's `rust-version`.
@@ -74,7 +74,7 @@ pub(crate) fn forward<T: Scalar>(
     w: &[T],
     bias_act: Option<(&[T], Activation)>,
 ) {
-    forward_at(crate::simd::simd_level(), (m, n, k), y, x, w, bias_act);
+    forward_at(crate::base::simd::simd_level(), (m, n, k), y, x, w, bias_act);
 }
 
 /// [`forward`] at the given SIMD level (the portable loops where the CPU lacks it).
@@ -147,7 +147,7 @@ fn forward_simd<T: Scalar>(
 /// If `dw`, `dy` or `x` holds fewer than `m * n`, `k * m` or `k * n` values.
 #[inline]
 pub(crate) fn backward_weight<T: Scalar>((m, n, k): (usize, usize, usize), dw: &mut [T], dy: &[T], x: &[T]) {
-    backward_weight_at(crate::simd::simd_level(), (m, n, k), dw, dy, x);
+    backward_weight_at(crate::base::simd::simd_level(), (m, n, k), dw, dy, x);
 }
 
 /// [`backward_weight`] at the given SIMD level.
@@ -211,7 +211,7 @@ pub(crate) fn backward_input<T: Scalar>(
     w: (&[T], usize),
     deriv: Option<Deriv<'_, T>>,
 ) {
-    backward_input_at(crate::simd::simd_level(), (m, n, k), dx, dy, w, deriv);
+    backward_input_at(crate::base::simd::simd_level(), (m, n, k), dx, dy, w, deriv);
 }
 
 /// [`backward_input`] at the given SIMD level.
@@ -290,10 +290,10 @@ enum Simd {
 
 #[cfg(target_arch = "x86_64")]
 impl Simd {
-    /// The kernels of `level`, as [`crate::simd`]'s functions choose them: `None` (the portable
+    /// The kernels of `level`, as [`crate::base::simd`]'s functions choose them: `None` (the portable
     /// loops) for the baseline or where the CPU lacks the level.
     fn at(level: SimdLevel) -> Option<Simd> {
-        let detected = crate::simd::simd_level();
+        let detected = crate::base::simd::simd_level();
         match level {
             SimdLevel::Avx512 if detected == SimdLevel::Avx512 => lanes::Avx512::new().map(Simd::Avx512),
             SimdLevel::Avx2 if detected != SimdLevel::Baseline => lanes::Avx2::new().map(Simd::Avx2),

@@ -2,7 +2,7 @@
 //! shapes (edge sizes included) and on the networks' real shapes.
 
 use super::*;
-use crate::rng::Rng;
+use crate::base::rng::Rng;
 
 const LEVELS: [SimdLevel; 3] = [SimdLevel::Avx512, SimdLevel::Avx2, SimdLevel::Baseline];
 
@@ -244,7 +244,7 @@ fn fused_relu_on_zeros_and_nan() {
 fn the_cpus_simd_levels_have_kernels() {
     #[cfg(target_arch = "x86_64")]
     {
-        let detected = crate::simd::simd_level();
+        let detected = crate::base::simd::simd_level();
         eprintln!("SIMD level of this CPU: {detected:?}");
         assert_eq!(Simd::at(SimdLevel::Avx512).is_some(), detected == SimdLevel::Avx512);
         assert_eq!(Simd::at(SimdLevel::Avx2).is_some(), detected != SimdLevel::Baseline);

@@ -1,0 +1,97 @@
+//! Run-time SIMD dispatch for the element-wise loops of the training hot path.
+//!
+//! The release build targets baseline x86-64 (SSE2) so that it runs on any x86-64 CPU. The
+//! matrix products (`nn::matmul`) have their own AVX-512F and AVX2 + FMA kernels, chosen at
+//! run time by [`simd_level`] as well; the element-wise loops (bias and
+//! activation, their backward passes, Adam, Polyak averaging, norms, the squashed Gaussian head,
+//! the Box-Muller sampler) do the same through
+//! [`multiversion!`]: the loop is written once and compiled three times, for AVX-512F, for
+//! AVX2 + FMA and for the baseline, and the widest version the CPU supports runs.
+//!
+//! Results are bit-identical whichever version runs: each element's arithmetic is the same
+//! sequence of IEEE-754 operations (Rust never contracts `a * b + c` into a fused multiply-add,
+//! whatever the target features), and reductions keep their explicit order. A test compares the
+//! versions bit for bit.
+
+/// Which instruction-set level the element-wise loops run at on this CPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimdLevel {
+    /// AVX-512F (16 f32 lanes).
+    Avx512,
+    /// AVX2 with FMA (8 f32 lanes).
+    Avx2,
+    /// The build's baseline (SSE2 on x86-64).
+    Baseline,
+}
+
+/// The level [`multiversion!`] functions run at on this CPU (detected once, then cached by the
+/// standard library).
+#[inline]
+pub fn simd_level() -> SimdLevel {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let avx2 = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
+        if avx2 && std::arch::is_x86_feature_detected!("avx512f") {
+            return SimdLevel::Avx512;
+        }
+        if avx2 {
+            return SimdLevel::Avx2;
+        }
+    }
+    SimdLevel::Baseline
+}
+
+/// Defines `fn name<T: Scalar>(args) body` (or a function without a type parameter) so that `body` is compiled for AVX-512F, for AVX2 +
+/// FMA and for the baseline, and the widest version the CPU supports runs (see the module docs).
+///
+/// Written `fn name / name_at<T: Bound>(args) -> Ret { body }`: `name_at(level, args)` is the
+/// same function at a given level (the baseline where the CPU lacks it), for the tests that
+/// compare the versions.
+macro_rules! multiversion {
+    (
+        $(#[$meta:meta])*
+        $vis:vis fn $name:ident / $name_at:ident $(<$T:ident : $bound:path>)? ($($arg:ident : $ty:ty),* $(,)?) $(-> $ret:ty)?
+        $body:block
+    ) => {
+        $(#[$meta])*
+        #[inline]
+        $vis fn $name $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? {
+            $name_at $(::<$T>)? ($crate::base::simd::simd_level(), $($arg),*)
+        }
+
+        /// The same function at a given SIMD level (the baseline where the CPU lacks it).
+        #[allow(dead_code)]
+        #[inline]
+        pub(crate) fn $name_at $(<$T: $bound>)? (level: $crate::base::simd::SimdLevel, $($arg: $ty),*) $(-> $ret)? {
+            #[inline(always)]
+            fn body $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? $body
+
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f")]
+                unsafe fn avx512 $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? {
+                    body $(::<$T>)? ($($arg),*)
+                }
+                #[target_feature(enable = "avx2,fma")]
+                unsafe fn avx2 $(<$T: $bound>)? ($($arg: $ty),*) $(-> $ret)? {
+                    body $(::<$T>)? ($($arg),*)
+                }
+                let detected = $crate::base::simd::simd_level();
+                match level {
+                    // SAFETY: the CPU supports AVX-512F (detected at run time).
+                    $crate::base::simd::SimdLevel::Avx512 if detected == $crate::base::simd::SimdLevel::Avx512 => {
+                        return unsafe { avx512 $(::<$T>)? ($($arg),*) }
+                    }
+                    // SAFETY: the CPU supports AVX2 and FMA (the Avx512 level implies both).
+                    $crate::base::simd::SimdLevel::Avx2 if detected != $crate::base::simd::SimdLevel::Baseline => {
+                        return unsafe { avx2 $(::<$T>)? ($($arg),*) }
+                    }
+                    _ => {}
+                }
+            }
+            body $(::<$T>)? ($($arg),*)
+        }
+    };
+}
+
+pub(crate) use multiversion;

@@ -1,0 +1,291 @@
+//! The TOML configuration: one schema for the arm, the task, the reward, the agent and the
+//! training run, assembled here from the sections their modules own ([`RobotConfig`] beside the
+//! robot, [`TaskConfig`] beside the environment, [`RewardConfig`] beside the rewards,
+//! [`AgentConfig`] beside the agents, [`TrainConfig`] beside the training schedule), and the
+//! wiring that builds an environment from a whole config. Unknown fields are rejected; every
+//! value is validated with an error that names the field, the value and what is allowed.
+//!
+//! Defaults are the paper's where it gives a value, and the design notes' choices elsewhere.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::env::{ReachEnv, VecEnv};
+use crate::{Error, Result};
+
+use crate::agent::AgentConfig;
+use crate::env::TaskConfig;
+use crate::reward::RewardConfig;
+use crate::robot::RobotConfig;
+
+mod train;
+pub use train::{TrainConfig, MAX_EVAL_TRIALS};
+
+/// The whole configuration.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    pub robot: RobotConfig,
+    pub task: TaskConfig,
+    pub reward: RewardConfig,
+    pub agent: AgentConfig,
+    pub train: TrainConfig,
+}
+
+/// The most memory a run may be estimated to need ([`Config::estimated_memory`]): 16 GiB.
+pub const MAX_RUN_MEMORY_BYTES: f64 = 16.0 * (1u64 << 30) as f64;
+
+/// Joints assumed by [`Config::validate`]'s memory estimate (the URDF is not loaded there): the
+/// UR5's. The networks' hidden layers dominate the estimate wherever it comes near the limit.
+const ESTIMATE_DOF: usize = 6;
+
+/// A training run's estimated memory, bytes, by what holds it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MemoryEstimate {
+    /// Network parameters: actor, two critics and their targets (5 networks) x 4 copies (values,
+    /// gradients, two Adam moments), f32.
+    pub networks: f64,
+    /// Activations and their gradients: batch x every layer's width x 5 networks x 2, f32.
+    pub activations: f64,
+    /// The preallocated replay buffer: buffer_size x (2 observations + action + reward +
+    /// terminal), f32.
+    pub replay: f64,
+    /// One record per evaluation trial (64 bytes each).
+    pub evaluation: f64,
+}
+
+impl MemoryEstimate {
+    /// Everything, bytes.
+    pub fn total(&self) -> f64 {
+        self.networks + self.activations + self.replay + self.evaluation
+    }
+}
+
+impl Config {
+    /// The memory a run of this config needs for an arm of `dof` joints, estimated before anything
+    /// is allocated (in f64: absurd sizes do not overflow).
+    pub fn estimated_memory(&self, dof: usize) -> MemoryEstimate {
+        let obs = crate::env::observation_dim(self.task.observation, dof, self.task.obstacle_slots()) as f64;
+        let act = dof as f64;
+        let f32_bytes = 4.0;
+        let widths: Vec<f64> = self.agent.hidden.iter().map(|&h| h as f64).collect();
+        // Layer sizes of one network, input obs + act (the critics'; the actor's is smaller).
+        let mut params = 0.0;
+        let mut fan_in = obs + act;
+        for &w in widths.iter().chain([2.0 * act].iter()) {
+            params += fan_in * w + w;
+            fan_in = w;
+        }
+        let nets = 5.0;
+        let layer_values = widths.iter().sum::<f64>() + obs + 2.0 * act;
+        MemoryEstimate {
+            networks: params * nets * 4.0 * f32_bytes,
+            activations: self.agent.batch_size as f64 * layer_values * nets * 2.0 * f32_bytes,
+            replay: self.agent.buffer_size as f64 * (2.0 * obs + act + 2.0) * f32_bytes,
+            evaluation: f64::from(self.train.eval_trials) * 64.0,
+        }
+    }
+
+    /// An error if [`Config::estimated_memory`] for `dof` joints exceeds
+    /// [`MAX_RUN_MEMORY_BYTES`], naming the field that contributes most.
+    pub fn check_memory(&self, dof: usize) -> Result<()> {
+        let m = self.estimated_memory(dof);
+        if m.total() <= MAX_RUN_MEMORY_BYTES {
+            return Ok(());
+        }
+        let gib = |b: f64| b / (1u64 << 30) as f64;
+        let parts = [
+            (m.networks, "agent.hidden", format!("{:?}", self.agent.hidden)),
+            (m.activations, "agent.batch_size", self.agent.batch_size.to_string()),
+            (m.replay, "agent.buffer_size", self.agent.buffer_size.to_string()),
+            (m.evaluation, "train.eval_trials", self.train.eval_trials.to_string()),
+        ];
+        let (_, field, value) = parts.iter().max_by(|a, b| a.0.total_cmp(&b.0)).expect("four parts");
+        Err(Error::config(
+            *field,
+            value,
+            format!(
+                "the run would need about {:.1} GiB (networks {:.1}, activations {:.1}, replay buffer \
+                 {:.1}, evaluation {:.1} GiB), more than the {:.0} GiB allowed; use smaller values",
+                gib(m.total()),
+                gib(m.networks),
+                gib(m.activations),
+                gib(m.replay),
+                gib(m.evaluation),
+                gib(MAX_RUN_MEMORY_BYTES)
+            ),
+        ))
+    }
+}
+
+impl Config {
+    /// Parse a TOML document; `origin` names it in error messages. Every value is checked; a
+    /// section of another algorithm than `agent.algo` is allowed here (a command-line `--algo`
+    /// may pick the run's algorithm later; a preset holds one for each algorithm of its sweep)
+    /// and refused by [`Config::validate`], which every run calls.
+    pub fn from_toml_str(text: &str, origin: &Path) -> Result<Config> {
+        let cfg: Config = toml::from_str(text).map_err(|e| {
+            let raw: Option<toml::Table> = toml::from_str(text).ok();
+            let agent = raw.as_ref().and_then(|t| t.get("agent")).and_then(toml::Value::as_table);
+            let message = agent.and_then(AgentConfig::misplaced_key).unwrap_or_else(|| e.to_string());
+            Error::ConfigParse {
+                path: origin.to_path_buf(),
+                message: crate::base::text::bound_message(&message),
+            }
+        })?;
+        cfg.validate_values()?;
+        Ok(cfg)
+    }
+
+    /// Read, parse and check a TOML file (see [`Config::from_toml_str`]).
+    pub fn load(path: &Path) -> Result<Config> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Config::from_toml_str(&text, path)
+    }
+
+    /// The configuration as TOML, every field written out (the resolved config of a run); of
+    /// the agent's algorithm sections only the run's own.
+    pub fn to_toml_string(&self) -> String {
+        let resolved = Config { agent: self.agent.resolved(), ..self.clone() };
+        toml::to_string_pretty(&resolved).expect("the config is always representable in TOML")
+    }
+
+    /// The checks of a run's config: every value, and no agent section of another algorithm
+    /// than the run's.
+    pub fn validate(&self) -> Result<()> {
+        self.validate_values()?;
+        self.agent.validate()
+    }
+
+    /// Chain-independent checks of every value of every section.
+    fn validate_values(&self) -> Result<()> {
+        if self.robot.urdf.trim().is_empty() {
+            return Err(Error::config("robot.urdf", "\"\"", "\"ur5\" or a path to a URDF file"));
+        }
+        self.task.validate()?;
+        self.reward.validate()?;
+        crate::env::check_collision_settings(self.task.on_collision, &self.reward)?;
+        self.agent.validate_values()?;
+        self.train.validate()?;
+        crate::env::check_obstacles_in_path(
+            self.train.obstacles_in_path,
+            self.task.random_obstacles.is_some(),
+        )?;
+        self.check_memory(ESTIMATE_DOF)
+    }
+}
+
+impl ReachEnv {
+    /// Build the arm, resolve the task and create the environment from a whole config.
+    pub fn from_config(cfg: &Config, seed: u64) -> Result<ReachEnv> {
+        cfg.validate()?;
+        let chain = Arc::new(cfg.robot.load()?);
+        // The memory estimate again, with the arm's own joint count.
+        cfg.check_memory(chain.dof())?;
+        let task = cfg.task.resolve(&chain)?;
+        ReachEnv::new(chain, task, cfg.reward.clone(), seed)
+    }
+}
+
+impl VecEnv {
+    /// `n` environments from a whole config.
+    pub fn from_config(n: usize, cfg: &Config, seed: u64) -> Result<VecEnv> {
+        cfg.validate()?;
+        let chain = Arc::new(cfg.robot.load()?);
+        let task = cfg.task.resolve(&chain)?;
+        VecEnv::new(n, chain, task, cfg.reward.clone(), seed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Config> {
+        Config::from_toml_str(text, Path::new("test.toml"))
+    }
+
+    #[test]
+    fn defaults_are_the_papers() {
+        let c = Config::default();
+        assert_eq!(c.task.dt_s, 0.05);
+        assert_eq!(c.task.max_steps, 50);
+        assert_eq!(c.reward.beta_m, 0.01);
+        assert_eq!(c.reward.success_bonus, 20.0);
+        assert_eq!(c.reward.har_boundary_m, 0.5);
+        assert_eq!((c.reward.sar_sigma1, c.reward.sar_sigma2), (1.0, 1.0));
+        c.validate().unwrap();
+    }
+
+    #[test]
+    fn empty_file_is_the_default_and_round_trips() {
+        let c = parse("").unwrap();
+        assert_eq!(c, Config::default());
+        let full = Config {
+            task: TaskConfig {
+                home_pose_rad: Some(crate::env::UR5_HOME_POSE_RAD.to_vec()),
+                ..TaskConfig::default()
+            },
+            ..Config::default()
+        };
+        let text = full.to_toml_string();
+        assert_eq!(parse(&text).unwrap(), full);
+    }
+
+    #[test]
+    fn partial_sections_override_only_what_they_name() {
+        let c = parse("[reward]\nfunction = \"har\"\nbeta_m = 0.02\n[task]\nmax_steps = 80\n").unwrap();
+        assert_eq!(c.reward.function, crate::reward::RewardFunction::Har);
+        assert_eq!(c.reward.beta_m, 0.02);
+        assert_eq!(c.reward.har_boundary_m, 0.5);
+        assert_eq!(c.task.max_steps, 80);
+        assert_eq!(c.task.dt_s, 0.05);
+    }
+
+    #[test]
+    fn parse_errors_name_the_problem() {
+        let cases = [
+            ("[reward]\nbeta = 0.02\n", "unknown field `beta`"),
+            ("[rewards]\n", "unknown field `rewards`"),
+            ("[task]\ndt_s = \"fast\"\n", "dt_s"),
+            ("[task]\nmax_steps = -3\n", "max_steps"),
+            ("[reward]\nfunction = \"sparse\"\n", "sparse"),
+            ("[task]\ndt_s = 0.0\n", "task.dt_s"),
+            ("[task]\ndt_s = -0.05\n", "task.dt_s"),
+            ("[task]\nmax_steps = 0\n", "task.max_steps"),
+            ("[reward]\nbeta_m = 0\n", "reward.beta_m"),
+            ("[reward]\nsar_sigma1 = -1\n", "reward.sar_sigma1"),
+            ("[robot]\nurdf = \"\"\n", "robot.urdf"),
+            ("[task]\ntarget_min_z_m = nan\n", "task.target_min_z_m"),
+        ];
+        for (text, needle) in cases {
+            let e = parse(text).expect_err(text).to_string();
+            assert!(e.contains(needle), "error for {text:?} was {e:?}, expected it to mention {needle:?}");
+        }
+    }
+
+    #[test]
+    fn the_printed_default_holds_only_its_algorithms_section_and_round_trips() {
+        // `stagerl config` prints this; `train --config` must read it back unchanged.
+        let text = Config::default().to_toml_string();
+        assert!(text.contains("[agent.sac]") && text.contains("init_alpha = 1.0"), "{text}");
+        assert!(!text.contains("[agent.ddpg]") && !text.contains("[agent.td3]"), "{text}");
+        let back = parse(&text).unwrap();
+        back.validate().unwrap();
+        assert_eq!(back, Config::default());
+        assert_eq!(back.to_toml_string(), text);
+        for algo in crate::agent::Algo::ALL {
+            let c = Config { agent: AgentConfig::new(algo), ..Config::default() };
+            let text = c.to_toml_string();
+            assert!(text.contains(&format!("[agent.{algo}]")), "{text}");
+            assert_eq!(parse(&text).unwrap(), c, "{algo}");
+        }
+    }
+
+    #[test]
+    fn load_reports_missing_file_with_its_path() {
+        let e = Config::load(Path::new("/nonexistent/stagerl.toml")).unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/stagerl.toml"), "{e}");
+    }
+}

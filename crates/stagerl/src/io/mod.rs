@@ -1,0 +1,182 @@
+//! What runs read and write, as bytes: file writes that never leave a half-written file behind
+//! (here), checkpoints ([`checkpoint`]), the CSV files ([`csv`]), TensorBoard event files
+//! ([`tensorboard`]) and the protobuf encoder those and the ONNX export share ([`proto`]).
+
+pub mod checkpoint;
+pub mod csv;
+pub mod proto;
+pub mod tensorboard;
+
+use std::fs::{self, File};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::{Error, Result};
+
+/// The temporary sibling `path` is first written to.
+fn temp_path(path: &Path) -> PathBuf {
+    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(format!(".tmp-{}", std::process::id()));
+    path.with_file_name(name)
+}
+
+/// Write `bytes` to `path` atomically: into a temporary file beside it, fsync, rename over `path`,
+/// then fsync the directory. A reader sees the old file or the new one, never a mix.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = temp_path(path);
+    let result = (|| {
+        let mut f = File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&tmp, path)?;
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            // Persist the rename; not every platform lets a directory be opened, so best effort.
+            if let Ok(d) = File::open(dir) {
+                let _ = d.sync_all();
+            }
+        }
+        Ok(())
+    })();
+    result.map_err(|e| {
+        let _ = fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}
+
+/// What [`write_new`] (or a writer like it) did with a file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Written {
+    /// A new file.
+    New,
+    /// The file held these very contents; left as is.
+    Unchanged,
+    /// The file held other contents and was replaced (`force`).
+    Replaced,
+}
+
+impl std::fmt::Display for Written {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Written::New => "written",
+            Written::Unchanged => "unchanged: the same contents",
+            Written::Replaced => "replaced (--force)",
+        })
+    }
+}
+
+/// Write `bytes` to `path` atomically ([`write_atomic`]) unless `path` already holds them; a
+/// file with other contents is replaced only with `force` (never silently).
+pub fn write_new(path: &Path, bytes: &[u8], force: bool) -> Result<Written> {
+    let written = match fs::read(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Written::New,
+        Ok(old) if old == bytes => return Ok(Written::Unchanged),
+        Ok(_) if force => Written::Replaced,
+        Ok(_) => {
+            return Err(Error::InvalidInput(format!(
+                "{} exists and holds something else; pass --force to replace it",
+                path.display()
+            )))
+        }
+        Err(_) if path.is_dir() => {
+            return Err(Error::InvalidInput(format!("{} is a directory, not a file", path.display())))
+        }
+        Err(e) => return Err(Error::io(path, e)),
+    };
+    write_atomic(path, bytes)?;
+    Ok(written)
+}
+
+/// Whether `name` is a temporary file of [`write_atomic`] (`<name>.tmp-<pid>`).
+pub fn is_temp_name(name: &str) -> bool {
+    name.rsplit_once(".tmp-")
+        .is_some_and(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Remove the temporary files of [`write_atomic`] in `dir` (not recursively) that a killed
+/// writer left behind; a missing `dir` has none. Call it only while no live process can be
+/// writing into `dir` (under its lock, see [`crate::run::lock`]). Returns what was removed.
+pub fn remove_stale_temps(dir: &Path) -> Result<Vec<PathBuf>> {
+    let entries = match fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(Error::io(dir, e)),
+    };
+    let mut removed = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(dir, e))?;
+        let is_file = entry.file_type().is_ok_and(|t| t.is_file());
+        if is_file && is_temp_name(&entry.file_name().to_string_lossy()) {
+            let p = entry.path();
+            match fs::remove_file(&p) {
+                Ok(()) => removed.push(p),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(Error::io(&p, e)),
+            }
+        }
+    }
+    Ok(removed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replaces_whole_file_and_leaves_no_temp() {
+        let dir = std::env::temp_dir().join(format!("stagerl-io-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.txt");
+        write_atomic(&p, b"first version, longer").unwrap();
+        write_atomic(&p, b"second").unwrap();
+        assert_eq!(fs::read(&p).unwrap(), b"second");
+        let names: Vec<_> = fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+        let e = write_atomic(&dir.join("missing/b.txt"), b"x").unwrap_err().to_string();
+        assert!(e.contains("missing/b.txt"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn write_new_refuses_other_contents_without_force() {
+        let dir = std::env::temp_dir().join(format!("stagerl-io-new-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("model.onnx");
+        assert_eq!(write_new(&p, b"one", false).unwrap(), Written::New);
+        assert_eq!(write_new(&p, b"one", false).unwrap(), Written::Unchanged);
+        let e = write_new(&p, b"two", false).unwrap_err().to_string();
+        assert!(e.contains("model.onnx") && e.contains("--force"), "{e}");
+        assert_eq!(fs::read(&p).unwrap(), b"one");
+        assert_eq!(write_new(&p, b"two", true).unwrap(), Written::Replaced);
+        assert_eq!(fs::read(&p).unwrap(), b"two");
+        let e = write_new(&dir, b"x", true).unwrap_err().to_string();
+        assert!(e.contains("is a directory"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn stale_temps_are_removed_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("stagerl-io-stale-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        for name in
+            ["latest.safetensors.tmp-4242", "eval.csv.tmp-1", "keep.tmp-", "keep.tmp-12a", "notes.txt"]
+        {
+            fs::write(dir.join(name), b"x").unwrap();
+        }
+        let mut removed: Vec<String> = remove_stale_temps(&dir)
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        removed.sort();
+        assert_eq!(removed, ["eval.csv.tmp-1", "latest.safetensors.tmp-4242"]);
+        let mut left: Vec<String> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["keep.tmp-", "keep.tmp-12a", "notes.txt"]);
+        assert!(remove_stale_temps(&dir.join("missing")).unwrap().is_empty());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,748 @@
+//! Collisions of the arm in the kinematic simulation: with the floor (the plane z = 0 of the base
+//! frame), with itself (links that no joint connects) and with obstacles (boxes and spheres at
+//! fixed poses). The arm's shapes are its URDF's `<collision>` primitives
+//! ([`crate::robot::LinkShape`]); the tests between shapes are parry3d's (f32), the floor test
+//! is exact (the lowest point of each shape).
+//!
+//! Which links are adjacent: links move with the frame of the last actuated joint before them
+//! (their *segment*; the root link and the links fixed to it form segment -1). Two shapes are
+//! tested against each other when their segments differ by 2 or more: shapes of one segment are
+//! rigidly joined, and consecutive segments meet at a joint, where the shapes of real arms
+//! touch. The root's shapes are not tested against the floor (the arm stands on it).
+
+use parry3d::math::{Pose3, Rot3, Vec3};
+use parry3d::query::intersection_test;
+use parry3d::shape::{Ball, Capsule, Cuboid, Shape as ParryShape};
+use serde::{Deserialize, Serialize};
+
+use crate::robot::{Chain, Shape};
+use crate::{Error, Result};
+
+/// What the arm touched first in a check; `shape`s are indices into
+/// [`Chain::collision_shapes`] (see [`Contact::describe`] for the links' names).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "with", rename_all = "snake_case")]
+pub enum Contact {
+    /// A shape reaches below z = 0.
+    Floor { shape: usize },
+    /// Shapes of two links that no joint connects overlap.
+    SelfCollision { shape_a: usize, shape_b: usize },
+    /// A shape overlaps obstacle `obstacle` (its index in the task's obstacles).
+    Obstacle { shape: usize, obstacle: usize },
+}
+
+impl Contact {
+    /// In words, with the links' names: "link `wrist_3_link` with the floor".
+    pub fn describe(&self, chain: &Chain) -> String {
+        let link = |k: usize| chain.collision_shapes().get(k).map_or("?", |s| s.link.as_str()).to_string();
+        match *self {
+            Contact::Floor { shape } => format!("link `{}` with the floor", link(shape)),
+            Contact::SelfCollision { shape_a, shape_b } => {
+                format!("link `{}` with link `{}`", link(shape_a), link(shape_b))
+            }
+            Contact::Obstacle { shape, obstacle } => {
+                format!("link `{}` with obstacle {obstacle}", link(shape))
+            }
+        }
+    }
+
+    pub fn kind(&self) -> CollisionKind {
+        match self {
+            Contact::Floor { .. } => CollisionKind::Floor,
+            Contact::SelfCollision { .. } => CollisionKind::SelfCollision,
+            Contact::Obstacle { .. } => CollisionKind::Obstacle,
+        }
+    }
+}
+
+/// An obstacle's kind.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObstacleShape {
+    /// A box: `half_extents_m`.
+    Cuboid,
+    /// A ball: `radius_m`.
+    Sphere,
+}
+
+/// An obstacle: a box or a sphere at a fixed pose in the base frame (`[[task.obstacles]]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Obstacle {
+    pub shape: ObstacleShape,
+    /// A cuboid's half size along its axes, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub half_extents_m: Option<[f64; 3]>,
+    /// A sphere's radius, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius_m: Option<f64>,
+    /// Centre, metres, base frame.
+    pub position_m: [f64; 3],
+    /// Orientation as a unit quaternion (x, y, z, w); unset: the base frame's axes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_xyzw: Option<[f64; 4]>,
+}
+
+impl Obstacle {
+    /// A sphere of `radius_m` at `position_m`.
+    pub fn sphere(radius_m: f64, position_m: [f64; 3]) -> Obstacle {
+        Obstacle {
+            shape: ObstacleShape::Sphere,
+            half_extents_m: None,
+            radius_m: Some(radius_m),
+            position_m,
+            rotation_xyzw: None,
+        }
+    }
+
+    /// A box of half extents `half_extents_m` at `position_m`, turned by `rotation_xyzw`.
+    pub fn cuboid(
+        half_extents_m: [f64; 3],
+        position_m: [f64; 3],
+        rotation_xyzw: Option<[f64; 4]>,
+    ) -> Obstacle {
+        Obstacle {
+            shape: ObstacleShape::Cuboid,
+            half_extents_m: Some(half_extents_m),
+            radius_m: None,
+            position_m,
+            rotation_xyzw,
+        }
+    }
+
+    /// Its primitive (of a validated obstacle).
+    pub fn primitive(&self) -> Shape {
+        match self.shape {
+            ObstacleShape::Sphere => Shape::Sphere { radius_m: self.radius_m.unwrap_or(0.0) },
+            ObstacleShape::Cuboid => {
+                Shape::Cuboid { half_extents_m: self.half_extents_m.unwrap_or([0.0; 3]) }
+            }
+        }
+    }
+
+    /// Check the values; `field` names the obstacle in errors (`task.obstacles[2]`).
+    pub fn validate(&self, field: &str) -> Result<()> {
+        let size_ok = |v: f64| v.is_finite() && v > 0.0 && v <= 100.0;
+        let unset = |what: &str, v: String, has: &str| {
+            Err(Error::config(
+                format!("{field}.{what}"),
+                v,
+                format!("unset: a {:?} has {has}", self.shape).to_lowercase(),
+            ))
+        };
+        match self.shape {
+            ObstacleShape::Sphere => {
+                if let Some(h) = self.half_extents_m {
+                    return unset("half_extents_m", format!("{h:?}"), "radius_m");
+                }
+                match self.radius_m {
+                    Some(r) if size_ok(r) => {}
+                    r => {
+                        let v = r.map_or("(unset)".to_string(), |r| r.to_string());
+                        return Err(Error::config(
+                            format!("{field}.radius_m"),
+                            v,
+                            "a number in (0, 100] metres",
+                        ));
+                    }
+                }
+            }
+            ObstacleShape::Cuboid => {
+                if let Some(r) = self.radius_m {
+                    return unset("radius_m", r.to_string(), "half_extents_m");
+                }
+                match self.half_extents_m {
+                    Some(h) if h.iter().all(|&v| size_ok(v)) => {}
+                    h => {
+                        let v = h.map_or("(unset)".to_string(), |h| format!("{h:?}"));
+                        return Err(Error::config(
+                            format!("{field}.half_extents_m"),
+                            v,
+                            "three numbers in (0, 100] metres",
+                        ));
+                    }
+                }
+            }
+        }
+        if !self.position_m.iter().all(|v| v.is_finite() && v.abs() <= 100.0) {
+            return Err(Error::config(
+                format!("{field}.position_m"),
+                format!("{:?}", self.position_m),
+                "three finite numbers within +-100 metres",
+            ));
+        }
+        if let Some(q) = self.rotation_xyzw {
+            let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if !(norm - 1.0).abs().le(&1e-6) {
+                return Err(Error::config(
+                    format!("{field}.rotation_xyzw"),
+                    format!("{q:?}"),
+                    "a unit quaternion (x, y, z, w), |norm - 1| <= 1e-6",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Half its size along each of its axes, metres (a sphere's radius three times).
+    pub fn half_size_m(&self) -> [f64; 3] {
+        match self.primitive() {
+            Shape::Sphere { radius_m } => [radius_m; 3],
+            Shape::Cuboid { half_extents_m } => half_extents_m,
+            Shape::Capsule { radius_m, half_length_m } => [radius_m, radius_m, half_length_m + radius_m],
+        }
+    }
+
+    /// Distance from point `p` (metres, base frame) to the obstacle's surface, metres; negative
+    /// inside (a box's: the depth to its nearest face).
+    pub fn distance_to_point_m(&self, p: [f64; 3]) -> f64 {
+        let m = self.transform();
+        let d = [p[0] - m[3], p[1] - m[7], p[2] - m[11]];
+        // Into the obstacle's frame: the transposed rotation.
+        let local = [0, 1, 2].map(|c| m[c] * d[0] + m[4 + c] * d[1] + m[8 + c] * d[2]);
+        match self.primitive() {
+            Shape::Sphere { radius_m } => local.iter().map(|x| x * x).sum::<f64>().sqrt() - radius_m,
+            _ => {
+                let h = self.half_size_m();
+                let q = [0, 1, 2].map(|k| local[k].abs() - h[k]);
+                let outside = q.iter().map(|x| x.max(0.0).powi(2)).sum::<f64>().sqrt();
+                outside + q[0].max(q[1]).max(q[2]).min(0.0)
+            }
+        }
+    }
+
+    /// Its pose as a row-major 3 x 4 transform (metres).
+    fn transform(&self) -> [f64; 12] {
+        let p = self.position_m;
+        let [x, y, z, w] = self.rotation_xyzw.unwrap_or([0.0, 0.0, 0.0, 1.0]);
+        let n = (x * x + y * y + z * z + w * w).sqrt();
+        let (x, y, z, w) = (x / n, y / n, z / n, w / n);
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+            p[0],
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+            p[1],
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+            p[2],
+        ]
+    }
+}
+
+/// A parry primitive (a concrete type, so that the collider is `Clone`).
+#[derive(Clone, Debug)]
+enum Prim {
+    Capsule(Capsule),
+    Ball(Ball),
+    Cuboid(Cuboid),
+}
+
+impl Prim {
+    fn of(s: &Shape) -> Prim {
+        match *s {
+            Shape::Capsule { radius_m, half_length_m } => {
+                Prim::Capsule(Capsule::new_z(half_length_m as f32, radius_m as f32))
+            }
+            Shape::Sphere { radius_m } => Prim::Ball(Ball::new(radius_m as f32)),
+            Shape::Cuboid { half_extents_m: [x, y, z] } => {
+                Prim::Cuboid(Cuboid::new(Vec3::new(x as f32, y as f32, z as f32)))
+            }
+        }
+    }
+
+    fn shape(&self) -> &dyn ParryShape {
+        match self {
+            Prim::Capsule(c) => c,
+            Prim::Ball(b) => b,
+            Prim::Cuboid(c) => c,
+        }
+    }
+}
+
+/// One of the arm's shapes, ready for the tests.
+#[derive(Clone, Debug)]
+struct ArmShape {
+    /// Into [`Chain::collision_shapes`].
+    index: usize,
+    /// -1 for the root's segment.
+    segment: i64,
+    local: [f64; 12],
+    shape: Shape,
+    parry: Prim,
+}
+
+/// The lowest z of a primitive at the row-major 3 x 4 pose `m`, metres.
+fn lowest_z(s: &Shape, m: &[f64; 12]) -> f64 {
+    let (zx, zy, zz, z0) = (m[8], m[9], m[10], m[11]);
+    match *s {
+        Shape::Capsule { radius_m, half_length_m } => z0 - half_length_m * zz.abs() - radius_m,
+        Shape::Sphere { radius_m } => z0 - radius_m,
+        Shape::Cuboid { half_extents_m: [x, y, z] } => z0 - x * zx.abs() - y * zy.abs() - z * zz.abs(),
+    }
+}
+
+/// Whether two posed shapes overlap (parry supports every pair of our primitives).
+fn overlap(p1: &Pose3, s1: &dyn ParryShape, p2: &Pose3, s2: &dyn ParryShape) -> bool {
+    intersection_test(p1, s1, p2, s2).is_ok_and(|i| i.intersecting)
+}
+
+fn pose3(m: &[f64; 12]) -> Pose3 {
+    let r = parry3d::math::Mat3::from_cols(
+        Vec3::new(m[0] as f32, m[4] as f32, m[8] as f32),
+        Vec3::new(m[1] as f32, m[5] as f32, m[9] as f32),
+        Vec3::new(m[2] as f32, m[6] as f32, m[10] as f32),
+    );
+    Pose3::from_parts(Vec3::new(m[3] as f32, m[7] as f32, m[11] as f32), Rot3::from_mat3(&r).normalize())
+}
+
+/// `[task.collision]`: which contacts of the arm are looked for (all are recorded, none
+/// changes the episode: the paper's task has no collision term). Unset: both.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Checks {
+    /// The floor, the plane z = 0 of the base frame.
+    pub floor: bool,
+    /// Links that no joint connects.
+    pub self_collision: bool,
+}
+
+impl Default for Checks {
+    fn default() -> Self {
+        Checks { floor: true, self_collision: true }
+    }
+}
+
+/// What a step's arm touched (the details: [`Contact`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CollisionKind {
+    Floor,
+    SelfCollision,
+    Obstacle,
+}
+
+/// The arm's collision checker, with the obstacles it is tested against (scratch included: a
+/// check allocates nothing).
+#[derive(Clone, Debug)]
+pub struct ArmCollider {
+    shapes: Vec<ArmShape>,
+    obstacles: Vec<(Pose3, Prim, Geo)>,
+    /// Pairs of indices into `shapes` tested for self-collision.
+    pairs: Vec<(usize, usize)>,
+    checks: Checks,
+    frames: Vec<[f64; 12]>,
+    world: Vec<[f64; 12]>,
+    geo: Vec<Geo>,
+}
+
+impl ArmCollider {
+    pub fn new(chain: &Chain, checks: Checks) -> ArmCollider {
+        let shapes: Vec<ArmShape> = chain
+            .collision_shapes()
+            .iter()
+            .enumerate()
+            .map(|(index, s)| ArmShape {
+                index,
+                segment: s.segment.map_or(-1, |i| i as i64),
+                local: s.pose,
+                shape: s.shape,
+                parry: Prim::of(&s.shape),
+            })
+            .collect();
+        let mut pairs = Vec::new();
+        for a in 0..shapes.len() {
+            for b in a + 1..shapes.len() {
+                if (shapes[a].segment - shapes[b].segment).abs() >= 2 {
+                    pairs.push((a, b));
+                }
+            }
+        }
+        let n = shapes.len();
+        ArmCollider {
+            shapes,
+            obstacles: Vec::new(),
+            pairs,
+            checks,
+            frames: vec![[0.0; 12]; chain.dof()],
+            world: vec![[0.0; 12]; n],
+            geo: vec![Geo::default(); n],
+        }
+    }
+
+    /// Shapes of the arm (0: nothing to collide).
+    pub fn len(&self) -> usize {
+        self.shapes.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.shapes.is_empty()
+    }
+
+    /// The obstacles later checks test against (validated ones: see [`Obstacle::validate`]).
+    /// Allocates only when there are more than ever before.
+    pub fn set_obstacles(&mut self, obstacles: &[Obstacle]) {
+        self.obstacles.clear();
+        self.obstacles.extend(obstacles.iter().map(Self::prepare));
+    }
+
+    fn prepare(o: &Obstacle) -> (Pose3, Prim, Geo) {
+        let (prim, m) = (o.primitive(), o.transform());
+        (pose3(&m), Prim::of(&prim), Geo::of(&prim, &m))
+    }
+
+    /// Put the arm's shapes where joint values `q` take them.
+    fn place(&mut self, chain: &Chain, q: &[f64]) {
+        chain.segment_frames(q, &mut self.frames);
+        for (k, s) in self.shapes.iter().enumerate() {
+            self.world[k] = match s.segment {
+                -1 => s.local,
+                i => crate::robot::mul_tf(&self.frames[i as usize], &s.local),
+            };
+            self.geo[k] = Geo::of(&s.shape, &self.world[k]);
+        }
+    }
+
+    /// The first placed arm shape (index into `shapes`) that overlaps an obstacle.
+    fn hit_obstacle(&self, (pose, shape, geo): &(Pose3, Prim, Geo)) -> Option<usize> {
+        (0..self.shapes.len()).find(|&k| {
+            let g = &self.geo[k];
+            g.bounds_overlap(geo)
+                && match (&self.shapes[k].shape, geo.round) {
+                    // Capsules and spheres against a sphere: a segment's distance to a point.
+                    (Shape::Capsule { .. } | Shape::Sphere { .. }, true) => {
+                        let d2 = point_segment_distance2(geo.a, g.a, g.b);
+                        d2 < (g.radius + geo.radius).powi(2)
+                    }
+                    _ => overlap(&pose3(&self.world[k]), self.shapes[k].parry.shape(), pose, shape.shape()),
+                }
+        })
+    }
+
+    /// Whether the arm at joint values `q` touches obstacle `o` (whatever the checks and the
+    /// obstacles set): the test random obstacles are placed with. No allocation.
+    pub fn touches(&mut self, chain: &Chain, q: &[f64], o: &Obstacle) -> bool {
+        if self.shapes.is_empty() {
+            return false;
+        }
+        self.place(chain, q);
+        self.hit_obstacle(&Self::prepare(o)).is_some()
+    }
+
+    /// The first contact of the arm at joint values `q` (one per joint) with the floor, itself
+    /// or the obstacles, in that order of tests; `None` when it is clear.
+    pub fn check(&mut self, chain: &Chain, q: &[f64]) -> Option<Contact> {
+        if self.shapes.is_empty()
+            || !(self.checks.floor || self.checks.self_collision || !self.obstacles.is_empty())
+        {
+            return None;
+        }
+        self.place(chain, q);
+        if self.checks.floor {
+            for (k, s) in self.shapes.iter().enumerate() {
+                if s.segment >= 0 && lowest_z(&s.shape, &self.world[k]) < 0.0 {
+                    return Some(Contact::Floor { shape: s.index });
+                }
+            }
+        }
+        if self.checks.self_collision {
+            for &(a, b) in &self.pairs {
+                if self.overlap_arm(a, b) {
+                    let (sa, sb) = (&self.shapes[a], &self.shapes[b]);
+                    return Some(Contact::SelfCollision { shape_a: sa.index, shape_b: sb.index });
+                }
+            }
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            if let Some(k) = self.hit_obstacle(o) {
+                return Some(Contact::Obstacle { shape: self.shapes[k].index, obstacle: i });
+            }
+        }
+        None
+    }
+
+    /// Whether arm shapes `a` and `b` overlap: bounding spheres first, then the exact test
+    /// (segments for capsules and spheres, parry for anything with a box).
+    fn overlap_arm(&self, a: usize, b: usize) -> bool {
+        let (ga, gb) = (&self.geo[a], &self.geo[b]);
+        if !ga.bounds_overlap(gb) {
+            return false;
+        }
+        if ga.round && gb.round {
+            return segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) < (ga.radius + gb.radius).powi(2);
+        }
+        overlap(
+            &pose3(&self.world[a]),
+            self.shapes[a].parry.shape(),
+            &pose3(&self.world[b]),
+            self.shapes[b].parry.shape(),
+        )
+    }
+}
+
+/// A shape placed in the world, as the fast tests need it: capsules and spheres (`round`) as a
+/// segment `a`-`b` (a point for a sphere) and a radius; every shape's bounding sphere.
+#[derive(Clone, Copy, Debug, Default)]
+struct Geo {
+    round: bool,
+    a: [f64; 3],
+    b: [f64; 3],
+    radius: f64,
+    centre: [f64; 3],
+    bound: f64,
+}
+
+impl Geo {
+    fn of(s: &Shape, m: &[f64; 12]) -> Geo {
+        let c = [m[3], m[7], m[11]];
+        match *s {
+            Shape::Capsule { radius_m, half_length_m: h } => {
+                let z = [m[2] * h, m[6] * h, m[10] * h];
+                Geo {
+                    round: true,
+                    a: [c[0] - z[0], c[1] - z[1], c[2] - z[2]],
+                    b: [c[0] + z[0], c[1] + z[1], c[2] + z[2]],
+                    radius: radius_m,
+                    centre: c,
+                    bound: h + radius_m,
+                }
+            }
+            Shape::Sphere { radius_m } => {
+                Geo { round: true, a: c, b: c, radius: radius_m, centre: c, bound: radius_m }
+            }
+            Shape::Cuboid { half_extents_m: [x, y, z] } => {
+                Geo { round: false, centre: c, bound: (x * x + y * y + z * z).sqrt(), ..Geo::default() }
+            }
+        }
+    }
+
+    fn bounds_overlap(&self, o: &Geo) -> bool {
+        let d = [self.centre[0] - o.centre[0], self.centre[1] - o.centre[1], self.centre[2] - o.centre[2]];
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= (self.bound + o.bound).powi(2)
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Squared distance from point `p` to the segment `a`-`b`.
+fn point_segment_distance2(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
+    let (ab, ap) = (sub(b, a), sub(p, a));
+    let len2 = dot(ab, ab);
+    let t = if len2 > 0.0 { (dot(ap, ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let d = [ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]];
+    dot(d, d)
+}
+
+/// Squared distance between segments `p1`-`q1` and `p2`-`q2` (Ericson, Real-Time Collision
+/// Detection, 5.1.9: the closest points' parameters, clamped).
+pub(crate) fn segment_segment_distance2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3], q2: [f64; 3]) -> f64 {
+    let (d1, d2, r) = (sub(q1, p1), sub(q2, p2), sub(p1, p2));
+    let (a, e, f) = (dot(d1, d1), dot(d2, d2), dot(d2, r));
+    const EPS: f64 = 1e-18;
+    let (s, t) = if a <= EPS && e <= EPS {
+        (0.0, 0.0)
+    } else if a <= EPS {
+        (0.0, (f / e).clamp(0.0, 1.0))
+    } else {
+        let c = dot(d1, r);
+        if e <= EPS {
+            ((-c / a).clamp(0.0, 1.0), 0.0)
+        } else {
+            let b = dot(d1, d2);
+            let denom = a * e - b * b;
+            let mut s = if denom > EPS { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    let c1 = [p1[0] + d1[0] * s, p1[1] + d1[1] * s, p1[2] + d1[2] * s];
+    let c2 = [p2[0] + d2[0] * t, p2[1] + d2[1] * t, p2[2] + d2[2] * t];
+    let d = sub(c1, c2);
+    dot(d, d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::base::rng::Rng;
+
+    fn panda() -> Chain {
+        Chain::from_urdf_file(
+            std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/robots/panda.urdf")),
+            None,
+        )
+        .unwrap()
+    }
+
+    const PANDA_HOME: [f64; 7] = {
+        use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
+        [0.0, -FRAC_PI_4, 0.0, -3.0 * FRAC_PI_4, 0.0, FRAC_PI_2, FRAC_PI_4]
+    };
+
+    /// The closest distance between segments p0-p1 and q0-q1 (clamped parameters, by a fine
+    /// search: an independent check of parry's capsule test).
+    fn segment_distance(p: [[f64; 3]; 2], q: [[f64; 3]; 2]) -> f64 {
+        let at = |s: [[f64; 3]; 2], t: f64| [0, 1, 2].map(|i| s[0][i] + t * (s[1][i] - s[0][i]));
+        let mut best = f64::INFINITY;
+        for i in 0..=200 {
+            let a = at(p, i as f64 / 200.0);
+            for j in 0..=200 {
+                let b = at(q, j as f64 / 200.0);
+                best =
+                    best.min(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt());
+            }
+        }
+        best
+    }
+
+    fn capsule_ends(chain: &Chain, frames: &[[f64; 12]], k: usize) -> ([[f64; 3]; 2], f64) {
+        let s = &chain.collision_shapes()[k];
+        let m = match s.segment {
+            None => s.pose,
+            Some(i) => crate::robot::mul_tf(&frames[i], &s.pose),
+        };
+        let Shape::Capsule { radius_m, half_length_m: h } = s.shape else { panic!("not a capsule") };
+        let end = |sign: f64| [m[3] + sign * h * m[2], m[7] + sign * h * m[6], m[11] + sign * h * m[10]];
+        ([end(-1.0), end(1.0)], radius_m)
+    }
+
+    #[test]
+    fn the_home_pose_is_clear_and_a_low_pose_hits_the_floor() {
+        let chain = panda();
+        let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
+        assert!(c.len() >= 8);
+        assert_eq!(c.check(&chain, &PANDA_HOME), None);
+        // Poses that put the flange below the floor are floor contacts (with the floor test
+        // only), and the floor test off reports none.
+        let mut floor_only = ArmCollider::new(&chain, Checks { floor: true, self_collision: false });
+        let mut none = ArmCollider::new(&chain, Checks { floor: false, self_collision: false });
+        let mut below = 0;
+        for i in 0..=20 {
+            for k in 0..=20 {
+                let mut q = PANDA_HOME;
+                q[1] = -1.7 + 3.4 * i as f64 / 20.0;
+                q[3] = -3.0 + 2.9 * k as f64 / 20.0;
+                if chain.fk(&q).position.z < -0.02 {
+                    below += 1;
+                    let hit = floor_only.check(&chain, &q);
+                    assert!(matches!(hit, Some(Contact::Floor { .. })), "{q:?}: {hit:?}");
+                    assert_eq!(none.check(&chain, &q), None);
+                }
+            }
+        }
+        assert!(below >= 10, "{below} poses below the floor");
+    }
+
+    #[test]
+    fn an_obstacle_at_the_tool_is_hit_and_one_far_away_is_not() {
+        let chain = panda();
+        let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
+        let tool = chain.fk(&PANDA_HOME).position;
+        let near = Obstacle::sphere(0.05, [tool.x, tool.y, tool.z - 0.02]);
+        let far = Obstacle::sphere(0.05, [2.0, 2.0, 0.5]);
+        let cube = Obstacle::cuboid(
+            [0.05, 0.3, 0.02],
+            [tool.x, tool.y, tool.z + 0.2],
+            Some([0.0, 0.0, 0.382_683_4, 0.923_879_5]),
+        );
+        c.set_obstacles(std::slice::from_ref(&far));
+        assert_eq!(c.check(&chain, &PANDA_HOME), None);
+        c.set_obstacles(&[far, near]);
+        assert!(matches!(c.check(&chain, &PANDA_HOME), Some(Contact::Obstacle { obstacle: 1, .. })));
+        c.set_obstacles(&[cube]);
+        assert!(matches!(c.check(&chain, &PANDA_HOME), Some(Contact::Obstacle { obstacle: 0, .. })));
+    }
+
+    /// Over random poses, the collider reports a self-collision exactly when an independent
+    /// computation (distances between the capsules' segments by a fine search) finds two
+    /// shapes of links no joint connects overlapping. Poses with a pair within 3 mm of touching
+    /// are skipped (parry is f32, the search discrete).
+    #[test]
+    fn self_collision_agrees_with_segment_distances() {
+        let chain = panda();
+        let mut c = ArmCollider::new(&chain, Checks { floor: false, self_collision: true });
+        let mut rng = Rng::new(7);
+        let mut frames = vec![[0.0; 12]; chain.dof()];
+        let shapes = chain.collision_shapes();
+        assert!(shapes.iter().all(|s| matches!(s.shape, Shape::Capsule { .. })));
+        let seg = |s: Option<usize>| s.map_or(-1, |i| i as i64);
+        let (mut colliding, mut clear) = (0, 0);
+        for _ in 0..150 {
+            let q: Vec<f64> =
+                (0..7).map(|i| rng.uniform_range(chain.lower_limits()[i], chain.upper_limits()[i])).collect();
+            chain.segment_frames(&q, &mut frames);
+            let mut gaps = Vec::new();
+            for a in 0..shapes.len() {
+                for b in a + 1..shapes.len() {
+                    if (seg(shapes[a].segment) - seg(shapes[b].segment)).abs() >= 2 {
+                        let ((pa, ra), (pb, rb)) =
+                            (capsule_ends(&chain, &frames, a), capsule_ends(&chain, &frames, b));
+                        gaps.push(segment_distance(pa, pb) - ra - rb);
+                    }
+                }
+            }
+            if gaps.iter().any(|g| g.abs() < 3e-3) {
+                continue;
+            }
+            let expected = gaps.iter().any(|&g| g < 0.0);
+            let got = c.check(&chain, &q);
+            assert_eq!(got.is_some(), expected, "{q:?}: {got:?}, gaps {gaps:?}");
+            if expected {
+                assert!(matches!(got, Some(Contact::SelfCollision { .. })));
+                colliding += 1;
+            } else {
+                clear += 1;
+            }
+        }
+        assert!(colliding >= 10 && clear >= 10, "{colliding} colliding poses, {clear} clear");
+    }
+
+    /// The closed-form segment distance against the fine search, on random, parallel,
+    /// collinear and point-like segments.
+    #[test]
+    fn segment_distance_closed_form_matches_the_search() {
+        let mut rng = Rng::new(12);
+        let mut p = || [0, 1, 2].map(|_| rng.uniform_range(-1.0, 1.0));
+        for case in 0..400 {
+            let (a, b, c) = (p(), p(), p());
+            let d = match case % 4 {
+                0 => p(),
+                // Parallel to a-b.
+                1 => [c[0] + (b[0] - a[0]) * 0.7, c[1] + (b[1] - a[1]) * 0.7, c[2] + (b[2] - a[2]) * 0.7],
+                // Collinear with a-b.
+                2 => {
+                    let c2 =
+                        [a[0] + (b[0] - a[0]) * 1.3, a[1] + (b[1] - a[1]) * 1.3, a[2] + (b[2] - a[2]) * 1.3];
+                    let d2 =
+                        [a[0] + (b[0] - a[0]) * 2.0, a[1] + (b[1] - a[1]) * 2.0, a[2] + (b[2] - a[2]) * 2.0];
+                    let want = segment_distance([a, b], [c2, d2]);
+                    let got = segment_segment_distance2(a, b, c2, d2).sqrt();
+                    assert!((got - want).abs() < 1e-2, "collinear: {got} vs {want}");
+                    continue;
+                }
+                // A point.
+                _ => c,
+            };
+            let want = segment_distance([a, b], [c, d]);
+            let got = segment_segment_distance2(a, b, c, d).sqrt();
+            assert!(got <= want + 1e-12 && want - got < 1.5e-2, "case {case}: {got} vs {want}");
+        }
+    }
+}

@@ -1,0 +1,354 @@
+//! Hindsight experience replay (HER; Andrychowicz et al., NeurIPS 2017) for the off-policy
+//! agents: `agent.her = { strategy = "future", k = 4 }`, off by default.
+//!
+//! An episode that missed its target still shows how to reach the places the end effector did
+//! reach. When an episode ends, each of its transitions is stored again with a substituted goal
+//! `g`, an end-effector position of the same episode, chosen by the strategy:
+//! - `future`: the position after a step `t' >= t` of the same episode, uniformly (`k` goals);
+//! - `episode`: the position after any step of the episode, uniformly (`k` goals);
+//! - `final`: the position after the episode's last step (one goal: `k` copies of the same goal
+//!   would only weight it).
+//!
+//! For the substituted goal everything that depends on the target is computed again, exactly as
+//! the environment computes it: the target entries of both observations
+//! ([`crate::env::write_target_entries`]), the reward with the run's reward function (any of the
+//! five: each is a pure function of the step's end-effector pose, joint velocities and target,
+//! eqs. 1-15 and 18), the success bonus and the termination (`D_PT < beta` for `g`). The real
+//! transitions are stored as without HER, after every step, so that the updates of Algorithm 1
+//! see them at once; the relabelled ones follow when the episode ends.
+//!
+//! The episode under way and the goal sampler's random state are part of the training state, so
+//! a run with HER resumes bit-identically.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::agent::{HerConfig, HerStrategy};
+use crate::base::rng::Rng;
+use crate::env::{collision_outcome, write_target_entries, ResolvedTask, Transition};
+use crate::reward::{RewardConfig, RewardInput, RewardTerms};
+
+/// The steps of the episode under way, as relabelling needs them: the observations and actions
+/// as stored, and the end-effector poses (metres, quaternion `(x, y, z, w)`) and joint
+/// velocities (rad/s) the rewards are computed from. Flat arrays, one row per step, reused
+/// from episode to episode.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeLog {
+    /// End-effector position at the episode's start (metres).
+    start_ee: [f64; 3],
+    obs: Vec<f32>,
+    action: Vec<f32>,
+    next_obs: Vec<f32>,
+    /// End-effector position after each step (metres).
+    ee: Vec<f64>,
+    /// End-effector orientation after each step, `(x, y, z, w)`.
+    quat: Vec<f64>,
+    /// Joint velocities applied in each step (rad/s).
+    joint_vel: Vec<f64>,
+    /// Each step ended in contact (absent in checkpoints of older versions: no contact).
+    #[serde(default)]
+    contact: Vec<bool>,
+}
+
+impl EpisodeLog {
+    /// Forget the previous episode; the next one starts with the end effector at `start_ee`.
+    pub fn begin(&mut self, start_ee: Vector3<f64>) {
+        self.start_ee = start_ee.into();
+        for v in [&mut self.obs, &mut self.action, &mut self.next_obs] {
+            v.clear();
+        }
+        for v in [&mut self.ee, &mut self.quat, &mut self.joint_vel] {
+            v.clear();
+        }
+        self.contact.clear();
+    }
+
+    /// Record a step of the episode (after the environment took it).
+    pub fn push(&mut self, t: &Transition<'_>) {
+        let pose = t.env.ee_pose();
+        self.obs.extend_from_slice(t.obs);
+        self.action.extend_from_slice(t.action);
+        self.next_obs.extend_from_slice(t.env.observation());
+        self.ee.extend_from_slice(pose.position.as_slice());
+        self.quat.extend_from_slice(&pose.quaternion_xyzw());
+        self.joint_vel.extend_from_slice(t.env.joint_velocities());
+        self.contact.push(t.step.collision.is_some());
+    }
+
+    /// Steps recorded.
+    pub fn len(&self) -> usize {
+        self.ee.len() / 3
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ee.is_empty()
+    }
+
+    fn contact_after(&self, t: usize) -> bool {
+        self.contact.get(t).copied().unwrap_or(false)
+    }
+
+    fn ee_after(&self, t: usize) -> Vector3<f64> {
+        Vector3::new(self.ee[3 * t], self.ee[3 * t + 1], self.ee[3 * t + 2])
+    }
+
+    fn ee_before(&self, t: usize) -> Vector3<f64> {
+        if t == 0 {
+            Vector3::from(self.start_ee)
+        } else {
+            self.ee_after(t - 1)
+        }
+    }
+}
+
+/// The relabelling state of a run: the episode under way and the goal sampler's random stream.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HerState {
+    pub rng: Rng,
+    pub log: EpisodeLog,
+}
+
+impl HerState {
+    /// A fresh state drawing goals from `rng`.
+    pub fn new(rng: Rng) -> HerState {
+        HerState { rng, log: EpisodeLog::default() }
+    }
+}
+
+/// One relabelled transition, as [`relabel`] hands it over.
+pub struct Relabelled<'a> {
+    /// The step of the episode it relabels (0-based).
+    pub step: usize,
+    /// The substituted goal (metres, base frame).
+    pub goal: Vector3<f64>,
+    pub obs: &'a [f32],
+    pub action: &'a [f32],
+    pub next_obs: &'a [f32],
+    /// Every reward term for `goal`; `terms.total` is the stored reward.
+    pub terms: RewardTerms,
+    /// `goal` was reached, or the step ended in a contact that ends episodes
+    /// (`task.on_collision = "terminate"`): a terminal transition.
+    pub terminal: bool,
+}
+
+/// Relabels episodes; holds the observation buffers it writes the relabelled ones in (reused).
+#[derive(Clone, Debug, Default)]
+pub struct Relabeller {
+    obs: Vec<f32>,
+    next_obs: Vec<f32>,
+}
+
+impl Relabeller {
+    /// Hand every relabelled transition of the episode in `log` to `sink`, in step order, the
+    /// goals of each step drawn from `rng` by `cfg`'s strategy; observations and rewards as the
+    /// environment of `task` and `reward` computes them.
+    pub fn relabel(
+        &mut self,
+        cfg: &HerConfig,
+        task: &ResolvedTask,
+        reward: &RewardConfig,
+        log: &EpisodeLog,
+        rng: &mut Rng,
+        mut sink: impl FnMut(&Relabelled<'_>),
+    ) {
+        let steps = log.len();
+        if steps == 0 {
+            return;
+        }
+        let od = log.obs.len() / steps;
+        let ad = log.action.len() / steps;
+        let dof = log.joint_vel.len() / steps;
+        for t in 0..steps {
+            for _ in 0..cfg.copies() {
+                let g = match cfg.strategy {
+                    HerStrategy::Future => t + rng.below((steps - t) as u64) as usize,
+                    HerStrategy::Episode => rng.below(steps as u64) as usize,
+                    HerStrategy::Final => steps - 1,
+                };
+                let goal = log.ee_after(g);
+                let (before, after) = (log.ee_before(t), log.ee_after(t));
+                self.obs.clear();
+                self.obs.extend_from_slice(&log.obs[t * od..(t + 1) * od]);
+                write_target_entries(task, &mut self.obs, before, goal);
+                self.next_obs.clear();
+                self.next_obs.extend_from_slice(&log.next_obs[t * od..(t + 1) * od]);
+                write_target_entries(task, &mut self.next_obs, after, goal);
+                let q = &log.quat[4 * t..4 * t + 4];
+                let mut terms = RewardTerms::compute(
+                    reward,
+                    task.dt_s,
+                    &RewardInput {
+                        ee_pos: after,
+                        ee_quat: [q[0], q[1], q[2], q[3]],
+                        target: goal,
+                        joint_vel: &log.joint_vel[t * dof..(t + 1) * dof],
+                        prev_ee_pos: Some(before),
+                    },
+                );
+                let (ended_by_contact, penalty) = collision_outcome(task, reward, log.contact_after(t));
+                terms.total -= penalty;
+                sink(&Relabelled {
+                    step: t,
+                    goal,
+                    obs: &self.obs,
+                    action: &log.action[t * ad..(t + 1) * ad],
+                    next_obs: &self.next_obs,
+                    terminal: terms.reached || ended_by_contact,
+                    terms,
+                });
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agent::MAX_HER_K;
+    use crate::env::{rollout, Observed, ReachEnv, Scratch};
+    use crate::reward::RewardFunction;
+    use std::sync::Arc;
+
+    /// One random-action episode of `steps` steps at most, logged, with the joint positions
+    /// before each step.
+    fn episode(env: &mut ReachEnv, seed: u64) -> (EpisodeLog, Vec<Vec<f64>>) {
+        let mut log = EpisodeLog::default();
+        let mut qs = Vec::new();
+        let mut rng = Rng::new(seed);
+        env.reset();
+        log.begin(env.ee_pose().position);
+        let mut scratch = Scratch::new(env);
+        let mut driver = Observed(
+            |e: &ReachEnv, a: &mut [f32]| {
+                qs.push(e.joint_positions().to_vec());
+                for x in a.iter_mut() {
+                    *x = rng.uniform_range(-0.6, 0.6) as f32;
+                }
+                Ok(())
+            },
+            |t: &Transition<'_>| {
+                log.push(t);
+                Ok(crate::env::Flow::Continue)
+            },
+        );
+        rollout(env, &mut scratch, &mut driver).unwrap();
+        (log, qs)
+    }
+
+    fn env(function: RewardFunction, seed: u64) -> ReachEnv {
+        let chain = Arc::new(crate::robot::Chain::ur5());
+        let task =
+            crate::env::TaskConfig { obs_delta_scale: 10.0, ..Default::default() }.resolve(&chain).unwrap();
+        let reward = RewardConfig { function, ..RewardConfig::default() };
+        ReachEnv::new(chain, task, reward, seed).unwrap()
+    }
+
+    /// The acceptance test of relabelling: for every relabelled transition, a fresh environment
+    /// put at the step's joint positions with the substituted goal as its target, and given the
+    /// step's action, observes the relabelled observation, then takes a step whose reward (bonus
+    /// included), termination and next observation are the relabelled ones, bit for bit; for
+    /// every reward function and strategy.
+    #[test]
+    fn a_relabelled_transition_is_the_environments_own_for_the_new_goal() {
+        for (i, function) in RewardFunction::ALL.into_iter().enumerate() {
+            let mut e = env(function, 10 + i as u64);
+            let mut fresh = e.clone();
+            let (log, qs) = episode(&mut e, 7 + i as u64);
+            assert_eq!(log.len(), 50, "random actions do not reach the target");
+            for strategy in [HerStrategy::Future, HerStrategy::Final, HerStrategy::Episode] {
+                let cfg = HerConfig { strategy, k: 3 };
+                let (task, reward) = (e.task().clone(), e.reward_config().clone());
+                let mut r = Relabeller::default();
+                let (mut n, mut terminal, mut bonus) = (0, 0, 0.0);
+                r.relabel(&cfg, &task, &reward, &log, &mut Rng::new(3), |x| {
+                    n += 1;
+                    let obs = fresh.reset_to(&qs[x.step], x.goal).unwrap().to_vec();
+                    assert_eq!(obs, x.obs, "{function:?} {strategy:?} step {}: observation", x.step);
+                    let s = fresh.step(x.action).unwrap();
+                    assert_eq!(s.total().to_bits(), x.terms.total.to_bits(), "{function:?} step {}", x.step);
+                    assert_eq!(s.terms, x.terms);
+                    assert_eq!(s.terminated, x.terminal);
+                    assert_eq!(
+                        fresh.observation(),
+                        x.next_obs,
+                        "{function:?} step {}: next observation",
+                        x.step
+                    );
+                    terminal += usize::from(x.terminal);
+                    bonus += x.terms.bonus;
+                    match strategy {
+                        HerStrategy::Final => assert_eq!(x.goal, log.ee_after(49)),
+                        HerStrategy::Future => {
+                            assert!((x.step..50).any(|g| log.ee_after(g) == x.goal), "a later position")
+                        }
+                        HerStrategy::Episode => assert!((0..50).any(|g| log.ee_after(g) == x.goal)),
+                    }
+                });
+                assert_eq!(n, 50 * cfg.copies());
+                // Goals reached by the step itself are successes, with the bonus.
+                assert!(terminal >= 1, "{strategy:?}: the last step reaches the final goal");
+                assert_eq!(bonus, terminal as f64 * reward.success_bonus);
+            }
+        }
+    }
+
+    /// With `task.on_collision = "terminate"`, the step that ends in contact is terminal for
+    /// every substituted goal and loses the penalty, as the environment's own step does.
+    #[test]
+    fn a_contact_that_ends_the_episode_is_terminal_for_every_goal() {
+        use crate::sim::collision::Obstacle;
+        let chain = Arc::new(crate::robot::Chain::ur5());
+        let tool = chain.fk(&crate::env::UR5_HOME_POSE_RAD).position;
+        let task = crate::env::TaskConfig {
+            obstacles: vec![Obstacle::sphere(0.12, [tool.x + 0.2, tool.y, tool.z - 0.1])],
+            on_collision: crate::env::OnCollision::Terminate,
+            ..Default::default()
+        };
+        let task = task.resolve(&chain).unwrap();
+        let reward = RewardConfig { collision_penalty: Some(7.5), ..RewardConfig::default() };
+        let mut e = ReachEnv::new(chain, task.clone(), reward.clone(), 5).unwrap();
+        let mut fresh = e.clone();
+        // The first random episode that runs into the obstacle after a few steps.
+        let (log, qs) = (0..300)
+            .map(|seed| episode(&mut e, seed))
+            .find(|(log, _)| log.len() >= 3 && log.contact_after(log.len() - 1))
+            .expect("some random episode runs into the obstacle");
+        let last = log.len() - 1;
+        let cfg = HerConfig { strategy: HerStrategy::Future, k: 4 };
+        let mut ended = 0;
+        Relabeller::default().relabel(&cfg, &task, &reward, &log, &mut Rng::new(1), |x| {
+            fresh.reset_to(&qs[x.step], x.goal).unwrap();
+            let s = fresh.step(x.action).unwrap();
+            assert_eq!(s.total().to_bits(), x.terms.total.to_bits(), "step {}", x.step);
+            assert_eq!(s.terminated, x.terminal, "step {}", x.step);
+            if x.step == last {
+                assert!(x.terminal && s.collision.is_some());
+                assert_eq!(x.terms.total, x.terms.reward + x.terms.bonus - 7.5);
+                ended += 1;
+            }
+        });
+        assert_eq!(ended, 4, "every copy of the last step");
+    }
+
+    #[test]
+    fn future_goals_cover_the_rest_of_the_episode_and_k_is_checked() {
+        let mut e = env(RewardFunction::Basic, 1);
+        let (log, _) = episode(&mut e, 2);
+        let (task, reward) = (e.task().clone(), e.reward_config().clone());
+        let mut r = Relabeller::default();
+        let mut seen = vec![vec![false; 50]; 50];
+        let cfg = HerConfig { strategy: HerStrategy::Future, k: 64 };
+        r.relabel(&cfg, &task, &reward, &log, &mut Rng::new(4), |x| {
+            let g = (0..50).find(|&g| log.ee_after(g) == x.goal).unwrap();
+            assert!(g >= x.step);
+            seen[x.step][g] = true;
+        });
+        // Step 45 has 5 possible goals, 64 draws: all of them seen; step 0 many different ones.
+        assert!((45..50).all(|g| seen[45][g]));
+        assert!(seen[0].iter().filter(|s| **s).count() > 30);
+        for k in [0, MAX_HER_K + 1] {
+            let e = HerConfig { k, ..HerConfig::default() }.validate().unwrap_err().to_string();
+            assert!(e.contains("agent.her.k") && e.contains(&k.to_string()), "{e}");
+        }
+    }
+}
