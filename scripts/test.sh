@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The project's test command: the Rust tests, then the Python package's tests.
 #
-#   0. the headless browser of the view's test (crates/stagerl-cli/tests/view_browser.rs):
+#   0. the headless browser of the view's test (crates/stagerl-cli/tests/it/view_browser.rs):
 #      Debian's chromium, installed with apt-get when `chromium` is not on PATH (47 s
 #      with apt-get update, measured on a machine of this class without it; set CHROMIUM to use
 #      another binary). Without it that test fails: it does not skip.

@@ -57,7 +57,7 @@ class Policy:
         self.act_dim = core.act_dim
         self.algorithm = core.algorithm
         self.checkpoint = core.checkpoint
-        #: The checkpoint's portable policy description (``stagerl::policy::PolicySpec``).
+        #: The checkpoint's portable policy description (``stagerl::run::policy::PolicySpec``).
         self.spec = json.loads(core.spec_json)
 
     @classmethod

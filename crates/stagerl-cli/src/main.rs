@@ -4,6 +4,9 @@
 mod out;
 mod cmd;
 mod jsonl;
+mod plan_batch;
+mod progress;
+mod run_control;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -58,6 +61,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    stagerl::run::provenance::Code::record_build(env!("STAGERL_GIT_COMMIT"), env!("STAGERL_GIT_DIRTY"));
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => return usage(&e),

@@ -5,7 +5,7 @@
 //! Mechanism of Dense Reward for Robotic Trajectory Planning* (the "paper").
 //!
 //! The folders follow the pipeline from the bottom up; each imports only the folders above it in
-//! this list (`tests/code_shape.rs` asserts it):
+//! this list (`tests/it/code_shape.rs` asserts it):
 //! - [`base`]: the error type, the seeded random generator, scalar math, run-time SIMD dispatch,
 //!   the fork-join pool one run splits its work over, text bounds and shared value checks.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) with its own

@@ -1,7 +1,6 @@
 use anyhow::{Context, Result};
 use stagerl::env::Sim;
 use stagerl::run::dir::{EvalVariant, RunDir};
-use stagerl::train::eval::EvalSummary;
 use stagerl::train::{self};
 
 #[derive(clap::Args)]
@@ -50,13 +49,13 @@ pub fn run(args: Args) -> Result<()> {
     let variant = EvalVariant { sim, obstacles_in_path: in_path };
     // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
     // directory untouched).
-    let _lock = super::train::lock_run(&args.run.run)?;
-    let stop = super::train::stop_flag()?;
+    let _lock = crate::run_control::lock_run(&args.run.run)?;
+    let stop = crate::run_control::stop_flag()?;
     let e = match train::eval::evaluate_loaded(loaded, args.trials, args.seed, Some(&stop)) {
         Err(e @ stagerl::Error::Stopped { .. }) => {
             // Standard error may be closed too; the exit code still tells.
             let _ = errln!("stagerl: {e}");
-            std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
+            std::process::exit(i32::from(crate::run_control::INTERRUPTED_EXIT));
         }
         other => other?,
     };
@@ -76,29 +75,5 @@ pub fn run(args: Args) -> Result<()> {
             csv.display()
         )?;
     }
-    outln!("{}", summary_line(&e.summary, args.json))
-}
-
-pub fn summary_line(s: &EvalSummary, json: bool) -> String {
-    if json {
-        serde_json::json!({
-            "success_rate": s.success_rate,
-            "mean_reward": s.mean_reward,
-            "mean_steps": s.mean_steps,
-            "trials": s.trials,
-            "median_final_distance_m": s.median_final_distance_m,
-            "collision_rate": s.collision_rate,
-        })
-        .to_string()
-    } else {
-        format!(
-            "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m, collisions in {} of the trials",
-            100.0 * s.success_rate,
-            s.trials,
-            s.mean_reward,
-            s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into()),
-            s.median_final_distance_m,
-            s.collision_rate.map_or_else(|| "-".into(), |c| format!("{:.1} %", 100.0 * c))
-        )
-    }
+    outln!("{}", crate::progress::summary_line(&e.summary, args.json))
 }

@@ -1,8 +1,8 @@
 use anyhow::{bail, Context, Result};
-use stagerl::plan::{BatchLine, PlanRequest, Planner};
+use stagerl::plan::Planner;
 use stagerl::run::dir::RunDir;
-use stagerl::view::{self, View};
-use std::io::{BufRead, IsTerminal, Write};
+use stagerl::view::View;
+use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -65,10 +65,10 @@ pub fn run(args: Args) -> Result<()> {
         }
         let out = crate::out::stdout()?;
         if path.as_os_str() == "-" {
-            batch(&mut planner, std::io::stdin().lock(), out, view.as_mut())?;
+            crate::plan_batch::batch(&mut planner, std::io::stdin().lock(), out, view.as_mut())?;
         } else {
             let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-            batch(&mut planner, std::io::BufReader::new(file), out, view.as_mut())
+            crate::plan_batch::batch(&mut planner, std::io::BufReader::new(file), out, view.as_mut())
                 .with_context(|| format!("planning the targets of {}", path.display()))?;
         }
         return write_view(&args, view.as_ref());
@@ -141,38 +141,6 @@ fn planner(args: &Args) -> Result<Planner> {
         }
         (None, None) => bail!("give --run DIR (a trained run) or --controller jacobian"),
     }
-}
-
-/// Plan every JSON line of `input` ([`PlanRequest`]), one [`BatchLine`] out per line; warnings
-/// on standard error. The first [`view::MAX_TRAJECTORIES`] plans also go into `view`. Returns
-/// the number of control steps planned.
-pub fn batch(
-    planner: &mut Planner,
-    input: impl BufRead,
-    output: impl Write,
-    mut view: Option<&mut View>,
-) -> Result<u64> {
-    let (mut k, mut steps) = (0u64, 0u64);
-    crate::jsonl::process(input, output, |req: PlanRequest| {
-        k += 1;
-        let plan = planner.plan_request(&req)?;
-        if let Some(w) = &plan.warning {
-            errln!("stagerl: warning: plan {k}: {w}")?;
-        }
-        steps += u64::from(plan.summary.steps);
-        if let Some(v) = view.as_deref_mut().filter(|v| v.trajectories.len() < view::MAX_TRAJECTORIES) {
-            let t = &req.target;
-            v.push(planner.env().chain(), &format!("plan {k}"), [t[0], t[1], t[2]], &plan)?;
-        }
-        Ok(BatchLine(plan))
-    })?;
-    if view.is_some() && k > view::MAX_TRAJECTORIES as u64 {
-        errln!(
-            "stagerl: warning: the view holds the first {} of the {k} plans (its limit); the output has all of them",
-            view::MAX_TRAJECTORIES
-        )?;
-    }
-    Ok(steps)
 }
 
 /// Comma-separated numbers of flag `flag`.

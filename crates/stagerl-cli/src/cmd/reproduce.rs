@@ -48,7 +48,7 @@ pub fn run(args: Args) -> Result<()> {
         args.jobs,
         args.out.display()
     )?;
-    let stop = super::train::stop_flag()?;
+    let stop = crate::run_control::stop_flag()?;
     // A failing standard output stops the sweep as SIGINT does: runs save themselves.
     let output = crate::out::RunOutput::new(Arc::clone(&stop));
     let outcome =
@@ -72,7 +72,7 @@ pub fn run(args: Args) -> Result<()> {
             "stagerl: interrupted after {:.0} s; finished runs are kept. Run the same command again to continue.",
             outcome.wall_s
         );
-        std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
+        std::process::exit(i32::from(crate::run_control::INTERRUPTED_EXIT));
     }
     if !outcome.failures.is_empty() {
         bail!("{} of {total} runs failed:\n  {}", outcome.failures.len(), outcome.failures.join("\n  "));

@@ -1,17 +1,15 @@
 use anyhow::{bail, Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use stagerl::agent::Algo;
 use stagerl::reward::RewardFunction;
 use stagerl::run::dir::RunDir;
-use stagerl::train::{self, final_eval, Progress, Resumed, TrainOptions};
-use std::collections::VecDeque;
-use std::io::IsTerminal;
+use stagerl::train::{self, final_eval, Resumed, TrainOptions};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 
 use crate::out::RunOutput;
+use crate::progress::{print_summary, Reporter};
+use crate::run_control::{finish, lock_run, output_ok, stop_flags};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -54,71 +52,6 @@ pub struct Args {
     /// see the README's Performance section).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     threads: u32,
-}
-
-/// Exit code of a run stopped by SIGINT or SIGTERM (after saving it).
-pub const INTERRUPTED_EXIT: u8 = 130;
-
-/// A stop flag raised by SIGINT and SIGTERM: the loop then saves the run and returns.
-pub fn stop_flag() -> Result<Arc<AtomicBool>> {
-    let flag = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(sig, Arc::clone(&flag)).context("installing the signal handler")?;
-    }
-    Ok(flag)
-}
-
-/// The stop flag of training (raised by SIGINT, SIGTERM and a failing output, see
-/// [`RunOutput`]) and that of the closing evaluation (signals alone: output that fails after the
-/// last episode lets the run finish, evaluation included).
-fn stop_flags() -> Result<(Arc<AtomicBool>, Arc<AtomicBool>)> {
-    Ok((stop_flag()?, stop_flag()?))
-}
-
-/// Take the lock of the run directory `dir` (created if needed) for this process.
-pub fn lock_run(dir: &Path) -> Result<stagerl::run::lock::DirLock> {
-    stagerl::run::lock::DirLock::run(dir)
-        .with_context(|| format!("taking the run directory {}", dir.display()))
-}
-
-/// Map an interruption to a message and the interrupted exit code; a stop caused by standard
-/// output failing (closed pipe, full disk) is an error saying how to resume.
-fn finish<T>(r: stagerl::Result<T>, dir: &std::path::Path, output: &RunOutput) -> Result<T> {
-    match r {
-        Err(stagerl::Error::Interrupted { episode, checkpoint }) => {
-            let (saved, resume) = (checkpoint.display(), dir.display());
-            if let Some(e) = output.failed() {
-                bail!(
-                    "{e}: the run stopped after episode {episode} and was saved to {saved}. Continue with: stagerl train --resume {resume}"
-                );
-            }
-            // Standard error may be closed too; the exit code still tells.
-            let _ = errln!(
-                "stagerl: interrupted after episode {episode}; saved to {saved}. Continue with: stagerl train --resume {resume}"
-            );
-            std::process::exit(i32::from(INTERRUPTED_EXIT));
-        }
-        Err(e @ stagerl::Error::Stopped { .. }) => {
-            let resume = dir.display();
-            if let Some(failed) = output.failed() {
-                bail!("{failed}: {e}. Continue with: stagerl train --resume {resume}");
-            }
-            let _ = errln!("stagerl: {e}. Continue with: stagerl train --resume {resume}");
-            std::process::exit(i32::from(INTERRUPTED_EXIT));
-        }
-        other => other.context("training"),
-    }
-}
-
-/// An error if some output of a run that finished could not be printed.
-fn output_ok(output: &RunOutput, dir: &std::path::Path) -> Result<()> {
-    match output.failed() {
-        Some(e) => bail!(
-            "{e}: the run in {} finished and its files are complete, but its output was not all printed",
-            dir.display()
-        ),
-        None => Ok(()),
-    }
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -235,17 +168,6 @@ fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
     }
 }
 
-fn print_summary(summary: &train::TrainSummary, output: &RunOutput) {
-    output.line(format_args!(
-        "trained {} episodes, {} env steps, {} updates in {:.1} s ({:.0} env steps/s)",
-        summary.episodes,
-        summary.env_steps,
-        summary.updates,
-        summary.wall_s,
-        summary.env_steps as f64 / summary.wall_s
-    ));
-}
-
 /// The closing evaluation, recorded as the run's last step (see `train::final_eval`): the
 /// checkpoint `stagerl eval` would pick (best, else final), on targets of seed 0, not the
 /// `train.eval_seed` targets the best checkpoint was chosen on. A stop ends it (exit 130).
@@ -266,79 +188,6 @@ fn closing_evaluation(
         checkpoint.display(),
         RunDir::new(out).final_eval(seed).display()
     ));
-    output.line(format_args!("{}", super::eval::summary_line(&s, false)));
+    output.line(format_args!("{}", crate::progress::summary_line(&s, false)));
     Ok(())
-}
-
-/// A progress bar on a terminal; plain log lines every 10 s otherwise.
-struct Reporter<'a> {
-    output: &'a RunOutput,
-    bar: Option<ProgressBar>,
-    last_log: Instant,
-    recent: VecDeque<(f64, bool)>,
-    last_eval: Option<(u64, f64)>,
-}
-
-impl<'a> Reporter<'a> {
-    fn new(episodes: u64, output: &'a RunOutput) -> Reporter<'a> {
-        let bar = std::io::stdout().is_terminal().then(|| {
-            let b = ProgressBar::new(episodes);
-            b.set_style(
-                ProgressStyle::with_template(
-                    "{bar:30} {pos}/{len} episodes {elapsed_precise} (eta {eta}) {msg}",
-                )
-                .expect("valid template"),
-            );
-            b
-        });
-        Reporter { output, bar, last_log: Instant::now(), recent: VecDeque::new(), last_eval: None }
-    }
-
-    fn episode(&mut self, p: &Progress<'_>) {
-        let r = p.record;
-        self.recent.push_back((r.reward, r.success));
-        if self.recent.len() > 100 {
-            self.recent.pop_front();
-        }
-        if let Some(e) = p.eval {
-            self.last_eval = Some((r.episode, e.success_rate));
-        }
-        let n = self.recent.len() as f64;
-        let mean_r = self.recent.iter().map(|x| x.0).sum::<f64>() / n;
-        let succ = self.recent.iter().filter(|x| x.1).count() as f64 / n;
-        let mut msg = format!("reward(100) {mean_r:.2} success(100) {:.0}%", 100.0 * succ);
-        if let Some((ep, s)) = self.last_eval {
-            msg.push_str(&format!(" eval@{ep} {:.0}%", 100.0 * s));
-        }
-        if let Some(st) = &p.stats {
-            msg.push_str(&format!(" critic {:.3}", st.critic_loss));
-            if let Some(a) = st.alpha {
-                msg.push_str(&format!(" alpha {a:.3}"));
-            }
-        }
-        match &self.bar {
-            Some(b) => {
-                b.set_position(r.episode);
-                b.set_message(msg);
-            }
-            None => {
-                if self.last_log.elapsed() >= Duration::from_secs(10)
-                    || p.eval.is_some()
-                    || r.episode == p.episodes
-                {
-                    self.output.line(format_args!(
-                        "episode {}/{} env steps {} {:.0} s {msg}",
-                        r.episode, p.episodes, r.env_steps, r.wall_s
-                    ));
-                    self.last_log = Instant::now();
-                }
-            }
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(b) = &self.bar {
-            b.finish();
-        }
-    }
 }

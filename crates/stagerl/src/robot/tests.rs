@@ -1,6 +1,6 @@
 //! Unit tests of the robot module: UR5 against standard DH, a hand-checked pose, the Jacobian
 //! against finite differences, numerical properties and one test per URDF error.
-//! (The comparison with the `k` crate is in `tests/robot_k_oracle.rs`.)
+//! (The comparison with the `k` crate is in `tests/it/robot_k_oracle.rs`.)
 
 use std::f64::consts::{FRAC_PI_2, PI};
 

@@ -23,19 +23,33 @@ pub struct Code {
     pub git_dirty: Option<bool>,
 }
 
+/// `(commit, dirty)` from a build script's strings: empty or unknown values are `None`.
+fn build_facts(commit: &str, dirty: &str) -> (Option<String>, Option<bool>) {
+    let commit = (!commit.is_empty()).then(|| commit.to_string());
+    let dirty = match dirty {
+        "true" => Some(true),
+        "false" => Some(false),
+        _ => None,
+    };
+    (commit, dirty)
+}
+
+/// The build facts the program recorded at start ([`Code::record_build`]).
+static BUILD: std::sync::OnceLock<(Option<String>, Option<bool>)> = std::sync::OnceLock::new();
+
 impl Code {
-    /// This build's code version.
+    /// Record the git commit the program was built from and whether its tree had uncommitted
+    /// changes (`"true"`, `"false"`, or empty when unknown), as the program's build script found
+    /// them. The `stagerl` binary does it first thing; a program that does not leaves the commit
+    /// unknown (`None`) in what it writes. The first call wins.
+    pub fn record_build(commit: &str, dirty: &str) {
+        let _ = BUILD.set(build_facts(commit, dirty));
+    }
+
+    /// This program's code version: the library's version and the recorded build facts.
     pub fn current() -> Code {
-        let commit = env!("STAGERL_GIT_COMMIT");
-        Code {
-            stagerl_version: env!("CARGO_PKG_VERSION").to_string(),
-            git_commit: (!commit.is_empty()).then(|| commit.to_string()),
-            git_dirty: match env!("STAGERL_GIT_DIRTY") {
-                "true" => Some(true),
-                "false" => Some(false),
-                _ => None,
-            },
-        }
+        let (git_commit, git_dirty) = BUILD.get().cloned().unwrap_or((None, None));
+        Code { stagerl_version: env!("CARGO_PKG_VERSION").to_string(), git_commit, git_dirty }
     }
 
     /// `0.1.0 (abc1234)`, with `+dirty` when the tree had changes.
@@ -336,13 +350,17 @@ mod tests {
     }
 
     #[test]
-    fn this_build_knows_its_commit() {
-        // Built from this repository's checkout: the commit is 40 hex digits.
-        let c = Code::current();
-        let commit = c.git_commit.clone().expect("built from a git checkout");
-        assert_eq!(commit.len(), 40);
-        assert!(commit.chars().all(|ch| ch.is_ascii_hexdigit()));
-        assert!(c.git_dirty.is_some());
-        assert!(c.describe().contains(&commit[..12]));
+    fn build_facts_give_the_code_version() {
+        let commit = "0123456789abcdef0123456789abcdef01234567";
+        let (git_commit, git_dirty) = build_facts(commit, "true");
+        let c = Code { stagerl_version: "0.1.0".into(), git_commit, git_dirty };
+        assert_eq!((c.git_commit.as_deref(), c.git_dirty), (Some(commit), Some(true)));
+        assert_eq!(c.describe(), "0.1.0 (0123456789ab+dirty)");
+        assert_eq!(build_facts(commit, "false").1, Some(false));
+        // Not built from a git checkout: nothing is claimed.
+        let (git_commit, git_dirty) = build_facts("", "");
+        let none = Code { stagerl_version: "0.1.0".into(), git_commit, git_dirty };
+        assert_eq!(none.describe(), "0.1.0 (no git commit)");
+        assert_eq!(none.git_dirty, None);
     }
 }

@@ -222,7 +222,7 @@ fn best_ns(mut f: impl FnMut(usize)) -> f64 {
     best
 }
 
-/// `cargo test -p stagerl --test robot_k_oracle bench -- --ignored --nocapture`
+/// `cargo test -p stagerl --test it robot_k_oracle::bench -- --ignored --nocapture`
 #[test]
 #[ignore = "timing, run by hand"]
 fn bench_fk_and_jacobian_vs_k() {

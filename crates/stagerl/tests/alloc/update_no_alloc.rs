@@ -1,15 +1,12 @@
 //! A warmed-up SAC, TD3 or DDPG update allocates nothing (the matrix products included: their
 //! packing buffers are on the stack): counted with a global allocator.
 
-mod common;
+use crate::common;
 
 use common::allocs;
 use stagerl::agent::replay::Batch;
 use stagerl::agent::{build_off_policy, AgentConfig, Algo};
 use stagerl::base::rng::Rng;
-
-#[global_allocator]
-static GLOBAL: common::Counting = common::Counting;
 
 /// As `stagerl bench update`: observations 16, actions 6, a random batch of 256.
 fn no_allocation_in(algo: Algo, hidden: usize, updates: usize) {

@@ -3,7 +3,7 @@
 //! error, and so does a closed standard output for `fk` and `reward`; `train` whose output goes away saves its run and says how to
 //! resume it.
 
-mod common;
+use crate::common;
 
 use common::{bin, scratch, spawn_piped};
 use std::io::{BufRead, BufReader, Write};

@@ -2,7 +2,7 @@
 //! latest, best or final checkpoint makes `train --resume` and `eval` fail with a message naming
 //! the file, and nothing on disk changes.
 
-mod common;
+use crate::common;
 
 use common::{run, scratch, snapshot};
 use std::path::Path;

@@ -2,7 +2,7 @@
 //! trials (periodic, closing, `eval`, `demo`), and a run stopped there resumes bit-identically.
 //! A run killed during its closing evaluation is evaluated on resume.
 
-mod common;
+use crate::common;
 
 use common::{assert_steps_once, bin, episodes_without_wall, scratch, tb_scalars};
 use stagerl::io::checkpoint::Checkpoint;

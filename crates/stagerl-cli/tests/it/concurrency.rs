@@ -2,7 +2,7 @@
 //! `reproduce` processes share one sweep (each run trained by exactly one of them), and a killed
 //! writer leaves no stale lock and no temporary file that outlives the next process.
 
-mod common;
+use crate::common;
 
 use common::{assert_steps_once, bin, episodes_without_wall, scratch, tb_scalars};
 use std::path::Path;

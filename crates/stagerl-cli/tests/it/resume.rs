@@ -1,7 +1,7 @@
 //! Killing `stagerl train` at any moment loses nothing: resumed runs end identical (but wall
 //! time) to an uninterrupted one.
 
-mod common;
+use crate::common;
 
 use common::{assert_same_run, bin, run, scratch};
 use std::process::{Command, Stdio};

@@ -1,11 +1,8 @@
 //! `ReachEnv::step` and `VecEnv::step` allocate nothing: counted with a global allocator.
 
-mod common;
+use crate::common;
 
 use common::allocs;
-
-#[global_allocator]
-static GLOBAL: common::Counting = common::Counting;
 
 #[test]
 fn stepping_and_resetting_allocate_nothing() {

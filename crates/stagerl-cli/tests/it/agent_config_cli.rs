@@ -2,7 +2,7 @@
 //! --config` accepts and writes back unchanged; an algorithm's setting in the wrong place, or a
 //! section of another algorithm than the run's, is refused with where it belongs.
 
-mod common;
+use crate::common;
 
 use common::{bin, scratch};
 use stagerl::config::Config;

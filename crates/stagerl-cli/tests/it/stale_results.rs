@@ -3,7 +3,7 @@
 //! --force), `reproduce` writes nothing when it refuses, and a change of the evaluation settings
 //! alone re-runs the evaluation only.
 
-mod common;
+use crate::common;
 
 use common::{assert_steps_once, bin, scratch, tb_scalars};
 use std::path::Path;

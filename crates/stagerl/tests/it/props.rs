@@ -12,7 +12,7 @@ use stagerl::env::ReachEnv;
 use stagerl::reward::{sar_weights, DirectionSource, RewardConfig, RewardFunction, RewardInput, RewardTerms};
 use stagerl::robot::{Chain, JointKind, UR5_URDF};
 
-const TEST_ARM: &str = include_str!("robot_test_arm.urdf");
+const TEST_ARM: &str = include_str!("../robot_test_arm.urdf");
 
 /// A runner with `cases` cases and a fixed seed, unless the environment asks otherwise.
 fn runner(cases: u32) -> TestRunner {

@@ -3,7 +3,7 @@
 //! summary with the rows, CSV with JSON lines, batch mode with single plans; bad input is an
 //! error naming it, never a panic.
 
-mod common;
+use crate::common;
 
 use common::{bin, run, scratch};
 use serde_json::Value;

@@ -3,7 +3,7 @@
 //! SIGTERM is the exact mid-episode state (random generators, environment, floats in JSON), so
 //! any lost bit shows up as a different episodes.csv.
 
-mod common;
+use crate::common;
 
 use common::{assert_same_run, bin, run, scratch};
 use std::path::Path;

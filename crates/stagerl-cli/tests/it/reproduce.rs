@@ -1,6 +1,6 @@
 //! `stagerl reproduce`: resumable sweeps. Killing it loses no finished run and repeats none.
 
-mod common;
+use crate::common;
 
 use common::{bin, episodes_without_wall, scratch};
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! same model again is left as it is, another one is refused without --force and replaced with
 //! it, and --checkpoint picks the checkpoint (a run without evaluations has no best: its final one).
 
-mod common;
+use crate::common;
 
 use common::{bin, scratch};
 use stagerl::agent::Algo;

@@ -7,7 +7,7 @@
 //! fixture directory, `$RUN` a small trained SAC run (hidden [8, 8]) and `$EMPTY` a run directory
 //! with a config but no checkpoint.
 
-mod common;
+use crate::common;
 
 use common::{bin, snapshot, spawn_piped};
 use std::io::Write;

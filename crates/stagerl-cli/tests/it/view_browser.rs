@@ -8,7 +8,7 @@
 //! arm's colours, not just the background. A page with a script error is shown to fail the same
 //! checks, so they can fail. The embedded data is checked against the plans themselves.
 
-mod common;
+use crate::common;
 
 use common::{bin, scratch};
 use serde_json::Value;

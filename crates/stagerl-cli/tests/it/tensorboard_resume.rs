@@ -1,7 +1,7 @@
 //! After any sequence of kills (SIGKILL, SIGTERM) and resumes, a run's TensorBoard log holds
 //! every tag's steps exactly once, with the values of an uninterrupted run.
 
-mod common;
+use crate::common;
 
 use common::{assert_steps_once, bin, scratch, tb_scalars};
 use std::process::{Command, Stdio};

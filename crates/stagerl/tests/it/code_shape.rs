@@ -257,3 +257,34 @@ fn re_exports_only_in_lib_rs() {
         .collect();
     assert!(offenders.is_empty(), "`pub use crate::` outside lib.rs: {offenders:?}");
 }
+
+/// The command-line tool's commands: each is flags and wiring, and none imports another (what
+/// several share lives beside `cmd/`: run control, progress, output).
+#[test]
+fn no_command_imports_another() {
+    let cmd = crates_dir().join("stagerl-cli/src/cmd");
+    let names: Vec<String> = std::fs::read_dir(&cmd)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "rs") && !p.ends_with("mod.rs"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.len() >= 10 && names.contains(&"train".to_string()), "found the commands: {names:?}");
+    let mut wrong = Vec::new();
+    for name in &names {
+        let text: String = std::fs::read_to_string(cmd.join(format!("{name}.rs")))
+            .unwrap()
+            .lines()
+            .map(|l| code_of(l) + "\n")
+            .collect();
+        for other in names.iter().filter(|o| *o != name) {
+            for path in [format!("super::{other}::"), format!("cmd::{other}::"), format!("super::{{{other}")]
+            {
+                if text.contains(&path) {
+                    wrong.push(format!("{name} uses {path}"));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "commands importing commands:\n{}", wrong.join("\n"));
+}

@@ -1,0 +1,19 @@
+//! The command-line tool's integration tests, one binary (modules as ripgrep's tests/ has them).
+
+mod agent_config_cli;
+mod bad_inputs_cli;
+mod cli;
+mod common;
+mod concurrency;
+mod corrupt_checkpoint;
+mod export_cli;
+mod output_errors;
+mod plan_cli;
+mod report_cli;
+mod reproduce;
+mod resume;
+mod sigterm_resume;
+mod stale_results;
+mod stops;
+mod tensorboard_resume;
+mod view_browser;

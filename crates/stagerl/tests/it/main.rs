@@ -1,0 +1,13 @@
+//! The library's integration tests, one binary (modules as ripgrep's tests/ has them); the
+//! tests that count allocations are in tests/alloc, which installs a counting global allocator.
+
+mod bad_inputs;
+mod code_shape;
+mod determinism;
+mod float_roundtrip;
+mod learning;
+mod nan_guard;
+mod policy_portable;
+mod props;
+mod report_synthetic;
+mod robot_k_oracle;
