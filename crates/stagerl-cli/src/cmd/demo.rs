@@ -34,7 +34,7 @@ pub fn run(args: Args) -> Result<()> {
         args.seed
     )?;
     let mut scratch = Scratch::new(&env);
-    let stop = super::train::stop_flag()?;
+    let stop = crate::run_control::stop_flag()?;
     for ep in 1..=args.show {
         if stop.load(std::sync::atomic::Ordering::SeqCst) {
             stopped(&format!("stopped on request after {} episodes shown", ep - 1));
@@ -85,7 +85,7 @@ pub fn run(args: Args) -> Result<()> {
             Err(e @ stagerl::Error::Stopped { .. }) => stopped(&e.to_string()),
             other => other?,
         };
-        outln!("\n{}", super::eval::summary_line(&s, false))?;
+        outln!("\n{}", crate::progress::summary_line(&s, false))?;
     }
     Ok(())
 }
@@ -94,5 +94,5 @@ pub fn run(args: Args) -> Result<()> {
 fn stopped(what: &str) -> ! {
     // Standard error may be closed too; the exit code still tells.
     let _ = errln!("stagerl: {what}");
-    std::process::exit(i32::from(super::train::INTERRUPTED_EXIT));
+    std::process::exit(i32::from(crate::run_control::INTERRUPTED_EXIT));
 }
