@@ -212,41 +212,7 @@ pub(crate) fn describe<'py>(py: Python<'py>, env: &ReachEnv) -> PyResult<Bound<'
     Ok(d)
 }
 
-/// Bounds that hold for every observation an episode can produce (f32, as the observation is):
-/// joints within their limits and within `max_steps` full-speed steps of the home pose
-/// (continuous joints have no limits), positions within the arm's reach, deltas within twice it.
+/// The observation's bounds: those of its layout ([`stagerl::env::ObservationLayout::bounds`]).
 fn obs_bounds(env: &ReachEnv) -> (Vec<f32>, Vec<f32>) {
-    let chain = env.chain();
-    let task = env.task();
-    let travel = f64::from(task.max_steps) * task.dt_s;
-    let (mut lo, mut hi) = (Vec::new(), Vec::new());
-    for i in 0..chain.dof() {
-        let (home, v) = (task.home_pose[i], chain.velocity_limits()[i]);
-        let l = chain.lower_limits()[i].max(home - travel * v);
-        let h = chain.upper_limits()[i].min(home + travel * v);
-        lo.push((l / std::f64::consts::PI) as f32);
-        hi.push((h / std::f64::consts::PI) as f32);
-    }
-    // Widened a little so that rounding to f32 never puts a value outside.
-    let reach = chain.reach_bound_m() * 1.001 + 1e-6;
-    let delta = 2.0 * reach * task.obs_delta_scale;
-    for _ in 0..6 {
-        lo.push(-reach as f32);
-        hi.push(reach as f32);
-    }
-    for _ in 0..3 {
-        lo.push(-delta as f32);
-        hi.push(delta as f32);
-    }
-    lo.push(0.0);
-    hi.push(delta as f32);
-    // Observed obstacles (`task.observe_obstacles`): one slot of values per obstacle.
-    let slot = task.obstacle_obs_bounds(chain.reach_bound_m());
-    for _ in 0..task.obstacle_slots() {
-        for &(l, h) in &slot {
-            lo.push((l - 1e-6 - l.abs() * 1e-6) as f32);
-            hi.push((h + 1e-6 + h.abs() * 1e-6) as f32);
-        }
-    }
-    (lo, hi)
+    stagerl::env::ObservationLayout::of(env.task()).bounds(env.task(), env.chain())
 }

@@ -66,7 +66,8 @@ impl Config {
     /// The memory a run of this config needs for an arm of `dof` joints, estimated before anything
     /// is allocated (in f64: absurd sizes do not overflow).
     pub fn estimated_memory(&self, dof: usize) -> MemoryEstimate {
-        let obs = crate::env::observation_dim(self.task.observation, dof, self.task.obstacle_slots()) as f64;
+        let obs = crate::env::ObservationLayout::new(self.task.observation, dof, self.task.obstacle_slots())
+            .dim() as f64;
         let act = dof as f64;
         let f32_bytes = 4.0;
         let widths: Vec<f64> = self.agent.hidden.iter().map(|&h| h as f64).collect();

@@ -9,15 +9,18 @@
 //!
 //! [`ReachEnv::step`] allocates nothing.
 
+mod observation;
 mod rollout;
 mod task;
 mod vec;
 
+pub use observation::{empty_slot_distance, ObsEntry, ObservationLayout};
 pub use rollout::{rollout, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
 pub use vec::VecEnv;
 
 use nalgebra::Vector3;
 use std::f64::consts::PI;
+use std::ops::Range;
 use std::sync::Arc;
 
 use crate::base::rng::Rng;
@@ -63,14 +66,33 @@ impl Step {
     }
 }
 
-/// Whether a step that ended in contact (`collided`) ends the episode, and the reward it then
-/// loses (`reward.collision_penalty`, 0 when unset). One rule for the environment and for
-/// hindsight relabelling.
-#[inline]
-pub fn collision_outcome(task: &ResolvedTask, reward: &RewardConfig, collided: bool) -> (bool, f64) {
-    match (collided, task.on_collision) {
-        (true, OnCollision::Terminate) => (true, reward.collision_penalty.unwrap_or(0.0)),
-        _ => (false, 0.0),
+impl Step {
+    /// The outcome of a step of `task` from what the arm did (`input`: the end-effector pose
+    /// after the step and before it, the joint velocities applied, the target), whether it ended
+    /// in contact (`collided`) and the steps taken so far, this one included (the result's
+    /// `collision` is left for the caller, who knows what was touched). One rule for the
+    /// environment and for hindsight relabelling, which asks it again for substituted goals:
+    /// 1. the reward terms of the run's reward function (eqs. 1-15 and 18), the success bonus
+    ///    included when `D_PT < beta`;
+    /// 2. a step in contact with `task.on_collision = "terminate"` ends the episode and loses
+    ///    `reward.collision_penalty` (0 when unset); with `"record"` contact changes nothing;
+    /// 3. terminated: reached or ended by contact; truncated: not terminated at `max_steps`.
+    #[inline]
+    pub fn outcome(
+        task: &ResolvedTask,
+        reward: &RewardConfig,
+        input: &RewardInput<'_>,
+        collided: bool,
+        steps: u32,
+    ) -> Step {
+        let mut terms = RewardTerms::compute(reward, task.dt_s, input);
+        let ended_by_contact = collided && task.on_collision == OnCollision::Terminate;
+        if ended_by_contact {
+            terms.total -= reward.collision_penalty.unwrap_or(0.0);
+        }
+        let terminated = terms.reached || ended_by_contact;
+        let truncated = !terminated && steps >= task.max_steps;
+        Step { terms, terminated, truncated, collision: None }
     }
 }
 
@@ -103,32 +125,6 @@ pub fn check_obstacles_in_path(fraction: f64, random_obstacles: bool) -> Result<
         ));
     }
     Ok(())
-}
-
-/// Number of observation values for an arm with `dof` joints and `obstacle_slots` observed
-/// obstacles ([`TaskConfig::observe_obstacles`]).
-pub fn observation_dim(kind: ObservationKind, dof: usize, obstacle_slots: usize) -> usize {
-    match kind {
-        ObservationKind::Standard => dof + 10 + task::OBSTACLE_OBS_LEN * obstacle_slots,
-    }
-}
-
-/// Write the observation entries that depend on the target (metres, base frame) for an
-/// end-effector at `ee` (metres): for the standard observation of a `dof`-joint arm, the target
-/// (at `dof + 3..dof + 6`), `obs_delta_scale x (target - ee)` and its norm. The environment writes its own observations with it, and hindsight relabelling
-/// ([`crate::train::her`]) writes those of a substituted goal, so both are the same bits.
-pub fn write_target_entries(task: &ResolvedTask, obs: &mut [f32], ee: Vector3<f64>, target: Vector3<f64>) {
-    match task.observation {
-        ObservationKind::Standard => {
-            let n = task.home_pose.len();
-            let d = (target - ee) * task.obs_delta_scale;
-            for k in 0..3 {
-                obs[n + 3 + k] = target[k] as f32;
-                obs[n + 6 + k] = d[k] as f32;
-            }
-            obs[n + 9] = d.norm() as f32;
-        }
-    }
 }
 
 /// Check joint positions for `chain`: one finite value per joint, each within its joint's limits.
@@ -191,6 +187,8 @@ pub struct ReachEnv {
     /// Steps of this episode that ended in contact.
     collision_steps: u32,
     obs: Vec<f32>,
+    /// Where each entry of `obs` is.
+    layout: ObservationLayout,
     /// The collision checker, when the arm has collision shapes.
     collider: Option<ArmCollider>,
     contact: Option<Contact>,
@@ -232,7 +230,7 @@ impl ReachEnv {
                 task.home_pose.len()
             )));
         }
-        let obs_dim = observation_dim(task.observation, n, task.obstacle_slots());
+        let layout = ObservationLayout::of(&task);
         let mut obstacles = Vec::with_capacity(task.max_obstacles());
         obstacles.extend(task.obstacles.iter().cloned());
         let q = task.home_pose.clone();
@@ -255,7 +253,7 @@ impl ReachEnv {
                 Some(Box::new(arm))
             }
         };
-        let far_obs = task.obstacle_obs_bounds(chain.reach_bound_m())[task::OBSTACLE_OBS_LEN - 1].1 as f32;
+        let far_obs = empty_slot_distance(&task, &chain);
         let mut env = ReachEnv {
             collider,
             contact: None,
@@ -273,7 +271,8 @@ impl ReachEnv {
             steps: 0,
             done: true,
             collision_steps: 0,
-            obs: vec![0.0; obs_dim],
+            obs: vec![0.0; layout.dim()],
+            layout,
             q,
             task,
             reward,
@@ -425,24 +424,18 @@ impl ReachEnv {
         self.check_contact();
         self.steps += 1;
         self.collision_steps += u32::from(self.contact.is_some());
-        let mut terms = RewardTerms::compute(
-            &self.reward,
-            dt,
-            &RewardInput {
-                ee_pos: self.ee.position,
-                ee_quat: self.ee.quaternion_xyzw(),
-                target: self.target,
-                joint_vel: &self.joint_vel,
-                prev_ee_pos: Some(prev_ee),
-            },
-        );
-        let (ended_by_contact, penalty) = collision_outcome(&self.task, &self.reward, self.contact.is_some());
-        terms.total -= penalty;
-        let terminated = terms.reached || ended_by_contact;
-        let truncated = !terminated && self.steps >= self.task.max_steps;
-        self.done = terminated || truncated;
+        let input = RewardInput {
+            ee_pos: self.ee.position,
+            ee_quat: self.ee.quaternion_xyzw(),
+            target: self.target,
+            joint_vel: &self.joint_vel,
+            prev_ee_pos: Some(prev_ee),
+        };
+        let mut step = Step::outcome(&self.task, &self.reward, &input, self.contact.is_some(), self.steps);
+        step.collision = self.contact.map(|c| c.kind());
+        self.done = step.done();
         self.write_observation();
-        Ok(Step { terms, terminated, truncated, collision: self.contact.map(|c| c.kind()) })
+        Ok(step)
     }
 
     /// Look for the arm's contacts at its current joint positions ([`ReachEnv::contact`]).
@@ -451,28 +444,26 @@ impl ReachEnv {
     }
 
     fn write_observation(&mut self) {
-        match self.task.observation {
-            ObservationKind::Standard => {
-                let n = self.q.len();
-                for (o, q) in self.obs.iter_mut().zip(&self.q) {
-                    *o = (q / PI) as f32;
-                }
-                let p = self.ee.position;
-                for k in 0..3 {
-                    self.obs[n + k] = p[k] as f32;
-                }
-                match self.task.obstacle_observation {
-                    ObstacleObservation::Absolute => self.write_obstacles_absolute(n + 10),
-                    ObstacleObservation::Nearest => self.write_obstacles_nearest(n + 10),
-                }
-            }
+        let layout = self.layout;
+        for (o, q) in self.obs[layout.q_over_pi()].iter_mut().zip(&self.q) {
+            *o = (q / PI) as f32;
         }
-        write_target_entries(&self.task, &mut self.obs, self.ee.position, self.target);
+        let p = self.ee.position;
+        for (k, o) in self.obs[layout.ee_pos()].iter_mut().enumerate() {
+            *o = p[k] as f32;
+        }
+        let slots = layout.obstacles();
+        match self.task.obstacle_observation {
+            ObstacleObservation::Absolute => self.write_obstacles_absolute(slots),
+            ObstacleObservation::Nearest => self.write_obstacles_nearest(slots),
+        }
+        let k = self.task.obs_delta_scale;
+        self.layout.write_target_entries(&mut self.obs, k, self.ee.position, self.target);
     }
 
-    /// [`ObstacleObservation::Absolute`]'s slots, from `self.obs[start..]`.
-    fn write_obstacles_absolute(&mut self, start: usize) {
-        let slots = &mut self.obs[start..];
+    /// [`ObstacleObservation::Absolute`]'s slots, into `self.obs[slots]`.
+    fn write_obstacles_absolute(&mut self, slots: Range<usize>) {
+        let slots = &mut self.obs[slots];
         slots.fill(0.0);
         for (o, slot) in self.obstacles.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN)) {
             let (p, h) = (o.position_m, o.half_size_m());
@@ -484,15 +475,15 @@ impl ReachEnv {
         }
     }
 
-    /// [`ObstacleObservation::Nearest`]'s slots, from `self.obs[start..]`.
-    fn write_obstacles_nearest(&mut self, start: usize) {
+    /// [`ObstacleObservation::Nearest`]'s slots, into `self.obs[slots]`.
+    fn write_obstacles_nearest(&mut self, slots: Range<usize>) {
         let ee = self.ee.position;
         let scale = self.task.obs_delta_scale;
         self.nearest.clear();
         self.nearest
             .extend(self.obstacles.iter().enumerate().map(|(i, o)| (o.distance_to_point_m(ee.into()), i)));
         self.nearest.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let slots = &mut self.obs[start..];
+        let slots = &mut self.obs[slots];
         for slot in slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN) {
             slot.fill(0.0);
             slot[6] = self.far_obs;
@@ -724,6 +715,74 @@ pub(crate) mod tests {
             assert_eq!(o[12 + k], ((t[k] - p[k]) * 10.0) as f32);
         }
         assert_eq!(o[15], (e.distance() * 10.0) as f32);
+    }
+
+    /// For every observation option (no obstacles; fixed or random ones observed absolute or
+    /// nearest, with and without a range; a 7-joint arm), the layout's entries tile the
+    /// observation from 0 without gap, their sizes sum to its length, and every value of a few
+    /// random episodes stays within the layout's bounds.
+    #[test]
+    fn the_layout_describes_every_value_of_every_observation_option() {
+        let chain = Arc::new(Chain::ur5());
+        let random = || Some(task::RandomObstacles { count: [1, 3], ..Default::default() });
+        let fixed = vec![crate::sim::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])];
+        let nearest = ObstacleObservation::Nearest;
+        let options = [
+            TaskConfig::default(),
+            TaskConfig { obstacles: fixed.clone(), ..TaskConfig::default() },
+            TaskConfig { obstacles: fixed.clone(), observe_obstacles: true, ..TaskConfig::default() },
+            TaskConfig { random_obstacles: random(), observe_obstacles: true, ..TaskConfig::default() },
+            TaskConfig {
+                obstacles: fixed,
+                random_obstacles: random(),
+                observe_obstacles: true,
+                obstacle_observation: nearest,
+                ..TaskConfig::default()
+            },
+            TaskConfig {
+                random_obstacles: random(),
+                observe_obstacles: true,
+                obstacle_observation: nearest,
+                obstacle_range_m: Some(0.15),
+                ..TaskConfig::default()
+            },
+        ];
+        let mut envs: Vec<ReachEnv> = options
+            .into_iter()
+            .map(|t| {
+                ReachEnv::new(chain.clone(), t.resolve(&chain).unwrap(), RewardConfig::default(), 3).unwrap()
+            })
+            .collect();
+        envs.push(panda_env(Vec::new(), None));
+        let mut slots_seen = Vec::new();
+        for env in &mut envs {
+            let layout = ObservationLayout::of(env.task());
+            let entries = layout.entries(env.task(), env.chain());
+            let mut next = 0;
+            for e in &entries {
+                assert_eq!(e.start, next, "{} starts where the one before ends", e.name);
+                assert!(e.size > 0 && !e.value.is_empty());
+                next += e.size;
+            }
+            assert_eq!(next, env.obs_dim());
+            assert_eq!(layout.dim(), env.obs_dim());
+            assert_eq!(entries.len(), 5 + layout.obstacle_slots());
+            slots_seen.push(layout.obstacle_slots());
+            let (lo, hi) = layout.bounds(env.task(), env.chain());
+            let mut rng = Rng::new(9);
+            let mut action = vec![0.0f32; env.act_dim()];
+            for _ in 0..5 {
+                env.reset();
+                while !env.is_done() {
+                    for (i, x) in env.observation().iter().enumerate() {
+                        assert!(lo[i] <= *x && *x <= hi[i], "value {i} = {x} within [{}, {}]", lo[i], hi[i]);
+                    }
+                    action.iter_mut().for_each(|a| *a = rng.uniform_range(-1.0, 1.0) as f32);
+                    env.step(&action).unwrap();
+                }
+            }
+        }
+        assert_eq!(slots_seen, [0, 0, 1, 3, 4, 3, 0]);
     }
 
     #[test]

@@ -262,8 +262,11 @@ pub fn encode(
     for t in &inits {
         put_len_delimited(&mut graph, 5, t);
     }
-    let obs_doc = "standard observation: q / pi, end-effector position (m), target (m), k * (target - ee), k * |target - ee|";
-    put_len_delimited(&mut graph, 11, &value_info(INPUT, spec.observation.dim, obs_doc));
+    let mut obs_doc = "standard observation: q / pi, end-effector position (m), target (m), k * (target - ee), k * |target - ee|".to_string();
+    if let Some(o) = &spec.observation.obstacles {
+        obs_doc.push_str(&format!(", then {} obstacle slots of 7 values ({} encoding)", o.slots, o.encoding));
+    }
+    put_len_delimited(&mut graph, 11, &value_info(INPUT, spec.observation.dim, &obs_doc));
     let out_doc = "joint velocity command, rad/s (m/s for prismatic joints)";
     put_len_delimited(&mut graph, 12, &value_info(OUTPUT, spec.action.dim, out_doc));
     let mut model = Vec::new();

@@ -6,7 +6,9 @@
 //! 1. observation (f32, `observation.dim` values, in the order of `observation.layout`):
 //!    `q / pi` (one per joint, q in radians), the end-effector position (3, metres, base frame),
 //!    the target (3, metres), `obs_delta_scale * (target - end effector)` (3) and
-//!    `obs_delta_scale * |target - end effector|` (1); when `observation.normalization` is
+//!    `obs_delta_scale * |target - end effector|` (1), then, when the run observes obstacles,
+//!    7 values per obstacle slot (`obstacle_<i>`, computed as `observation.obstacles` says:
+//!    [`ObstacleSlotsSpec`]); when `observation.normalization` is
 //!    present (PPO with `norm_obs`), each value is then normalised in f32,
 //!    `x' = clip((x - mean) / std, -clip, clip)`, with the tensors it names (shape `[dim]`);
 //! 2. the actor: for each entry of `actor.layers` in order, `x <- f(W x + b)` with `W` the tensor
@@ -23,15 +25,17 @@ use serde::{Deserialize, Serialize};
 
 use crate::agent::{Agent, Algo};
 use crate::config::Config;
-use crate::env::{ObservationKind, ReachEnv};
+use crate::env::{empty_slot_distance, ObsEntry, ObservationLayout, ObstacleObservation, ReachEnv};
 use crate::nn::Activation;
 
 /// The checkpoint metadata key of the [`PolicySpec`].
 pub const POLICY_KEY: &str = "policy";
 
-/// The version of the [`PolicySpec`] format: 2 when the observation is normalised (a reader of
-/// format 1 would not know to), else 1.
-pub const POLICY_FORMAT_VERSION: u32 = 2;
+/// The newest version of the [`PolicySpec`] format. A spec is written with the oldest version
+/// whose readers can run it: 3 when the observation holds obstacle slots (`observation.obstacles`
+/// and the `obstacle_<i>` entries; specs written before version 3 left those values out of the
+/// layout), 2 when it is normalised (a reader of format 1 would not know to), else 1.
+pub const POLICY_FORMAT_VERSION: u32 = 3;
 
 /// A checkpoint's policy, described for running it anywhere (see the module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -56,11 +60,33 @@ pub struct ObservationSpec {
     pub dim: usize,
     /// The factor `k` of the scaled entries.
     pub obs_delta_scale: f64,
-    /// The entries in order.
+    /// The entries in order; their sizes sum to `dim`.
     pub layout: Vec<ObsEntry>,
+    /// The observed obstacles' slots (the `obstacle_<i>` entries), if any (format 3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obstacles: Option<ObstacleSlotsSpec>,
     /// The running normalisation the actor's input goes through, if any (format 2).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub normalization: Option<NormalizationSpec>,
+}
+
+/// How the `obstacle_<i>` entries are computed (each entry's `value` says it in words).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObstacleSlotsSpec {
+    /// Number of slots, 7 values each.
+    pub slots: usize,
+    /// `absolute`: slot `i` is obstacle `i` (fixed obstacles first, then random ones): centre (3,
+    /// m, base frame), half size along its axes (3, m; a sphere's radius three times), 1 for a
+    /// sphere else 0; all zeros without one. `nearest`: slot `i` is the `i+1`-th nearest obstacle
+    /// to the end effector by surface distance (ties by obstacle order), within `range_m` if set:
+    /// `obs_delta_scale` times (centre - end effector) (3), half size (3) and that distance (1);
+    /// without one, zeros and `empty_slot_distance`.
+    pub encoding: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range_m: Option<f64>,
+    /// The distance value of an empty `nearest` slot (f32 as written).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub empty_slot_distance: Option<f64>,
 }
 
 /// `x' = clip((x - mean) / std, -clip, clip)` per observation value, in f32.
@@ -73,18 +99,6 @@ pub struct NormalizationSpec {
     pub clip: f64,
     /// The rule in words.
     pub rule_text: String,
-}
-
-/// One block of the observation.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ObsEntry {
-    /// `q_over_pi`, `ee_pos`, `target`, `scaled_delta` or `scaled_distance`.
-    pub name: String,
-    /// Index of its first value.
-    pub start: usize,
-    pub size: usize,
-    /// What it holds, in words.
-    pub value: String,
 }
 
 /// The actor network: `x <- activation(W x + b)` per layer.
@@ -180,7 +194,11 @@ impl PolicySpec {
             ),
         });
         PolicySpec {
-            format_version: if observation.normalization.is_some() { POLICY_FORMAT_VERSION } else { 1 },
+            format_version: match (&observation.obstacles, &observation.normalization) {
+                (Some(_), _) => 3,
+                (None, Some(_)) => 2,
+                (None, None) => 1,
+            },
             algorithm: agent.algo().name().into(),
             robot: cfg.robot.urdf.clone(),
             tip_link: chain.tip_link().into(),
@@ -201,25 +219,23 @@ impl PolicySpec {
 }
 
 fn observation_spec(env: &ReachEnv) -> ObservationSpec {
-    let n = env.act_dim();
-    let k = env.task().obs_delta_scale;
-    let entries: [(&str, usize, String); 5] = match env.task().observation {
-        ObservationKind::Standard => [
-            ("q_over_pi", n, "joint positions (radians) divided by pi".into()),
-            ("ee_pos", 3, "end-effector position x, y, z, metres, base frame".into()),
-            ("target", 3, "target position x, y, z, metres, base frame".into()),
-            ("scaled_delta", 3, format!("{k} * (target - ee_pos), per axis")),
-            ("scaled_distance", 1, format!("{k} * |target - ee_pos| (Euclidean norm)")),
-        ],
-    };
-    let mut start = 0;
-    let layout = entries
-        .into_iter()
-        .map(|(name, size, value)| {
-            let e = ObsEntry { name: name.into(), start, size, value };
-            start += size;
-            e
-        })
-        .collect();
-    ObservationSpec { dim: env.obs_dim(), obs_delta_scale: k, layout, normalization: None }
+    let task = env.task();
+    let layout = ObservationLayout::of(task);
+    let obstacles = (layout.obstacle_slots() > 0).then(|| ObstacleSlotsSpec {
+        slots: layout.obstacle_slots(),
+        encoding: match task.obstacle_observation {
+            ObstacleObservation::Absolute => "absolute".into(),
+            ObstacleObservation::Nearest => "nearest".into(),
+        },
+        range_m: task.obstacle_range_m,
+        empty_slot_distance: (task.obstacle_observation == ObstacleObservation::Nearest)
+            .then(|| f64::from(empty_slot_distance(task, env.chain()))),
+    });
+    ObservationSpec {
+        dim: layout.dim(),
+        obs_delta_scale: task.obs_delta_scale,
+        layout: layout.entries(task, env.chain()),
+        obstacles,
+        normalization: None,
+    }
 }

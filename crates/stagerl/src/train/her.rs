@@ -11,7 +11,7 @@
 //!
 //! For the substituted goal everything that depends on the target is computed again, exactly as
 //! the environment computes it: the target entries of both observations
-//! ([`crate::env::write_target_entries`]), the reward with the run's reward function (any of the
+//! ([`crate::env::ObservationLayout::write_target_entries`]), the reward with the run's reward function (any of the
 //! five: each is a pure function of the step's end-effector pose, joint velocities and target,
 //! eqs. 1-15 and 18), the success bonus and the termination (`D_PT < beta` for `g`). The real
 //! transitions are stored as without HER, after every step, so that the updates of Algorithm 1
@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::agent::{HerConfig, HerStrategy};
 use crate::base::rng::Rng;
-use crate::env::{collision_outcome, write_target_entries, ResolvedTask, Transition};
+use crate::env::{ObservationLayout, ResolvedTask, Step, Transition};
 use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 
 /// The steps of the episode under way, as relabelling needs them: the observations and actions
@@ -158,6 +158,7 @@ impl Relabeller {
         let od = log.obs.len() / steps;
         let ad = log.action.len() / steps;
         let dof = log.joint_vel.len() / steps;
+        let layout = ObservationLayout::of(task);
         for t in 0..steps {
             for _ in 0..cfg.copies() {
                 let g = match cfg.strategy {
@@ -169,32 +170,27 @@ impl Relabeller {
                 let (before, after) = (log.ee_before(t), log.ee_after(t));
                 self.obs.clear();
                 self.obs.extend_from_slice(&log.obs[t * od..(t + 1) * od]);
-                write_target_entries(task, &mut self.obs, before, goal);
+                layout.write_target_entries(&mut self.obs, task.obs_delta_scale, before, goal);
                 self.next_obs.clear();
                 self.next_obs.extend_from_slice(&log.next_obs[t * od..(t + 1) * od]);
-                write_target_entries(task, &mut self.next_obs, after, goal);
+                layout.write_target_entries(&mut self.next_obs, task.obs_delta_scale, after, goal);
                 let q = &log.quat[4 * t..4 * t + 4];
-                let mut terms = RewardTerms::compute(
-                    reward,
-                    task.dt_s,
-                    &RewardInput {
-                        ee_pos: after,
-                        ee_quat: [q[0], q[1], q[2], q[3]],
-                        target: goal,
-                        joint_vel: &log.joint_vel[t * dof..(t + 1) * dof],
-                        prev_ee_pos: Some(before),
-                    },
-                );
-                let (ended_by_contact, penalty) = collision_outcome(task, reward, log.contact_after(t));
-                terms.total -= penalty;
+                let input = RewardInput {
+                    ee_pos: after,
+                    ee_quat: [q[0], q[1], q[2], q[3]],
+                    target: goal,
+                    joint_vel: &log.joint_vel[t * dof..(t + 1) * dof],
+                    prev_ee_pos: Some(before),
+                };
+                let step = Step::outcome(task, reward, &input, log.contact_after(t), t as u32 + 1);
                 sink(&Relabelled {
                     step: t,
                     goal,
                     obs: &self.obs,
                     action: &log.action[t * ad..(t + 1) * ad],
                     next_obs: &self.next_obs,
-                    terminal: terms.reached || ended_by_contact,
-                    terms,
+                    terminal: step.terminated,
+                    terms: step.terms,
                 });
             }
         }

@@ -9,10 +9,20 @@ use stagerl::agent::obs_norm::ObsNormConfig;
 use stagerl::agent::{Algo, PpoConfig};
 use stagerl::base::rng::Rng;
 use stagerl::config::Config;
-use stagerl::env::ReachEnv;
+use stagerl::env::{ObstacleObservation, RandomObstacles, ReachEnv};
 use stagerl::nalgebra::Vector3;
+use stagerl::sim::collision::{Obstacle, ObstacleShape};
 use std::collections::HashMap;
 use std::path::Path;
+
+/// An obstacle as the world shows it: centre and half size (m), shape, and the end effector's
+/// distance to its surface (m).
+struct Seen {
+    centre: [f64; 3],
+    half: [f64; 3],
+    sphere: bool,
+    distance: f64,
+}
 
 /// The policy of one checkpoint file, read without stagerl.
 struct Portable {
@@ -48,13 +58,55 @@ impl Portable {
         v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
     }
 
-    /// The observation from joint positions (rad), end effector and target (m), by the layout.
-    fn observation(&self, q: &[f64], ee: [f64; 3], target: [f64; 3]) -> Vec<f32> {
+    /// The obstacle slots' values, 7 per slot, by `observation.obstacles`, from each obstacle's
+    /// centre (m), half size (m), whether it is a sphere and the end effector's distance to its
+    /// surface (m), in the episode's order.
+    fn obstacle_slots(&self, obstacles: &[Seen], ee: [f64; 3]) -> Vec<Vec<f64>> {
+        let spec = &self.spec["observation"]["obstacles"];
+        let k = self.spec["observation"]["obs_delta_scale"].as_f64().unwrap();
+        let slots = spec["slots"].as_u64().unwrap() as usize;
+        match spec["encoding"].as_str().unwrap() {
+            "absolute" => (0..slots)
+                .map(|i| match obstacles.get(i) {
+                    Some(o) => {
+                        [o.centre.to_vec(), o.half.to_vec(), vec![f64::from(u8::from(o.sphere))]].concat()
+                    }
+                    None => vec![0.0; 7],
+                })
+                .collect(),
+            "nearest" => {
+                let range = spec["range_m"].as_f64().unwrap_or(f64::INFINITY);
+                let mut order: Vec<usize> =
+                    (0..obstacles.len()).filter(|&i| obstacles[i].distance <= range).collect();
+                order.sort_by(|&a, &b| {
+                    obstacles[a].distance.total_cmp(&obstacles[b].distance).then(a.cmp(&b))
+                });
+                let empty = spec["empty_slot_distance"].as_f64().unwrap();
+                (0..slots)
+                    .map(|i| match order.get(i).map(|&j| &obstacles[j]) {
+                        Some(o) => (0..3)
+                            .map(|a| k * (o.centre[a] - ee[a]))
+                            .chain(o.half.iter().map(|h| k * h))
+                            .chain([k * o.distance])
+                            .collect(),
+                        None => [vec![0.0; 6], vec![empty]].concat(),
+                    })
+                    .collect()
+            }
+            other => panic!("unknown obstacle encoding {other}"),
+        }
+    }
+
+    /// The observation from joint positions (rad), end effector and target (m) and the
+    /// obstacles, by the layout.
+    fn observation(&self, q: &[f64], ee: [f64; 3], target: [f64; 3], obstacles: &[Seen]) -> Vec<f32> {
         let obs = &self.spec["observation"];
         let k = obs["obs_delta_scale"].as_f64().unwrap();
         let mut out = vec![0.0f32; obs["dim"].as_u64().unwrap() as usize];
         let delta: Vec<f64> = (0..3).map(|i| (target[i] - ee[i]) * k).collect();
         let dist = delta.iter().map(|d| d * d).sum::<f64>().sqrt();
+        let slots = if obs["obstacles"].is_null() { Vec::new() } else { self.obstacle_slots(obstacles, ee) };
+        let mut size = 0;
         for entry in obs["layout"].as_array().unwrap() {
             let start = entry["start"].as_u64().unwrap() as usize;
             let values: Vec<f64> = match entry["name"].as_str().unwrap() {
@@ -63,13 +115,18 @@ impl Portable {
                 "target" => target.to_vec(),
                 "scaled_delta" => delta.clone(),
                 "scaled_distance" => vec![dist],
-                other => panic!("unknown observation entry {other}"),
+                other => match other.strip_prefix("obstacle_") {
+                    Some(i) => slots[i.parse::<usize>().unwrap()].clone(),
+                    None => panic!("unknown observation entry {other}"),
+                },
             };
+            size += values.len();
             assert_eq!(values.len() as u64, entry["size"].as_u64().unwrap());
             for (i, v) in values.into_iter().enumerate() {
                 out[start + i] = v as f32;
             }
         }
+        assert_eq!(size, out.len(), "the layout describes every value");
         out
     }
 
@@ -78,7 +135,10 @@ impl Portable {
         let mut x = obs.to_vec();
         let norm = &self.spec["observation"]["normalization"];
         if !norm.is_null() {
-            assert_eq!(self.spec["format_version"], 2, "a normalised observation is format 2");
+            assert!(
+                self.spec["format_version"].as_u64() >= Some(2),
+                "a normalised observation is format 2 or later"
+            );
             let (_, mean) = &self.tensors[norm["mean"].as_str().unwrap()];
             let (_, std) = &self.tensors[norm["std"].as_str().unwrap()];
             let c = norm["clip"].as_f64().unwrap() as f32;
@@ -122,8 +182,16 @@ impl Portable {
     }
 }
 
-fn small_run(dir: &Path, algo: Algo, norm_obs: bool) -> Config {
+fn small_run(dir: &Path, algo: Algo, norm_obs: bool, obstacles: Option<ObstacleObservation>) -> Config {
     let mut cfg = Config::default();
+    if let Some(encoding) = obstacles {
+        // A fixed sphere and 1-3 random obstacles, observed; "nearest" within 30 cm.
+        cfg.task.obstacles = vec![Obstacle::sphere(0.05, [0.0, 0.6, 0.3])];
+        cfg.task.random_obstacles = Some(RandomObstacles { count: [1, 3], ..RandomObstacles::default() });
+        cfg.task.observe_obstacles = true;
+        cfg.task.obstacle_observation = encoding;
+        cfg.task.obstacle_range_m = (encoding == ObstacleObservation::Nearest).then_some(0.3);
+    }
     cfg.agent.algo = algo;
     cfg.agent.hidden = vec![24, 16];
     cfg.agent.batch_size = 16;
@@ -149,16 +217,27 @@ fn small_run(dir: &Path, algo: Algo, norm_obs: bool) -> Config {
 #[test]
 fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
     let root = std::env::temp_dir().join(format!("stagerl-portable-{}", std::process::id()));
-    let variants = Algo::ALL.into_iter().map(|a| (a, false)).chain([(Algo::Ppo, true)]);
-    for (algo, norm_obs) in variants {
-        let dir = root.join(format!("{algo}-{norm_obs}"));
-        let cfg = small_run(&dir, algo, norm_obs);
+    let variants = Algo::ALL.into_iter().map(|a| (a, false, None)).chain([
+        (Algo::Ppo, true, None),
+        (Algo::Sac, false, Some(ObstacleObservation::Nearest)),
+        (Algo::Td3, false, Some(ObstacleObservation::Absolute)),
+        (Algo::Ppo, true, Some(ObstacleObservation::Nearest)),
+    ]);
+    for (algo, norm_obs, obstacles) in variants {
+        let dir = root.join(format!("{algo}-{norm_obs}-{obstacles:?}"));
+        let cfg = small_run(&dir, algo, norm_obs, obstacles);
         for kind in ["latest", "final", "best"] {
             let path = dir.join("checkpoints").join(format!("{kind}.safetensors"));
             let p = Portable::load(&path);
             assert_eq!(p.spec["algorithm"], algo.name());
             assert_eq!(p.spec["observation"]["normalization"].is_null(), !norm_obs);
-            assert_eq!(p.spec["format_version"], if norm_obs { 2 } else { 1 });
+            let version = match (obstacles, norm_obs) {
+                (Some(_), _) => 3,
+                (None, true) => 2,
+                (None, false) => 1,
+            };
+            assert_eq!(p.spec["format_version"], version);
+            assert_eq!(p.spec["observation"]["obstacles"].is_null(), obstacles.is_none());
             let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
             let mut agent = stagerl::train::load_agent(&cfg, &env, &path).unwrap();
             let (lo, hi) = (p.floats(&["action", "lower_limits"]), p.floats(&["action", "upper_limits"]));
@@ -173,7 +252,17 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
                     [rng.uniform_range(-0.8, 0.8), rng.uniform_range(-0.8, 0.8), rng.uniform_range(0.0, 0.9)];
                 env.reset_to(&q, Vector3::from(t)).unwrap();
                 let ee = env.ee_pose().position;
-                let obs = p.observation(&q, [ee.x, ee.y, ee.z], t);
+                let seen: Vec<Seen> = env
+                    .obstacles()
+                    .iter()
+                    .map(|o| Seen {
+                        centre: o.position_m,
+                        half: o.half_size_m(),
+                        sphere: o.shape == ObstacleShape::Sphere,
+                        distance: o.distance_to_point_m([ee.x, ee.y, ee.z]),
+                    })
+                    .collect();
+                let obs = p.observation(&q, [ee.x, ee.y, ee.z], t, &seen);
                 assert_eq!(obs, env.observation(), "observation of trial {trial}");
                 // Step 4 clips the action to [-1, 1] (PPO's mean can leave it; a tanh output cannot).
                 let mine: Vec<f32> = p.action(&obs).iter().map(|a| a.clamp(-1.0, 1.0)).collect();
