@@ -26,8 +26,8 @@ use std::sync::Arc;
 use crate::base::rng::Rng;
 use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::robot::{Chain, Pose};
-use crate::sim::collision::{ArmCollider, CollisionKind, Contact};
-use crate::sim::physics::DynamicArm;
+use crate::sim::arm::Arm;
+use crate::sim::collision::{CollisionKind, Contact};
 use crate::{Error, Result};
 pub use task::{
     ObservationKind, ObstacleObservation, OnCollision, RandomObstacles, ResolvedTask, Sim, TaskConfig,
@@ -189,9 +189,8 @@ pub struct ReachEnv {
     obs: Vec<f32>,
     /// Where each entry of `obs` is.
     layout: ObservationLayout,
-    /// The collision checker, when the arm has collision shapes.
-    collider: Option<ArmCollider>,
-    contact: Option<Contact>,
+    /// The simulated arm in its scene (kinematic or dynamic, with its collision checks).
+    arm: Arm,
     /// The episode's obstacles: the fixed ones, then the random ones.
     obstacles: Vec<crate::sim::collision::Obstacle>,
     /// `task.obstacle_observation = "nearest"`: (distance from the end effector, index) per
@@ -199,8 +198,6 @@ pub struct ReachEnv {
     nearest: Vec<(f64, usize)>,
     /// The largest value of a "nearest" slot's distance entry (an empty slot's).
     far_obs: f32,
-    /// The rigid-body simulation (`task.sim = "dynamic"`), boxed: it is large.
-    physics: Option<Box<DynamicArm>>,
     /// The probability that an episode's first random obstacle is placed in the way
     /// ([`ReachEnv::set_obstacles_in_path`]; 0 unless set).
     obstacles_in_path: f64,
@@ -235,32 +232,13 @@ impl ReachEnv {
         obstacles.extend(task.obstacles.iter().cloned());
         let q = task.home_pose.clone();
         let ee = chain.fk(&q);
-        let collider = (!chain.collision_shapes().is_empty()).then(|| {
-            let mut c = ArmCollider::new(&chain, task.collision);
-            c.set_obstacles(&task.obstacles);
-            c
-        });
-        let physics = match task.sim {
-            Sim::Kinematic => None,
-            Sim::Dynamic => {
-                let arm = DynamicArm::new(
-                    chain.urdf_source(),
-                    &chain,
-                    task.dt_s,
-                    &obstacles,
-                    task.collision.floor,
-                )?;
-                Some(Box::new(arm))
-            }
-        };
+        let arm = Arm::new(&chain, task.sim == Sim::Dynamic, task.dt_s, &obstacles, task.collision)?;
         let far_obs = empty_slot_distance(&task, &chain);
         let mut env = ReachEnv {
-            collider,
-            contact: None,
+            arm,
             nearest: Vec::with_capacity(task.max_obstacles()),
             far_obs,
             obstacles,
-            physics,
             obstacles_in_path: 0.0,
             chain,
             rng: Rng::new(seed),
@@ -326,30 +304,23 @@ impl ReachEnv {
 
     fn begin_episode(&mut self) -> &[f32] {
         if self.task.random_obstacles.is_some() {
-            let collider = self.collider.as_mut();
             self.task.place_obstacles(
                 &self.chain,
-                collider,
+                self.arm.collider_mut(),
                 &self.q,
                 self.target,
                 self.obstacles_in_path,
                 &mut self.rng,
                 &mut self.obstacles,
             );
-            if let Some(c) = &mut self.collider {
-                c.set_obstacles(&self.obstacles);
-            }
-            if let Some(p) = &mut self.physics {
-                p.set_obstacles(&self.obstacles);
-            }
+            self.arm.set_obstacles(&self.obstacles);
         }
         self.joint_vel.fill(0.0);
-        if let Some(p) = &mut self.physics {
-            // The start pose was checked against the limits; at rest.
-            p.set_state(&self.q, &self.joint_vel).expect("a checked start pose is a valid state");
-        }
+        // The start pose was checked against the limits; at rest.
+        self.arm
+            .set_state(&self.chain, &self.q, &self.joint_vel)
+            .expect("a checked start pose is a valid state");
         self.ee = self.chain.fk(&self.q);
-        self.check_contact();
         self.steps = 0;
         self.collision_steps = 0;
         self.done = false;
@@ -374,56 +345,22 @@ impl ReachEnv {
         if self.done {
             return Err(Error::InvalidInput("the episode is over: call reset() before step()".into()));
         }
-        let dt = self.task.dt_s;
-        let (lo, hi, vmax) =
-            (self.chain.lower_limits(), self.chain.upper_limits(), self.chain.velocity_limits());
         let prev_ee = self.ee.position;
-        match &mut self.physics {
-            None => {
-                for i in 0..n {
-                    let command = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
-                    let q_old = self.q[i];
-                    let q_new = (q_old + command * dt).clamp(lo[i], hi[i]);
-                    self.joint_vel[i] = (q_new - q_old) / dt;
-                    self.q[i] = q_new;
-                }
-            }
-            Some(p) => {
-                // The command goes to the joints' motors; the velocity that counts is the one
-                // the simulated arm achieved over the step.
-                for i in 0..n {
-                    self.scratch[i] = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
-                }
-                p.step(&self.scratch);
-                p.joint_positions(&mut self.scratch);
-                if let Some(i) = self.scratch.iter().position(|x| !x.is_finite()) {
-                    self.done = true;
-                    return Err(Error::NumericalFault(format!(
-                        "the dynamic simulation gave joint {i} the position {} at step {} of the \
-                         episode; the episode is over",
-                        self.scratch[i],
-                        self.steps + 1
-                    )));
-                }
-                let mut clamped = false;
-                for i in 0..n {
-                    let (q_old, q_new) = (self.q[i], self.scratch[i].clamp(lo[i], hi[i]));
-                    clamped |= q_new != self.scratch[i];
-                    self.joint_vel[i] = (q_new - q_old) / dt;
-                    self.q[i] = q_new;
-                }
-                if clamped {
-                    // A joint a hair past its limit (f32): the simulation continues from the
-                    // clamped pose, as a restored state would.
-                    p.joint_velocities(&mut self.scratch);
-                    p.set_state(&self.q, &self.scratch).expect("clamped joint positions are a valid state");
-                }
-            }
+        let stepped = self.arm.step(
+            &self.chain,
+            action,
+            self.task.dt_s,
+            self.steps + 1,
+            &mut self.q,
+            &mut self.joint_vel,
+        );
+        if let Err(e) = stepped {
+            self.done = true;
+            return Err(e);
         }
         self.ee = self.chain.fk(&self.q);
-        self.check_contact();
         self.steps += 1;
-        self.collision_steps += u32::from(self.contact.is_some());
+        self.collision_steps += u32::from(self.arm.contact().is_some());
         let input = RewardInput {
             ee_pos: self.ee.position,
             ee_quat: self.ee.quaternion_xyzw(),
@@ -431,16 +368,12 @@ impl ReachEnv {
             joint_vel: &self.joint_vel,
             prev_ee_pos: Some(prev_ee),
         };
-        let mut step = Step::outcome(&self.task, &self.reward, &input, self.contact.is_some(), self.steps);
-        step.collision = self.contact.map(|c| c.kind());
+        let contact = self.arm.contact();
+        let mut step = Step::outcome(&self.task, &self.reward, &input, contact.is_some(), self.steps);
+        step.collision = contact.map(|c| c.kind());
         self.done = step.done();
         self.write_observation();
         Ok(step)
-    }
-
-    /// Look for the arm's contacts at its current joint positions ([`ReachEnv::contact`]).
-    fn check_contact(&mut self) {
-        self.contact = self.collider.as_mut().and_then(|c| c.check(&self.chain, &self.q));
     }
 
     fn write_observation(&mut self) {
@@ -513,7 +446,7 @@ impl ReachEnv {
     /// What the arm touches at its current joint positions (checked at every reset and step),
     /// if anything; [`Contact::describe`] names the links.
     pub fn contact(&self) -> Option<Contact> {
-        self.contact
+        self.arm.contact()
     }
 
     /// The current observation.
@@ -596,11 +529,7 @@ impl ReachEnv {
             done: self.done,
             collision_steps: self.collision_steps,
             random_obstacles: self.obstacles[self.task.obstacles.len()..].to_vec(),
-            sim_velocities: self.physics.as_ref().map_or_else(Vec::new, |p| {
-                let mut v = vec![0.0; self.q.len()];
-                p.joint_velocities(&mut v);
-                v
-            }),
+            sim_velocities: self.arm.sim_velocities(),
         }
     }
 
@@ -643,16 +572,10 @@ impl ReachEnv {
         self.collision_steps = s.collision_steps;
         self.obstacles.truncate(self.task.obstacles.len());
         self.obstacles.extend(s.random_obstacles.iter().cloned());
-        if let Some(c) = &mut self.collider {
-            c.set_obstacles(&self.obstacles);
-        }
-        if let Some(p) = &mut self.physics {
-            p.set_obstacles(&self.obstacles);
-            let v = if s.sim_velocities.is_empty() { &s.joint_vel } else { &s.sim_velocities };
-            p.set_state(&self.q, v)?;
-        }
+        self.arm.set_obstacles(&self.obstacles);
+        let v = if s.sim_velocities.is_empty() { &s.joint_vel } else { &s.sim_velocities };
+        self.arm.set_state(&self.chain, &self.q, v)?;
         self.ee = self.chain.fk(&self.q);
-        self.check_contact();
         self.write_observation();
         Ok(())
     }
@@ -1097,7 +1020,8 @@ pub(crate) mod tests {
             ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed)
                 .unwrap()
         };
-        let mut checker = ArmCollider::new(&chain, crate::sim::collision::Checks::default());
+        let mut checker =
+            crate::sim::collision::ArmCollider::new(&chain, crate::sim::collision::Checks::default());
         let mut blocked_share = |fraction: f64| {
             let mut e = env(11);
             e.set_obstacles_in_path(fraction).unwrap();
@@ -1165,7 +1089,8 @@ pub(crate) mod tests {
     fn random_obstacles_are_placed_clear_of_the_start_and_the_target() {
         let mut env = random_obstacles_env(4, true);
         assert_eq!(env.obs_dim(), 16 + 7 * (1 + 5));
-        let mut checker = ArmCollider::new(env.chain(), crate::sim::collision::Checks::default());
+        let mut checker =
+            crate::sim::collision::ArmCollider::new(env.chain(), crate::sim::collision::Checks::default());
         let (mut counts, mut hit) = (std::collections::BTreeSet::new(), 0);
         for _ in 0..200 {
             env.reset();
