@@ -30,9 +30,8 @@ use crate::sim::arm::Arm;
 use crate::sim::collision::{CollisionKind, Contact};
 use crate::{Error, Result};
 pub use task::{
-    ObservationKind, ObstacleObservation, OnCollision, RandomObstacles, ResolvedTask, Sim, TaskConfig,
-    DEFAULT_TARGET_JOINT_RANGE_RAD, MAX_OBSTACLES, MAX_OBS_DELTA_SCALE, MAX_RANDOM_OBSTACLES,
-    OBSTACLE_OBS_LEN, PLACEMENT_TRIES, UR5_HOME_POSE_RAD,
+    ObservationKind, ObstacleObservation, OnCollision, ResolvedTask, Sim, TaskConfig,
+    DEFAULT_TARGET_JOINT_RANGE_RAD, MAX_OBS_DELTA_SCALE, OBSTACLE_OBS_LEN, UR5_HOME_POSE_RAD,
 };
 
 /// The outcome of one step.
@@ -163,7 +162,7 @@ pub struct EnvState {
     pub collision_steps: u32,
     /// The episode's random obstacles (`[task.random_obstacles]`), after the fixed ones.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub random_obstacles: Vec<crate::sim::collision::Obstacle>,
+    pub random_obstacles: Vec<crate::sim::scene::Obstacle>,
     /// With `task.sim = "dynamic"`: the joints' instantaneous velocities (rad/s), which with
     /// `q` are the simulation's state.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -192,7 +191,7 @@ pub struct ReachEnv {
     /// The simulated arm in its scene (kinematic or dynamic, with its collision checks).
     arm: Arm,
     /// The episode's obstacles: the fixed ones, then the random ones.
-    obstacles: Vec<crate::sim::collision::Obstacle>,
+    obstacles: Vec<crate::sim::scene::Obstacle>,
     /// `task.obstacle_observation = "nearest"`: (distance from the end effector, index) per
     /// obstacle, sorted for the observation's slots (scratch of capacity `max_obstacles`).
     nearest: Vec<(f64, usize)>,
@@ -404,7 +403,7 @@ impl ReachEnv {
                 slot[k] = p[k] as f32;
                 slot[3 + k] = h[k] as f32;
             }
-            slot[6] = f32::from(u8::from(o.shape == crate::sim::collision::ObstacleShape::Sphere));
+            slot[6] = f32::from(u8::from(o.shape == crate::sim::scene::ObstacleShape::Sphere));
         }
     }
 
@@ -439,7 +438,7 @@ impl ReachEnv {
     }
 
     /// The obstacles of this episode: the fixed ones, then the random ones.
-    pub fn obstacles(&self) -> &[crate::sim::collision::Obstacle] {
+    pub fn obstacles(&self) -> &[crate::sim::scene::Obstacle] {
         &self.obstacles
     }
 
@@ -647,8 +646,8 @@ pub(crate) mod tests {
     #[test]
     fn the_layout_describes_every_value_of_every_observation_option() {
         let chain = Arc::new(Chain::ur5());
-        let random = || Some(task::RandomObstacles { count: [1, 3], ..Default::default() });
-        let fixed = vec![crate::sim::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])];
+        let random = || Some(crate::sim::scene::RandomObstacles { count: [1, 3], ..Default::default() });
+        let fixed = vec![crate::sim::scene::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])];
         let nearest = ObstacleObservation::Nearest;
         let options = [
             TaskConfig::default(),
@@ -852,14 +851,14 @@ pub(crate) mod tests {
     }
 
     fn panda_env(
-        obstacles: Vec<crate::sim::collision::Obstacle>,
+        obstacles: Vec<crate::sim::scene::Obstacle>,
         checks: Option<crate::sim::collision::Checks>,
     ) -> ReachEnv {
         panda_env_with(obstacles, checks, OnCollision::Record, None)
     }
 
     fn panda_env_with(
-        obstacles: Vec<crate::sim::collision::Obstacle>,
+        obstacles: Vec<crate::sim::scene::Obstacle>,
         checks: Option<crate::sim::collision::Checks>,
         on_collision: OnCollision,
         collision_penalty: Option<f64>,
@@ -887,7 +886,8 @@ pub(crate) mod tests {
     /// change nothing else: with the checks off, the same steps give the same bits.
     #[test]
     fn collisions_are_recorded_and_change_nothing_else() {
-        use crate::sim::collision::{Checks, CollisionKind, Contact, Obstacle};
+        use crate::sim::collision::{Checks, CollisionKind, Contact};
+        use crate::sim::scene::Obstacle;
         let mut env = panda_env(Vec::new(), None);
         env.reset();
         assert_eq!(env.contact(), None, "the home pose is clear");
@@ -997,8 +997,11 @@ pub(crate) mod tests {
     fn random_obstacles_env(seed: u64, observe: bool) -> ReachEnv {
         let chain = Arc::new(Chain::ur5());
         let task = TaskConfig {
-            obstacles: vec![crate::sim::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
-            random_obstacles: Some(task::RandomObstacles { count: [2, 5], ..Default::default() }),
+            obstacles: vec![crate::sim::scene::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
+            random_obstacles: Some(crate::sim::scene::RandomObstacles {
+                count: [2, 5],
+                ..Default::default()
+            }),
             observe_obstacles: observe,
             ..TaskConfig::default()
         };
@@ -1013,7 +1016,10 @@ pub(crate) mod tests {
     fn obstacles_in_path_stand_in_the_way() {
         let chain = Arc::new(Chain::ur5());
         let task = TaskConfig {
-            random_obstacles: Some(task::RandomObstacles { count: [1, 1], ..Default::default() }),
+            random_obstacles: Some(crate::sim::scene::RandomObstacles {
+                count: [1, 1],
+                ..Default::default()
+            }),
             ..TaskConfig::default()
         };
         let env = |seed| {
@@ -1053,7 +1059,10 @@ pub(crate) mod tests {
         }
         // Placed in the way from a side stream: the same targets and the same later obstacles.
         let two = TaskConfig {
-            random_obstacles: Some(task::RandomObstacles { count: [2, 2], ..Default::default() }),
+            random_obstacles: Some(crate::sim::scene::RandomObstacles {
+                count: [2, 2],
+                ..Default::default()
+            }),
             ..TaskConfig::default()
         };
         let env2 = || {
@@ -1156,8 +1165,11 @@ pub(crate) mod tests {
         let chain = Arc::new(Chain::ur5());
         let make = |encoding| {
             let task = TaskConfig {
-                obstacles: vec![crate::sim::collision::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
-                random_obstacles: Some(task::RandomObstacles { count: [1, 3], ..Default::default() }),
+                obstacles: vec![crate::sim::scene::Obstacle::sphere(0.05, [0.0, 0.6, 0.3])],
+                random_obstacles: Some(crate::sim::scene::RandomObstacles {
+                    count: [1, 3],
+                    ..Default::default()
+                }),
                 observe_obstacles: true,
                 obstacle_observation: encoding,
                 ..TaskConfig::default()
@@ -1223,7 +1235,10 @@ pub(crate) mod tests {
         let chain = Arc::new(Chain::ur5());
         let make = |range| {
             let task = TaskConfig {
-                random_obstacles: Some(task::RandomObstacles { count: [1, 3], ..Default::default() }),
+                random_obstacles: Some(crate::sim::scene::RandomObstacles {
+                    count: [1, 3],
+                    ..Default::default()
+                }),
                 observe_obstacles: true,
                 obstacle_observation: ObstacleObservation::Nearest,
                 obstacle_range_m: range,
@@ -1261,7 +1276,7 @@ pub(crate) mod tests {
         assert!(kept > 0 && dropped > 0, "{kept} obstacle slots kept, {dropped} dropped");
         let check = |t: TaskConfig| t.validate().unwrap_err().to_string();
         let near = || TaskConfig {
-            random_obstacles: Some(task::RandomObstacles::default()),
+            random_obstacles: Some(crate::sim::scene::RandomObstacles::default()),
             observe_obstacles: true,
             obstacle_observation: ObstacleObservation::Nearest,
             ..TaskConfig::default()
@@ -1280,24 +1295,24 @@ pub(crate) mod tests {
 
     #[test]
     fn random_obstacle_settings_are_checked() {
-        let bad = |r: task::RandomObstacles, field: &str| {
+        let bad = |r: crate::sim::scene::RandomObstacles, field: &str| {
             let t = TaskConfig { random_obstacles: Some(r), ..TaskConfig::default() };
             let e = t.validate().unwrap_err().to_string();
             assert!(e.contains(field), "{e}");
         };
-        let d = task::RandomObstacles::default;
-        bad(task::RandomObstacles { count: [3, 2], ..d() }, "task.random_obstacles.count");
-        bad(task::RandomObstacles { count: [0, 33], ..d() }, "task.random_obstacles.count");
-        bad(task::RandomObstacles { shapes: Vec::new(), ..d() }, "task.random_obstacles.shapes");
-        bad(task::RandomObstacles { size_m: [0.0, 0.1], ..d() }, "task.random_obstacles.size_m");
-        bad(task::RandomObstacles { size_m: [0.2, 0.1], ..d() }, "task.random_obstacles.size_m");
-        bad(task::RandomObstacles { region_min_m: [1.0, 0.0, 0.0], ..d() }, "region_min_m");
-        bad(task::RandomObstacles { target_clearance_m: f64::NAN, ..d() }, "target_clearance_m");
+        let d = crate::sim::scene::RandomObstacles::default;
+        bad(crate::sim::scene::RandomObstacles { count: [3, 2], ..d() }, "task.random_obstacles.count");
+        bad(crate::sim::scene::RandomObstacles { count: [0, 33], ..d() }, "task.random_obstacles.count");
+        bad(crate::sim::scene::RandomObstacles { shapes: Vec::new(), ..d() }, "task.random_obstacles.shapes");
+        bad(crate::sim::scene::RandomObstacles { size_m: [0.0, 0.1], ..d() }, "task.random_obstacles.size_m");
+        bad(crate::sim::scene::RandomObstacles { size_m: [0.2, 0.1], ..d() }, "task.random_obstacles.size_m");
+        bad(crate::sim::scene::RandomObstacles { region_min_m: [1.0, 0.0, 0.0], ..d() }, "region_min_m");
+        bad(crate::sim::scene::RandomObstacles { target_clearance_m: f64::NAN, ..d() }, "target_clearance_m");
         let e = TaskConfig { observe_obstacles: true, ..TaskConfig::default() }.validate().unwrap_err();
         assert!(e.to_string().contains("task.observe_obstacles"), "{e}");
     }
 
-    fn dynamic_env(seed: u64, obstacles: Vec<crate::sim::collision::Obstacle>) -> ReachEnv {
+    fn dynamic_env(seed: u64, obstacles: Vec<crate::sim::scene::Obstacle>) -> ReachEnv {
         let chain = Arc::new(Chain::ur5());
         let task = TaskConfig { sim: Sim::Dynamic, obstacles, ..TaskConfig::default() };
         ReachEnv::new(chain.clone(), task.resolve(&chain).unwrap(), RewardConfig::default(), seed).unwrap()
@@ -1356,7 +1371,7 @@ pub(crate) mod tests {
         let home = chain.fk(&task::UR5_HOME_POSE_RAD).position;
         // A box in the way of the base's turn.
         let wall =
-            crate::sim::collision::Obstacle::cuboid([0.05, 0.3, 0.3], [home.x, home.y + 0.25, home.z], None);
+            crate::sim::scene::Obstacle::cuboid([0.05, 0.3, 0.3], [home.x, home.y + 0.25, home.z], None);
         let mut a = dynamic_env(3, vec![wall.clone()]);
         a.reset();
         let push = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0];

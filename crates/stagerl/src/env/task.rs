@@ -7,7 +7,8 @@ use std::f64::consts::FRAC_PI_2;
 
 use crate::base::rng::Rng;
 use crate::robot::{Chain, JointKind};
-use crate::sim::collision::{ArmCollider, Checks, Obstacle, ObstacleShape};
+use crate::sim::collision::{ArmCollider, Checks};
+use crate::sim::scene::{place_obstacles, Obstacle, Placement, RandomObstacles, MAX_OBSTACLES};
 use crate::{Error, Result};
 
 /// What the policy observes.
@@ -132,134 +133,6 @@ fn is_false(b: &bool) -> bool {
 /// Values per obstacle slot of the observation (`task.observe_obstacles`).
 pub const OBSTACLE_OBS_LEN: usize = 7;
 
-/// Most random obstacles per episode.
-pub const MAX_RANDOM_OBSTACLES: u32 = 32;
-
-/// `[task.random_obstacles]`: how many obstacles each episode gets, their shapes, sizes and
-/// region. A candidate is drawn again (up to [`PLACEMENT_TRIES`] times, then the obstacle is left
-/// out of that episode) while it touches the arm at the episode's start pose or comes closer to
-/// the target than `target_clearance_m`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RandomObstacles {
-    /// Obstacles per episode, an integer drawn uniformly from `[count[0], count[1]]`.
-    pub count: [u32; 2],
-    /// The shapes drawn from, uniformly (`"sphere"`, `"cuboid"`).
-    pub shapes: Vec<ObstacleShape>,
-    /// A sphere's radius, or each half extent of an (axis-aligned) box, uniform in this range,
-    /// metres.
-    pub size_m: [f64; 2],
-    /// Centres are uniform in the box from `region_min_m` to `region_max_m` (base frame, metres).
-    pub region_min_m: [f64; 3],
-    pub region_max_m: [f64; 3],
-    /// Least distance from the target to an obstacle's surface, metres.
-    pub target_clearance_m: f64,
-}
-
-/// Candidates drawn for one random obstacle before it is left out of the episode.
-pub const PLACEMENT_TRIES: u32 = 100;
-
-/// The index of the side stream of the obstacles placed in the way ([`Rng::derived`]).
-const IN_PATH_STREAM: u64 = 0x0B57_AC1E;
-
-impl Default for RandomObstacles {
-    fn default() -> Self {
-        RandomObstacles {
-            count: [1, 3],
-            shapes: vec![ObstacleShape::Sphere, ObstacleShape::Cuboid],
-            size_m: [0.04, 0.1],
-            region_min_m: [-0.6, -0.6, 0.0],
-            region_max_m: [0.6, 0.6, 0.7],
-            target_clearance_m: 0.05,
-        }
-    }
-}
-
-impl RandomObstacles {
-    fn validate(&self) -> Result<()> {
-        let f = "task.random_obstacles";
-        let [lo, hi] = self.count;
-        if lo > hi || hi > MAX_RANDOM_OBSTACLES {
-            return Err(Error::config(
-                format!("{f}.count"),
-                format!("{:?}", self.count),
-                format!("[min, max] with min <= max <= {MAX_RANDOM_OBSTACLES}"),
-            ));
-        }
-        if self.shapes.is_empty() {
-            return Err(Error::config(format!("{f}.shapes"), "[]", "one or more of \"sphere\", \"cuboid\""));
-        }
-        let [a, b] = self.size_m;
-        if !(a.is_finite() && b.is_finite() && a > 0.0 && a <= b && b <= 10.0) {
-            return Err(Error::config(
-                format!("{f}.size_m"),
-                format!("{:?}", self.size_m),
-                "[min, max] metres with 0 < min <= max <= 10",
-            ));
-        }
-        let (lo, hi) = (self.region_min_m, self.region_max_m);
-        let ok = (0..3).all(|k| {
-            lo[k].is_finite()
-                && hi[k].is_finite()
-                && lo[k] <= hi[k]
-                && hi[k].abs() <= 100.0
-                && lo[k].abs() <= 100.0
-        });
-        if !ok {
-            return Err(Error::config(
-                format!("{f}.region_min_m/region_max_m"),
-                format!("{lo:?} / {hi:?}"),
-                "finite corners within +-100 metres, each min <= its max",
-            ));
-        }
-        if !(self.target_clearance_m.is_finite() && self.target_clearance_m >= 0.0) {
-            return Err(Error::config(
-                format!("{f}.target_clearance_m"),
-                self.target_clearance_m,
-                "a finite number of metres >= 0",
-            ));
-        }
-        Ok(())
-    }
-
-    /// One candidate obstacle from `rng`: its shape and size, then its centre uniform in the
-    /// region.
-    fn draw(&self, rng: &mut Rng) -> Obstacle {
-        let mut o = self.draw_body(rng);
-        let (lo, hi) = (self.region_min_m, self.region_max_m);
-        o.position_m = [0, 1, 2].map(|k| rng.uniform_range(lo[k], hi[k]));
-        o
-    }
-
-    /// One candidate obstacle in the way from `from` to `to` (metres, base frame): its shape and
-    /// size as [`RandomObstacles::draw`], its centre on the segment at a uniform fraction in
-    /// [1/4, 3/4] of its length, then moved along each axis by up to its radius (largest half
-    /// extent), so that it stands across the straight line or touches it; then clamped to the
-    /// region, which bounds every random obstacle's centre (and the observation's entries).
-    fn draw_in_path(&self, rng: &mut Rng, from: [f64; 3], to: [f64; 3]) -> Obstacle {
-        let mut o = self.draw_body(rng);
-        let reach = o.half_size_m().into_iter().fold(0.0, f64::max);
-        let u = rng.uniform_range(0.25, 0.75);
-        let (lo, hi) = (self.region_min_m, self.region_max_m);
-        o.position_m = [0, 1, 2].map(|k| {
-            (from[k] + u * (to[k] - from[k]) + rng.uniform_range(-reach, reach)).clamp(lo[k], hi[k])
-        });
-        o
-    }
-
-    /// A candidate's shape and size, at the origin.
-    fn draw_body(&self, rng: &mut Rng) -> Obstacle {
-        let shape = self.shapes[rng.below(self.shapes.len() as u64) as usize];
-        let [a, b] = self.size_m;
-        let mut size = || rng.uniform_range(a, b);
-        let (radius, half) = match shape {
-            ObstacleShape::Sphere => (Some(size()), None),
-            ObstacleShape::Cuboid => (None, Some([size(), size(), size()])),
-        };
-        Obstacle { shape, half_extents_m: half, radius_m: radius, position_m: [0.0; 3], rotation_xyzw: None }
-    }
-}
-
 /// `task.obstacle_observation`: the 7 values of an observed obstacle's slot.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -324,9 +197,6 @@ impl Default for TaskConfig {
         }
     }
 }
-
-/// Most `[[task.obstacles]]`.
-pub const MAX_OBSTACLES: usize = 256;
 
 /// The UR5 home pose of the design notes, radians.
 pub const UR5_HOME_POSE_RAD: [f64; 6] = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0];
@@ -552,17 +422,9 @@ impl ResolvedTask {
         self.obstacles.len() + self.random_obstacles.as_ref().map_or(0, |r| r.count[1] as usize)
     }
 
-    /// Draw the episode's random obstacles after the fixed ones into `out` (cleared first, fixed
-    /// ones copied): each clear of the arm at `q` (the start pose) and of `target` by the
-    /// clearance; a placement that fails [`PLACEMENT_TRIES`] times is left out.
-    ///
-    /// With `in_path > 0` (a probability; `train.obstacles_in_path`), the first random obstacle
-    /// is, with that probability, one drawn in the way from the start pose's end effector to the
-    /// target instead ([`RandomObstacles::draw_in_path`]; the region's if none fits in
-    /// [`PLACEMENT_TRIES`] tries). Those draws come from a side stream seeded by the next value
-    /// of `rng`, which they leave where it would be without them: the episode's other obstacles
-    /// and the following targets are those of `in_path = 0`. No allocation once `out` has the
-    /// capacity of [`ResolvedTask::max_obstacles`].
+    /// Draw the episode's obstacles into `out` ([`place_obstacles`]: the fixed ones, then the
+    /// random ones clear of the arm at `q` and of `target`, the first in the way with
+    /// probability `in_path`).
     #[allow(clippy::too_many_arguments)]
     pub fn place_obstacles(
         &self,
@@ -574,29 +436,8 @@ impl ResolvedTask {
         rng: &mut Rng,
         out: &mut Vec<Obstacle>,
     ) {
-        out.clear();
-        out.extend(self.obstacles.iter().cloned());
-        let Some(r) = &self.random_obstacles else { return };
-        let n = r.count[0] + rng.below(u64::from(r.count[1] - r.count[0]) + 1) as u32;
-        let mut side = (in_path > 0.0).then(|| Rng::derived(rng.clone().next_u64(), IN_PATH_STREAM));
-        let mut collider = collider;
-        let mut fits = |o: &Obstacle| {
-            o.distance_to_point_m(target.into()) >= r.target_clearance_m
-                && !collider.as_deref_mut().is_some_and(|c| c.touches(chain, q, o))
-        };
-        for i in 0..n {
-            let anywhere = (0..PLACEMENT_TRIES).map(|_| r.draw(rng)).find(&mut fits);
-            let mut in_the_way = None;
-            if let Some(side) = side.as_mut().filter(|_| i == 0) {
-                if side.uniform() < in_path {
-                    let from = chain.fk(q).position.into();
-                    in_the_way = (0..PLACEMENT_TRIES)
-                        .map(|_| r.draw_in_path(side, from, target.into()))
-                        .find(&mut fits);
-                }
-            }
-            out.extend(in_the_way.or(anywhere));
-        }
+        let placement = Placement { chain, q, target, in_path };
+        place_obstacles(&self.obstacles, self.random_obstacles.as_ref(), &placement, collider, rng, out);
     }
 
     /// Bounds of the obstacle entries of the observation, per value of one slot (low, high), for

@@ -10,8 +10,9 @@
 //! 3. the joint velocity that counts is the one achieved, `(q' - q) / dt`;
 //! 4. the collision checks look for contacts at `q'` (floor, self, obstacles).
 
-use super::collision::{ArmCollider, Checks, Contact, Obstacle};
+use super::collision::{ArmCollider, Checks, Contact};
 use super::physics::DynamicArm;
+use super::scene::Obstacle;
 use crate::robot::Chain;
 use crate::{Error, Result};
 

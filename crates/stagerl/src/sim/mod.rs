@@ -5,3 +5,4 @@
 pub mod arm;
 pub mod collision;
 pub mod physics;
+pub mod scene;

@@ -36,7 +36,7 @@ use rapier3d::prelude::*;
 use rapier3d_urdf::{urdf_rs, UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot};
 
 use crate::robot::{Chain, JointKind};
-use crate::sim::collision::{Obstacle, ObstacleShape};
+use crate::sim::scene::{Obstacle, ObstacleShape};
 use crate::{Error, Result};
 
 /// Solver iterations per physics step (rapier's `num_solver_iterations`; its default of 4 with

@@ -292,7 +292,7 @@ mod tests {
     /// every substituted goal and loses the penalty, as the environment's own step does.
     #[test]
     fn a_contact_that_ends_the_episode_is_terminal_for_every_goal() {
-        use crate::sim::collision::Obstacle;
+        use crate::sim::scene::Obstacle;
         let chain = Arc::new(crate::robot::Chain::ur5());
         let tool = chain.fk(&crate::env::UR5_HOME_POSE_RAD).position;
         let task = crate::env::TaskConfig {

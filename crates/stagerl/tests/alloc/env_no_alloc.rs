@@ -13,7 +13,7 @@ fn stepping_and_resetting_allocate_nothing() {
 #[test]
 fn random_obstacles_allocate_nothing() {
     let mut cfg = stagerl::config::Config::default();
-    cfg.task.random_obstacles = Some(stagerl::env::RandomObstacles::default());
+    cfg.task.random_obstacles = Some(stagerl::sim::scene::RandomObstacles::default());
     cfg.task.observe_obstacles = true;
     cfg.task.on_collision = stagerl::env::OnCollision::Terminate;
     no_allocation_in(cfg.clone());

@@ -9,9 +9,9 @@ use stagerl::agent::obs_norm::ObsNormConfig;
 use stagerl::agent::{Algo, PpoConfig};
 use stagerl::base::rng::Rng;
 use stagerl::config::Config;
-use stagerl::env::{ObstacleObservation, RandomObstacles, ReachEnv};
+use stagerl::env::{ObstacleObservation, ReachEnv};
 use stagerl::nalgebra::Vector3;
-use stagerl::sim::collision::{Obstacle, ObstacleShape};
+use stagerl::sim::scene::{Obstacle, ObstacleShape, RandomObstacles};
 use std::collections::HashMap;
 use std::path::Path;
 
