@@ -288,3 +288,36 @@ fn no_command_imports_another() {
     }
     assert!(wrong.is_empty(), "commands importing commands:\n{}", wrong.join("\n"));
 }
+
+/// One unit-test style: a module's tests sit inline while short, and in a sibling `tests.rs`
+/// once they pass about 150 lines.
+#[test]
+fn long_unit_tests_live_in_their_own_file() {
+    let mut files = Vec::new();
+    for krate in std::fs::read_dir(crates_dir()).unwrap().map(|e| e.unwrap().path()) {
+        if krate.join("src").is_dir() {
+            rust_files(&krate.join("src"), &mut files);
+        }
+    }
+    let mut inline = 0;
+    let mut long = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        for (i, l) in lines.iter().enumerate() {
+            if l.trim_end().ends_with("mod tests {") && i > 0 && lines[i - 1].trim() == "#[cfg(test)]" {
+                inline += 1;
+                let end = lines[i..].iter().position(|x| *x == "}").map_or(lines.len(), |p| i + p);
+                if end - i > 152 {
+                    long.push(format!("{}:{}: {} lines", f.display(), i + 1, end - i));
+                }
+            }
+        }
+    }
+    assert!(inline > 20, "found the inline test modules: {inline}");
+    assert!(
+        long.is_empty(),
+        "inline test modules over 150 lines (move them to a sibling tests.rs):\n{}",
+        long.join("\n")
+    );
+}
