@@ -6,7 +6,7 @@ environment step, hidden 64 x 64, batch 256, 1000 random steps first, one thread
 Not part of the tests (torch is heavy). In a venv with torch, stable-baselines3 and this
 project's package (`pip install ./python`), in the same session as the Rust figures:
 
-    python scripts/bench_sb3.py --algo sac ddpg td3 --steps 5000
+    python scripts/bench/bench_sb3.py --algo sac ddpg td3 --steps 5000
     target/release/stagerl bench train --algo sac
 
 Prints one JSON line per algorithm: {"algo", "steps", "steps_per_sec", "sb3", "torch"}.

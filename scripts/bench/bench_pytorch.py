@@ -6,7 +6,7 @@ h x h), one thread, median milliseconds per update.
 Not part of the tests (torch is heavy). Run it in a venv with torch installed, in the same
 session as the Rust figures:
 
-    python scripts/bench_pytorch.py --hidden 64 256 --updates 300
+    python scripts/bench/bench_pytorch.py --hidden 64 256 --updates 300
     target/release/stagerl bench update --algo sac --hidden 64
 
 Prints one JSON line per (algo, hidden): {"algo", "hidden", "ms_per_update", "torch"}.

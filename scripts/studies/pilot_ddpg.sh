@@ -7,10 +7,10 @@
 # Prints one line per cell: the mean success over its four runs for the final checkpoint (the
 # paper's protocol; the rule reads this one) and the best checkpoint, with the runs' values.
 #
-#   scripts/pilot_ddpg.sh OUT [--jobs N]        (resumable: run it again after an interruption)
+#   scripts/studies/pilot_ddpg.sh OUT [--jobs N]        (resumable: run it again after an interruption)
 set -euo pipefail
-cd "$(dirname "$0")/.."
-out=${1:?usage: scripts/pilot_ddpg.sh OUT [--jobs N]}
+cd "$(dirname "$0")/../.."
+out=${1:?usage: scripts/studies/pilot_ddpg.sh OUT [--jobs N]}
 shift
 bin=${STAGERL_BIN:-target/release/stagerl}
 [ -x "$bin" ] || cargo build --release --locked -p stagerl-cli

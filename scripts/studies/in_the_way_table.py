@@ -2,7 +2,7 @@
 """Success and collision rates of `stagerl eval --obstacles-in-path P` evaluations, per sweep
 and algorithm (mean and sample std over seeds, as Table 1 gives them), as a Markdown table.
 
-    scripts/in_the_way_table.py [--file NAME] SWEEP_RUNS_DIR [...]
+    scripts/studies/in_the_way_table.py [--file NAME] SWEEP_RUNS_DIR [...]
 
 Each SWEEP_RUNS_DIR holds run directories named <algo>-<reward>-seed<N> (a sweep's `runs/`);
 in each, NAME (default eval-best-trials500-seed0-in-path-1.csv), a per-trial CSV with the

@@ -11,8 +11,8 @@
 # closing evaluation's record (eval-final-seed<S>.json) exists; runs still under way are left
 # out. Runs already in DEST are not copied again. So a long sweep goes on across machines:
 #
-#   scripts/archive_runs.sh /work/runs/paper docs/results/paper/runs   # keep what finished
-#   scripts/archive_runs.sh docs/results/paper/runs /work/runs/paper   # on a new machine
+#   scripts/studies/archive_runs.sh /work/runs/paper docs/results/paper/runs   # keep what finished
+#   scripts/studies/archive_runs.sh docs/results/paper/runs /work/runs/paper   # on a new machine
 #   stagerl reproduce --preset paper --out /work/runs/paper            # the rest
 set -euo pipefail
 if [ $# -ne 2 ]; then

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Where an agent update's time goes (issue 10): samples `stagerl bench update` with perf (a
 # software clock, so it works inside VMs without hardware counters) and sums the samples by
-# kind of work. Usage: scripts/profile_update.sh [ALGO HIDDEN [UPDATES]] (default sac 64 2000).
+# kind of work. Usage: scripts/bench/profile_update.sh [ALGO HIDDEN [UPDATES]] (default sac 64 2000).
 # Needs perf (Debian: linux-perf) and a release build with symbols (the default profile keeps
 # line tables).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 algo=${1:-sac} hidden=${2:-64} updates=${3:-2000}
 bin=${STAGERL_BIN:-target/release/stagerl}
 data=$(mktemp)
