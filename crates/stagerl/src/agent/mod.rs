@@ -5,6 +5,7 @@
 //! replay buffer and the training loop are in [`crate::agent::replay`] and [`crate::train`].
 
 mod config;
+mod critics;
 pub mod ddpg;
 mod her_config;
 pub mod noise;
@@ -153,36 +154,6 @@ pub(crate) fn clip(grads: &mut [f32], max_norm: f64) {
     if max_norm > 0.0 {
         crate::nn::clip_grad_norm(grads, max_norm as f32);
     }
-}
-
-/// One regression step of a critic towards the targets `y` (`batch` rows): forward on `input`,
-/// mean squared error, backward, Adam. `dq` is scratch of at least `batch` values. Returns the loss.
-pub(crate) fn fit_critic(
-    q: &mut Mlp<f32>,
-    opt: &mut Adam<f32>,
-    input: &[f32],
-    y: &[f32],
-    dq: &mut [f32],
-    max_grad_norm: f64,
-) -> f64 {
-    q.forward(input, y.len());
-    fit_forwarded(q, opt, y, dq, max_grad_norm)
-}
-
-/// [`fit_critic`] after its forward pass: `q`'s last forward output against `y`, backward, Adam.
-pub(crate) fn fit_forwarded(
-    q: &mut Mlp<f32>,
-    opt: &mut Adam<f32>,
-    y: &[f32],
-    dq: &mut [f32],
-    max_grad_norm: f64,
-) -> f64 {
-    let b = y.len();
-    let loss = crate::nn::mse_loss(q.output(), y, &mut dq[..b]);
-    q.zero_grad();
-    q.backward(&dq[..b]);
-    step(q, opt, max_grad_norm);
-    f64::from(loss)
 }
 
 /// Apply one Adam step to a network from its accumulated gradients (clipped first if asked).
