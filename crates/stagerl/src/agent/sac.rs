@@ -13,13 +13,48 @@
 //! 3. `log alpha` minimises `-log alpha * mean(log pi(a~|s) + H_target)`, `H_target = -act_dim`
 //!    (times `target_entropy_per_dim`);
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
+//!
+//! Its own settings: `[agent.sac]`, [`SacConfig`] (the entropy coefficient).
+
+use serde::{Deserialize, Serialize};
 
 use super::critics::{self, Critics, TWIN};
 use super::parts::learned_parts;
 use super::{sizes, step, Agent, AgentConfig, Algo, Learner, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
 use crate::base::rng::Rng;
+use crate::base::validate::{finite, positive};
 use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
+use crate::Result;
+
+/// `[agent.sac]`: SAC's entropy coefficient.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SacConfig {
+    /// Learning rate of log(alpha).
+    pub alpha_lr: f64,
+    /// Initial entropy coefficient alpha.
+    pub init_alpha: f64,
+    /// Target entropy per action dimension (the usual choice: -1, i.e. -act_dim in total).
+    pub target_entropy_per_dim: f64,
+    /// Fix alpha at `init_alpha` instead of tuning it.
+    pub fixed_alpha: bool,
+}
+
+impl Default for SacConfig {
+    fn default() -> Self {
+        SacConfig { alpha_lr: 3e-4, init_alpha: 1.0, target_entropy_per_dim: -1.0, fixed_alpha: false }
+    }
+}
+
+impl SacConfig {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        positive("agent.sac.alpha_lr", self.alpha_lr)?;
+        positive("agent.sac.init_alpha", self.init_alpha)?;
+        finite("agent.sac.target_entropy_per_dim", self.target_entropy_per_dim)
+    }
+}
 
 /// The log-std range of the actor (CleanRL's).
 const LOG_STD: LogStdBound = LogStdBound::Tanh { min: -5.0, max: 2.0 };

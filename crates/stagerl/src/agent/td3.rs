@@ -16,14 +16,58 @@
 //!    Polyak-averaged, `theta' <- (1 - tau) theta' + tau theta`.
 //!
 //! Exploration: Gaussian or Ornstein-Uhlenbeck noise added to `mu(s)`, clipped to [-1, 1].
+//!
+//! Its own settings: `[agent.td3]`, [`Td3Config`] (exploration, policy delay, target policy
+//! smoothing).
 
+use serde::{Deserialize, Serialize};
+
+use super::config::validate_noise;
 use super::critics::{self, Critics, TargetSide, TWIN};
+use super::ddpg::DdpgConfig;
 use super::noise::ActionNoise;
 use super::parts::learned_parts;
 use super::{sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
 use crate::base::rng::Rng;
+use crate::base::validate::{at_least_one, non_negative};
 use crate::nn::{concat_cols, Activation, Adam, Mlp};
+use crate::Result;
+
+/// `[agent.td3]`: TD3's exploration, policy delay and target policy smoothing.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Td3Config {
+    /// Exploration noise kind.
+    pub noise: NoiseKind,
+    /// Exploration noise scale sigma (action units, actions in [-1, 1]).
+    pub noise_sigma: f64,
+    /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
+    pub ou_theta: f64,
+    /// Actor and target updates every this many critic updates.
+    pub policy_delay: u32,
+    /// Target policy smoothing noise sigma (action units).
+    pub target_noise: f64,
+    /// Clip of the smoothing noise (action units).
+    pub target_noise_clip: f64,
+}
+
+impl Default for Td3Config {
+    fn default() -> Self {
+        let DdpgConfig { noise, noise_sigma, ou_theta } = DdpgConfig::default();
+        Td3Config { noise, noise_sigma, ou_theta, policy_delay: 2, target_noise: 0.2, target_noise_clip: 0.5 }
+    }
+}
+
+impl Td3Config {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        validate_noise("agent.td3", self.noise_sigma, self.ou_theta)?;
+        at_least_one("agent.td3.policy_delay", self.policy_delay.into())?;
+        non_negative("agent.td3.target_noise", self.target_noise)?;
+        non_negative("agent.td3.target_noise_clip", self.target_noise_clip)
+    }
+}
 
 /// What sets a member of the TD3 family apart.
 #[derive(Clone, Debug, PartialEq)]
