@@ -1,16 +1,20 @@
 //! Agent hyper-parameters: the `[agent]` section holds what every algorithm shares, and
-//! `[agent.ddpg]`, `[agent.td3]`, `[agent.sac]` what is each algorithm's own. A run's config holds
-//! at most its own algorithm's section (absent: that algorithm's defaults); a sweep preset may
-//! hold one for each algorithm of its sweep, and each run keeps only its own
+//! `[agent.ddpg]`, `[agent.td3]`, `[agent.sac]`, `[agent.ppo]` what is each algorithm's own
+//! (each defined, with its defaults and its checks, in that algorithm's file). A run's config
+//! holds at most its own algorithm's section (absent: that algorithm's defaults); a sweep preset
+//! may hold one for each algorithm of its sweep, and each run keeps only its own
 //! ([`AgentConfig::for_algo`]).
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-use super::obs_norm::ObsNormConfig;
+use super::ddpg::DdpgConfig;
+use super::ppo::PpoConfig;
+use super::sac::SacConfig;
+use super::td3::Td3Config;
 use crate::agent::HerConfig;
-use crate::base::validate::{at_least_one, finite, non_negative, positive};
+use crate::base::validate::{at_least_one, non_negative, positive};
 use crate::{Error, Result};
 
 /// The learning algorithm.
@@ -122,139 +126,6 @@ pub struct AgentConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub her: Option<HerConfig>,
 }
-
-/// `[agent.ddpg]`: DDPG's exploration.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct DdpgConfig {
-    /// Exploration noise kind.
-    pub noise: NoiseKind,
-    /// Exploration noise scale sigma (action units, actions in [-1, 1]).
-    pub noise_sigma: f64,
-    /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
-    pub ou_theta: f64,
-}
-
-impl Default for DdpgConfig {
-    fn default() -> Self {
-        DdpgConfig { noise: NoiseKind::Gaussian, noise_sigma: 0.1, ou_theta: 0.15 }
-    }
-}
-
-/// `[agent.td3]`: TD3's exploration, policy delay and target policy smoothing.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Td3Config {
-    /// Exploration noise kind.
-    pub noise: NoiseKind,
-    /// Exploration noise scale sigma (action units, actions in [-1, 1]).
-    pub noise_sigma: f64,
-    /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
-    pub ou_theta: f64,
-    /// Actor and target updates every this many critic updates.
-    pub policy_delay: u32,
-    /// Target policy smoothing noise sigma (action units).
-    pub target_noise: f64,
-    /// Clip of the smoothing noise (action units).
-    pub target_noise_clip: f64,
-}
-
-impl Default for Td3Config {
-    fn default() -> Self {
-        let DdpgConfig { noise, noise_sigma, ou_theta } = DdpgConfig::default();
-        Td3Config { noise, noise_sigma, ou_theta, policy_delay: 2, target_noise: 0.2, target_noise_clip: 0.5 }
-    }
-}
-
-/// `[agent.sac]`: SAC's entropy coefficient.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SacConfig {
-    /// Learning rate of log(alpha).
-    pub alpha_lr: f64,
-    /// Initial entropy coefficient alpha.
-    pub init_alpha: f64,
-    /// Target entropy per action dimension (the usual choice: -1, i.e. -act_dim in total).
-    pub target_entropy_per_dim: f64,
-    /// Fix alpha at `init_alpha` instead of tuning it.
-    pub fixed_alpha: bool,
-}
-
-impl Default for SacConfig {
-    fn default() -> Self {
-        SacConfig { alpha_lr: 3e-4, init_alpha: 1.0, target_entropy_per_dim: -1.0, fixed_alpha: false }
-    }
-}
-
-/// `[agent.ppo]`: PPO's rollouts and clipped update (defaults: CleanRL's
-/// `ppo_continuous_action` where the task allows; see each field). PPO uses the shared `hidden`
-/// (tanh units, as CleanRL), `actor_lr` and `critic_lr` (default 3e-4) and `gamma`; the shared
-/// `max_grad_norm` (per network) and the replay settings (`batch_size`, `buffer_size`,
-/// `learning_starts`, `updates_per_step`, `tau`) are the off-policy agents' and unused.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct PpoConfig {
-    /// Environments stepped together (CleanRL: 1; 8 here, as a reaching episode is short).
-    pub num_envs: usize,
-    /// Steps per environment per rollout: a rollout is `num_envs x num_steps` transitions
-    /// (CleanRL: 1 x 2048; 8 x 256 = 2048 here).
-    pub num_steps: usize,
-    /// Passes over each rollout.
-    pub update_epochs: u32,
-    /// Minibatches per pass (the rollout is split into this many).
-    pub num_minibatches: usize,
-    /// GAE lambda.
-    pub gae_lambda: f64,
-    /// Clip range epsilon of the probability ratio (and of the value change, `clip_vloss`).
-    pub clip_coef: f64,
-    /// Clip the value loss around the rollout's values.
-    pub clip_vloss: bool,
-    /// Entropy bonus coefficient.
-    pub ent_coef: f64,
-    /// Value loss coefficient.
-    pub vf_coef: f64,
-    /// Normalise the advantages of each minibatch.
-    pub norm_adv: bool,
-    /// Decay the learning rates linearly to 0 over the run's episodes.
-    pub anneal_lr: bool,
-    /// Initial log standard deviation of the (state-independent) Gaussian policy.
-    pub init_log_std: f64,
-    /// Clip the gradient of all PPO's parameters together to this L2 norm (CleanRL: 0.5); 0
-    /// disables.
-    pub max_grad_norm: f64,
-    /// `norm_obs = { clip = 10.0 }`: normalise observations with running statistics
-    /// ([`super::obs_norm`]; CleanRL always does); unset: off (written only when set, so that
-    /// earlier runs' configs keep their hash).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub norm_obs: Option<ObsNormConfig>,
-}
-
-impl Default for PpoConfig {
-    fn default() -> Self {
-        PpoConfig {
-            num_envs: 8,
-            num_steps: 256,
-            update_epochs: 10,
-            num_minibatches: 32,
-            gae_lambda: 0.95,
-            clip_coef: 0.2,
-            clip_vloss: true,
-            ent_coef: 0.0,
-            vf_coef: 0.5,
-            norm_adv: true,
-            anneal_lr: true,
-            init_log_std: 0.0,
-            max_grad_norm: 0.5,
-            norm_obs: None,
-        }
-    }
-}
-
-/// Most environments PPO steps together.
-pub const MAX_PPO_ENVS: usize = 4096;
-
-/// Most transitions in one PPO rollout.
-pub const MAX_PPO_ROLLOUT: usize = 1 << 22;
 
 impl Default for AgentConfig {
     fn default() -> Self {
@@ -479,21 +350,16 @@ impl AgentConfig {
         at_least_one("agent.updates_per_step", self.updates_per_step.into())?;
         non_negative("agent.max_grad_norm", self.max_grad_norm)?;
         if let Some(d) = &self.ddpg {
-            validate_noise("agent.ddpg", d.noise_sigma, d.ou_theta)?;
+            d.validate()?;
         }
         if let Some(t) = &self.td3 {
-            validate_noise("agent.td3", t.noise_sigma, t.ou_theta)?;
-            at_least_one("agent.td3.policy_delay", t.policy_delay.into())?;
-            non_negative("agent.td3.target_noise", t.target_noise)?;
-            non_negative("agent.td3.target_noise_clip", t.target_noise_clip)?;
+            t.validate()?;
         }
         if let Some(s) = &self.sac {
-            positive("agent.sac.alpha_lr", s.alpha_lr)?;
-            positive("agent.sac.init_alpha", s.init_alpha)?;
-            finite("agent.sac.target_entropy_per_dim", s.target_entropy_per_dim)?;
+            s.validate()?;
         }
         if let Some(p) = &self.ppo {
-            validate_ppo(p)?;
+            p.validate()?;
         }
         if let Some(h) = &self.her {
             h.validate()?;
@@ -502,49 +368,8 @@ impl AgentConfig {
     }
 }
 
-/// `[agent.ppo]`'s values.
-fn validate_ppo(p: &PpoConfig) -> Result<()> {
-    if p.num_envs == 0 || p.num_envs > MAX_PPO_ENVS {
-        return Err(Error::config(
-            "agent.ppo.num_envs",
-            p.num_envs,
-            format!("an integer in 1..={MAX_PPO_ENVS}"),
-        ));
-    }
-    let rollout = p.num_envs.saturating_mul(p.num_steps);
-    if p.num_steps == 0 || rollout > MAX_PPO_ROLLOUT {
-        return Err(Error::config(
-            "agent.ppo.num_steps",
-            p.num_steps,
-            format!("an integer >= 1 with num_envs x num_steps <= {MAX_PPO_ROLLOUT} transitions a rollout"),
-        ));
-    }
-    if p.num_minibatches == 0 || p.num_minibatches > rollout {
-        return Err(Error::config(
-            "agent.ppo.num_minibatches",
-            p.num_minibatches,
-            format!("an integer in 1..={rollout} (num_envs x num_steps, the rollout's transitions)"),
-        ));
-    }
-    at_least_one("agent.ppo.update_epochs", p.update_epochs.into())?;
-    if !(p.gae_lambda.is_finite() && (0.0..=1.0).contains(&p.gae_lambda)) {
-        return Err(Error::config("agent.ppo.gae_lambda", p.gae_lambda, "a number in [0, 1]"));
-    }
-    positive("agent.ppo.clip_coef", p.clip_coef)?;
-    non_negative("agent.ppo.ent_coef", p.ent_coef)?;
-    non_negative("agent.ppo.vf_coef", p.vf_coef)?;
-    non_negative("agent.ppo.max_grad_norm", p.max_grad_norm)?;
-    if !(p.init_log_std.is_finite() && (-20.0..=2.0).contains(&p.init_log_std)) {
-        return Err(Error::config("agent.ppo.init_log_std", p.init_log_std, "a number in [-20, 2]"));
-    }
-    if let Some(n) = &p.norm_obs {
-        n.validate("agent.ppo.norm_obs")?;
-    }
-    Ok(())
-}
-
 /// The exploration noise of `[agent.ddpg]` or `[agent.td3]` (`section`).
-fn validate_noise(section: &str, sigma: f64, theta: f64) -> Result<()> {
+pub(super) fn validate_noise(section: &str, sigma: f64, theta: f64) -> Result<()> {
     non_negative(&format!("{section}.noise_sigma"), sigma)?;
     non_negative(&format!("{section}.ou_theta"), theta)
 }
@@ -552,6 +377,7 @@ fn validate_noise(section: &str, sigma: f64, theta: f64) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::agent::{SacConfig, Td3Config};
 
     #[test]
     fn an_absent_section_equals_its_defaults_and_only_the_runs_own_is_allowed() {

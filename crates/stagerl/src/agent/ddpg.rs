@@ -12,9 +12,40 @@
 //! 3. targets `theta' <- (1 - tau) theta' + tau theta`.
 //!
 //! Exploration: Gaussian or Ornstein-Uhlenbeck noise added to `mu(s)`, clipped to [-1, 1].
+//!
+//! Its own settings: `[agent.ddpg]`, [`DdpgConfig`] (exploration).
 
+use serde::{Deserialize, Serialize};
+
+use super::config::validate_noise;
 use super::td3::{Family, Td3};
-use super::{AgentConfig, Algo};
+use super::{AgentConfig, Algo, NoiseKind};
+use crate::Result;
+
+/// `[agent.ddpg]`: DDPG's exploration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DdpgConfig {
+    /// Exploration noise kind.
+    pub noise: NoiseKind,
+    /// Exploration noise scale sigma (action units, actions in [-1, 1]).
+    pub noise_sigma: f64,
+    /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
+    pub ou_theta: f64,
+}
+
+impl Default for DdpgConfig {
+    fn default() -> Self {
+        DdpgConfig { noise: NoiseKind::Gaussian, noise_sigma: 0.1, ou_theta: 0.15 }
+    }
+}
+
+impl DdpgConfig {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        validate_noise("agent.ddpg", self.noise_sigma, self.ou_theta)
+    }
+}
 
 /// DDPG's place in the TD3 family. Its critic keeps DDPG's checkpoint names (`critic`,
 /// `critic_target`, `critic_opt`).

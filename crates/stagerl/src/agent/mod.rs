@@ -1,26 +1,31 @@
-//! The agents. Each algorithm reads top to bottom in its own file: the off-policy [`td3`] (with
-//! DDPG, [`ddpg`], as its one-critic case, as in Stable-Baselines3) and [`sac`], and the
-//! on-policy [`ppo`]. What they share (the [`Agent`] verbs, the one list of learned parts that
-//! drives saving, loading and the non-finite guard, exploration noise) lives here once. The
-//! replay buffer and the training loop are in [`crate::agent::replay`] and [`crate::train`].
+//! The agents. Each algorithm reads top to bottom in its own file, its `[agent.<algo>]` section
+//! (defaults and checks) included: the off-policy `td3.rs` ([`Td3`], with DDPG, `ddpg.rs`, as
+//! its one-critic case, as in Stable-Baselines3) and `sac.rs` ([`Sac`]), and the on-policy
+//! `ppo.rs` ([`Ppo`]). What they share lives here once: the [`Agent`] verbs, the one list of
+//! learned parts that drives saving, loading and the non-finite guard, the shared `[agent]`
+//! settings ([`AgentConfig`]), exploration noise, and the critic ensemble of the off-policy
+//! agents (`critics.rs`: n critics with their targets, optimisers and buffers). The replay
+//! buffer and the training loop are in [`crate::agent::replay`] and [`crate::train`].
 
 mod config;
-pub mod ddpg;
+mod critics;
+mod ddpg;
 mod her_config;
 pub mod noise;
 pub mod obs_norm;
 mod parts;
-pub mod ppo;
+mod ppo;
 pub mod replay;
-pub mod sac;
-pub mod td3;
+mod sac;
+mod td3;
 
-pub use config::{
-    AgentConfig, Algo, DdpgConfig, NoiseKind, PpoConfig, SacConfig, Td3Config, MAX_BATCH_VALUES,
-    MAX_BUFFER_SIZE,
-};
+pub use config::{AgentConfig, Algo, NoiseKind, MAX_BATCH_VALUES, MAX_BUFFER_SIZE};
+pub use ddpg::DdpgConfig;
 pub use her_config::{HerConfig, HerStrategy, MAX_HER_K};
 pub use parts::Learned;
+pub use ppo::{Ppo, PpoConfig, Rollout};
+pub use sac::{Sac, SacConfig};
+pub use td3::{Family, Td3, Td3Config};
 
 use crate::agent::replay::Batch;
 use crate::io::checkpoint::Checkpoint;
@@ -105,14 +110,14 @@ pub trait OffPolicy: Agent {
 /// An agent as its learning loop needs it.
 pub enum Learner<'a> {
     OffPolicy(&'a mut dyn OffPolicy),
-    OnPolicy(&'a mut ppo::Ppo),
+    OnPolicy(&'a mut Ppo),
 }
 
 /// Build the agent the config asks for. `seed` fixes its initial weights and its noise.
 pub fn build(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Result<Box<dyn Agent>> {
     cfg.validate()?;
     Ok(match cfg.algo {
-        Algo::Ppo => Box::new(ppo::Ppo::new(cfg, obs_dim, act_dim, seed)),
+        Algo::Ppo => Box::new(Ppo::new(cfg, obs_dim, act_dim, seed)),
         _ => build_off_policy(cfg, obs_dim, act_dim, seed)?,
     })
 }
@@ -127,8 +132,8 @@ pub fn build_off_policy(
     cfg.validate()?;
     Ok(match cfg.algo {
         Algo::Ddpg => Box::new(ddpg::new(cfg, obs_dim, act_dim, seed)),
-        Algo::Td3 => Box::new(td3::Td3::new(cfg, obs_dim, act_dim, seed)),
-        Algo::Sac => Box::new(sac::Sac::new(cfg, obs_dim, act_dim, seed)),
+        Algo::Td3 => Box::new(Td3::new(cfg, obs_dim, act_dim, seed)),
+        Algo::Sac => Box::new(Sac::new(cfg, obs_dim, act_dim, seed)),
         Algo::Ppo => {
             return Err(crate::Error::config(
                 "agent.algo",
@@ -153,36 +158,6 @@ pub(crate) fn clip(grads: &mut [f32], max_norm: f64) {
     if max_norm > 0.0 {
         crate::nn::clip_grad_norm(grads, max_norm as f32);
     }
-}
-
-/// One regression step of a critic towards the targets `y` (`batch` rows): forward on `input`,
-/// mean squared error, backward, Adam. `dq` is scratch of at least `batch` values. Returns the loss.
-pub(crate) fn fit_critic(
-    q: &mut Mlp<f32>,
-    opt: &mut Adam<f32>,
-    input: &[f32],
-    y: &[f32],
-    dq: &mut [f32],
-    max_grad_norm: f64,
-) -> f64 {
-    q.forward(input, y.len());
-    fit_forwarded(q, opt, y, dq, max_grad_norm)
-}
-
-/// [`fit_critic`] after its forward pass: `q`'s last forward output against `y`, backward, Adam.
-pub(crate) fn fit_forwarded(
-    q: &mut Mlp<f32>,
-    opt: &mut Adam<f32>,
-    y: &[f32],
-    dq: &mut [f32],
-    max_grad_norm: f64,
-) -> f64 {
-    let b = y.len();
-    let loss = crate::nn::mse_loss(q.output(), y, &mut dq[..b]);
-    q.zero_grad();
-    q.backward(&dq[..b]);
-    step(q, opt, max_grad_norm);
-    f64::from(loss)
 }
 
 /// Apply one Adam step to a network from its accumulated gradients (clipped first if asked).

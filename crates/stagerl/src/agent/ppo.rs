@@ -23,12 +23,133 @@
 //! With `norm_obs`, both networks read observations normalised by running statistics
 //! ([`super::obs_norm`]), updated on each batch the policy acts on in training; the rollout
 //! keeps the normalised observations, as CleanRL's does.
+//!
+//! Its own settings: `[agent.ppo]`, [`PpoConfig`].
 
-use super::obs_norm::ObsNorm;
+use serde::{Deserialize, Serialize};
+
+use super::obs_norm::{ObsNorm, ObsNormConfig};
 use super::parts::learned_parts;
-use super::{sizes, Agent, AgentConfig, Algo, Learner, PpoConfig, UpdateStats};
+use super::{sizes, Agent, AgentConfig, Algo, Learner, UpdateStats};
 use crate::base::rng::Rng;
+use crate::base::validate::{at_least_one, non_negative, positive};
 use crate::nn::{Activation, Adam, Mlp};
+use crate::{Error, Result};
+
+/// `[agent.ppo]`: PPO's rollouts and clipped update (defaults: CleanRL's
+/// `ppo_continuous_action` where the task allows; see each field). PPO uses the shared `hidden`
+/// (tanh units, as CleanRL), `actor_lr` and `critic_lr` (default 3e-4) and `gamma`; the shared
+/// `max_grad_norm` (per network) and the replay settings (`batch_size`, `buffer_size`,
+/// `learning_starts`, `updates_per_step`, `tau`) are the off-policy agents' and unused.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PpoConfig {
+    /// Environments stepped together (CleanRL: 1; 8 here, as a reaching episode is short).
+    pub num_envs: usize,
+    /// Steps per environment per rollout: a rollout is `num_envs x num_steps` transitions
+    /// (CleanRL: 1 x 2048; 8 x 256 = 2048 here).
+    pub num_steps: usize,
+    /// Passes over each rollout.
+    pub update_epochs: u32,
+    /// Minibatches per pass (the rollout is split into this many).
+    pub num_minibatches: usize,
+    /// GAE lambda.
+    pub gae_lambda: f64,
+    /// Clip range epsilon of the probability ratio (and of the value change, `clip_vloss`).
+    pub clip_coef: f64,
+    /// Clip the value loss around the rollout's values.
+    pub clip_vloss: bool,
+    /// Entropy bonus coefficient.
+    pub ent_coef: f64,
+    /// Value loss coefficient.
+    pub vf_coef: f64,
+    /// Normalise the advantages of each minibatch.
+    pub norm_adv: bool,
+    /// Decay the learning rates linearly to 0 over the run's episodes.
+    pub anneal_lr: bool,
+    /// Initial log standard deviation of the (state-independent) Gaussian policy.
+    pub init_log_std: f64,
+    /// Clip the gradient of all PPO's parameters together to this L2 norm (CleanRL: 0.5); 0
+    /// disables.
+    pub max_grad_norm: f64,
+    /// `norm_obs = { clip = 10.0 }`: normalise observations with running statistics
+    /// ([`super::obs_norm`]; CleanRL always does); unset: off (written only when set, so that
+    /// earlier runs' configs keep their hash).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub norm_obs: Option<ObsNormConfig>,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        PpoConfig {
+            num_envs: 8,
+            num_steps: 256,
+            update_epochs: 10,
+            num_minibatches: 32,
+            gae_lambda: 0.95,
+            clip_coef: 0.2,
+            clip_vloss: true,
+            ent_coef: 0.0,
+            vf_coef: 0.5,
+            norm_adv: true,
+            anneal_lr: true,
+            init_log_std: 0.0,
+            max_grad_norm: 0.5,
+            norm_obs: None,
+        }
+    }
+}
+
+/// Most environments PPO steps together.
+pub const MAX_PPO_ENVS: usize = 4096;
+
+/// Most transitions in one PPO rollout.
+pub const MAX_PPO_ROLLOUT: usize = 1 << 22;
+
+impl PpoConfig {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        if self.num_envs == 0 || self.num_envs > MAX_PPO_ENVS {
+            return Err(Error::config(
+                "agent.ppo.num_envs",
+                self.num_envs,
+                format!("an integer in 1..={MAX_PPO_ENVS}"),
+            ));
+        }
+        let rollout = self.num_envs.saturating_mul(self.num_steps);
+        if self.num_steps == 0 || rollout > MAX_PPO_ROLLOUT {
+            return Err(Error::config(
+                "agent.ppo.num_steps",
+                self.num_steps,
+                format!(
+                    "an integer >= 1 with num_envs x num_steps <= {MAX_PPO_ROLLOUT} transitions a rollout"
+                ),
+            ));
+        }
+        if self.num_minibatches == 0 || self.num_minibatches > rollout {
+            return Err(Error::config(
+                "agent.ppo.num_minibatches",
+                self.num_minibatches,
+                format!("an integer in 1..={rollout} (num_envs x num_steps, the rollout's transitions)"),
+            ));
+        }
+        at_least_one("agent.ppo.update_epochs", self.update_epochs.into())?;
+        if !(self.gae_lambda.is_finite() && (0.0..=1.0).contains(&self.gae_lambda)) {
+            return Err(Error::config("agent.ppo.gae_lambda", self.gae_lambda, "a number in [0, 1]"));
+        }
+        positive("agent.ppo.clip_coef", self.clip_coef)?;
+        non_negative("agent.ppo.ent_coef", self.ent_coef)?;
+        non_negative("agent.ppo.vf_coef", self.vf_coef)?;
+        non_negative("agent.ppo.max_grad_norm", self.max_grad_norm)?;
+        if !(self.init_log_std.is_finite() && (-20.0..=2.0).contains(&self.init_log_std)) {
+            return Err(Error::config("agent.ppo.init_log_std", self.init_log_std, "a number in [-20, 2]"));
+        }
+        if let Some(n) = &self.norm_obs {
+            n.validate("agent.ppo.norm_obs")?;
+        }
+        Ok(())
+    }
+}
 
 /// `1/2 log(2 pi)`.
 const HALF_LOG_2PI: f64 = 0.918_938_533_204_672_7;

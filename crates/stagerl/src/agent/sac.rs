@@ -2,7 +2,8 @@
 //! Stable-Baselines3.
 //!
 //! Networks: a tanh-squashed Gaussian actor `obs -> [mean | s]` (log-std `l = -5 + 3.5 (tanh s + 1)`,
-//! in [-5, 2]), twin critics `Q1, Q2: [obs | act] -> 1` and their Polyak-averaged targets.
+//! in [-5, 2]), twin critics `Q1, Q2: [obs | act] -> 1` and their Polyak-averaged targets (a
+//! [`Critics`] ensemble of two).
 //!
 //! One update on a batch `(s, a, r, s', d)`:
 //! 1. critic target `y = r + gamma (1 - d) (min(Q1', Q2')(s', a') - alpha log pi(a'|s'))`,
@@ -12,13 +13,48 @@
 //! 3. `log alpha` minimises `-log alpha * mean(log pi(a~|s) + H_target)`, `H_target = -act_dim`
 //!    (times `target_entropy_per_dim`);
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
+//!
+//! Its own settings: `[agent.sac]`, [`SacConfig`] (the entropy coefficient).
 
+use serde::{Deserialize, Serialize};
+
+use super::critics::{self, Critics, TWIN};
 use super::parts::learned_parts;
-use super::{fit_critic, sizes, step, Agent, AgentConfig, Algo, Learner, OffPolicy, UpdateStats};
+use super::{sizes, step, Agent, AgentConfig, Algo, Learner, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
-use crate::base::par;
 use crate::base::rng::Rng;
+use crate::base::validate::{finite, positive};
 use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
+use crate::Result;
+
+/// `[agent.sac]`: SAC's entropy coefficient.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SacConfig {
+    /// Learning rate of log(alpha).
+    pub alpha_lr: f64,
+    /// Initial entropy coefficient alpha.
+    pub init_alpha: f64,
+    /// Target entropy per action dimension (the usual choice: -1, i.e. -act_dim in total).
+    pub target_entropy_per_dim: f64,
+    /// Fix alpha at `init_alpha` instead of tuning it.
+    pub fixed_alpha: bool,
+}
+
+impl Default for SacConfig {
+    fn default() -> Self {
+        SacConfig { alpha_lr: 3e-4, init_alpha: 1.0, target_entropy_per_dim: -1.0, fixed_alpha: false }
+    }
+}
+
+impl SacConfig {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        positive("agent.sac.alpha_lr", self.alpha_lr)?;
+        positive("agent.sac.init_alpha", self.init_alpha)?;
+        finite("agent.sac.target_entropy_per_dim", self.target_entropy_per_dim)
+    }
+}
 
 /// The log-std range of the actor (CleanRL's).
 const LOG_STD: LogStdBound = LogStdBound::Tanh { min: -5.0, max: 2.0 };
@@ -29,13 +65,9 @@ pub struct Sac {
     act_dim: usize,
     actor: Mlp<f32>,
     head: SquashedGaussian<f32>,
-    q1: Mlp<f32>,
-    q2: Mlp<f32>,
-    q1_target: Mlp<f32>,
-    q2_target: Mlp<f32>,
+    /// The twin critics `q1`, `q2`, their targets and optimisers.
+    critics: Critics,
     actor_opt: Adam<f32>,
-    q1_opt: Adam<f32>,
-    q2_opt: Adam<f32>,
     log_alpha: [f32; 1],
     alpha_opt: Adam<f32>,
     target_entropy: f32,
@@ -46,17 +78,6 @@ pub struct Sac {
     next_act: Vec<f32>,
     next_logp: Vec<f32>,
     y: Vec<f32>,
-    /// The second critic's values where the first's go to `y`, `dq`, `q1v`, `da` (the twin
-    /// critics run at once on two threads, see `stagerl::base::par`).
-    q2n: Vec<f32>,
-    dq: Vec<f32>,
-    dq2: Vec<f32>,
-    q1v: Vec<f32>,
-    q2v: Vec<f32>,
-    da2: Vec<f32>,
-    g1: Vec<f32>,
-    g2: Vec<f32>,
-    da: Vec<f32>,
     dlogp: Vec<f32>,
 }
 
@@ -69,15 +90,11 @@ impl Sac {
             Activation::Identity,
             &mut init,
         );
-        let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
-        let q1 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
-        let q2 = Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init);
-        let (q1_target, q2_target) = (q1.clone(), q2.clone());
         let (b, own) = (cfg.batch_size, cfg.sac());
+        let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
+        let critics = Critics::new(TWIN, &critic_sizes, cfg.critic_lr(), &mut init, b, act_dim);
         Sac {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
-            q1_opt: Adam::new(q1.num_params(), cfg.critic_lr()),
-            q2_opt: Adam::new(q2.num_params(), cfg.critic_lr()),
             log_alpha: [own.init_alpha.ln() as f32],
             alpha_opt: Adam::new(1, own.alpha_lr),
             target_entropy: (own.target_entropy_per_dim * act_dim as f64) as f32,
@@ -88,24 +105,12 @@ impl Sac {
             next_act: vec![0.0; b * act_dim],
             next_logp: vec![0.0; b],
             y: vec![0.0; b],
-            dq: vec![0.0; b],
-            q2n: vec![0.0; b],
-            dq2: vec![0.0; b],
-            q1v: vec![0.0; b],
-            q2v: vec![0.0; b],
-            da2: vec![0.0; b * act_dim],
-            g1: vec![0.0; b],
-            g2: vec![0.0; b],
-            da: vec![0.0; b * act_dim],
             dlogp: vec![0.0; b],
             cfg: cfg.clone(),
             obs_dim,
             act_dim,
             actor,
-            q1,
-            q2,
-            q1_target,
-            q2_target,
+            critics,
         }
     }
 
@@ -161,28 +166,14 @@ impl OffPolicy for Sac {
         self.next_act[..b * ad].copy_from_slice(a_next);
         self.next_logp[..b].copy_from_slice(logp_next);
         concat_cols(&batch.next_obs, od, &self.next_act[..b * ad], ad, b, &mut self.critic_in);
-        // The twin critics' passes run at once (on two threads with a pool; the same bits).
-        let (ci, y, q2n) = (&self.critic_in, &mut self.y, &mut self.q2n);
-        let (q1t, q2t) = (&mut self.q1_target, &mut self.q2_target);
-        par::join(
-            || y[..b].copy_from_slice(q1t.predict(ci, b)),
-            || q2n[..b].copy_from_slice(q2t.predict(ci, b)),
-        );
+        self.critics.target_min(&self.critic_in, b, &mut self.y);
         for i in 0..b {
-            let soft_v = self.y[i].min(self.q2n[i]) - alpha * self.next_logp[i];
+            let soft_v = self.y[i] - alpha * self.next_logp[i];
             self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * soft_v;
         }
         concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
-        let n = self.cfg.max_grad_norm;
-        let (ci, y) = (&self.critic_in, &self.y[..b]);
-        let (mut l1, mut l2) = (0.0, 0.0);
-        let (q1, q1_opt, dq) = (&mut self.q1, &mut self.q1_opt, &mut self.dq);
-        let (q2, q2_opt, dq2) = (&mut self.q2, &mut self.q2_opt, &mut self.dq2);
-        par::join(
-            || l1 = fit_critic(q1, q1_opt, ci, y, dq, n),
-            || l2 = fit_critic(q2, q2_opt, ci, y, dq2, n),
-        );
-        let critic_loss = l1 + l2;
+        let losses = self.critics.fit(&self.critic_in, &self.y[..b], self.cfg.max_grad_norm);
+        let critic_loss = critics::mean(losses);
 
         // 2. Actor, through the reparameterised sample and dQ/da of the smaller critic.
         let raw = self.actor.forward(&batch.obs, b);
@@ -190,34 +181,16 @@ impl OffPolicy for Sac {
         let (a, logp) = self.head.forward(raw, &self.eps[..b * ad], b);
         self.next_logp[..b].copy_from_slice(logp); // reuse: log pi(a~|s)
         concat_cols(&batch.obs, od, a, ad, b, &mut self.critic_in);
-        let ci = &self.critic_in;
-        let (q1, q1v, q2, q2v) = (&mut self.q1, &mut self.q1v, &mut self.q2, &mut self.q2v);
-        par::join(
-            || q1v[..b].copy_from_slice(q1.forward(ci, b)),
-            || q2v[..b].copy_from_slice(q2.forward(ci, b)),
-        );
+        let qmin = self.critics.forward_min(&self.critic_in, b);
         let inv_b = 1.0 / b as f32;
         let mut actor_loss = 0.0f64;
         for i in 0..b {
-            let first = self.q1v[i] <= self.q2v[i];
-            let qmin = if first { self.q1v[i] } else { self.q2v[i] };
-            actor_loss += f64::from(alpha * self.next_logp[i] - qmin);
-            self.g1[i] = if first { -inv_b } else { 0.0 };
-            self.g2[i] = if first { 0.0 } else { -inv_b };
+            actor_loss += f64::from(alpha * self.next_logp[i] - qmin[i]);
             self.dlogp[i] = alpha * inv_b;
         }
         actor_loss /= b as f64;
-        let cols = od..od + ad;
-        let (q1, g1, da) = (&mut self.q1, &self.g1[..b], &mut self.da[..b * ad]);
-        let (q2, g2, da2) = (&mut self.q2, &self.g2[..b], &mut self.da2[..b * ad]);
-        par::join(
-            || da.copy_from_slice(q1.input_grad_cols(g1, cols.clone())),
-            || da2.copy_from_slice(q2.input_grad_cols(g2, cols.clone())),
-        );
-        for (x, y) in self.da[..b * ad].iter_mut().zip(&self.da2[..b * ad]) {
-            *x += y;
-        }
-        let d_raw = self.head.backward(&self.da[..b * ad], &self.dlogp[..b]);
+        let da = self.critics.input_grad_min(-inv_b, od..od + ad);
+        let d_raw = self.head.backward(da, &self.dlogp[..b]);
         self.actor.zero_grad();
         self.actor.backward(d_raw);
         step(&mut self.actor, &mut self.actor_opt, self.cfg.max_grad_norm);
@@ -230,12 +203,10 @@ impl OffPolicy for Sac {
         }
 
         // 4. Targets.
-        let tau = self.cfg.tau as f32;
-        let (q1t, q1, q2t, q2) = (&mut self.q1_target, &self.q1, &mut self.q2_target, &self.q2);
-        par::join(|| q1t.polyak_from(q1, tau), || q2t.polyak_from(q2, tau));
+        self.critics.polyak(self.cfg.tau as f32);
 
         UpdateStats {
-            critic_loss: critic_loss / 2.0,
+            critic_loss,
             actor_loss: Some(actor_loss),
             alpha: Some(f64::from(alpha)),
             entropy: Some(-mean_logp),
@@ -244,15 +215,19 @@ impl OffPolicy for Sac {
 }
 
 learned_parts!(Sac, |s, f| {
+    let names = s.critics.names();
     f("actor", P::Net(r!(s.actor)));
-    f("q1", P::Net(r!(s.q1)));
-    f("q2", P::Net(r!(s.q2)));
-    f("q1_target", P::Net(r!(s.q1_target)));
-    f("q2_target", P::Net(r!(s.q2_target)));
+    for (name, q) in names.iter().zip(each!(s.critics.nets)) {
+        f(name[0], P::Net(q));
+    }
+    for (name, q) in names.iter().zip(each!(s.critics.targets)) {
+        f(name[1], P::Net(q));
+    }
     f("log_alpha", P::Tensor(r!(s.log_alpha)));
     f("actor_opt", P::Adam(r!(s.actor_opt)));
-    f("q1_opt", P::Adam(r!(s.q1_opt)));
-    f("q2_opt", P::Adam(r!(s.q2_opt)));
+    for (name, opt) in names.iter().zip(each!(s.critics.opts)) {
+        f(name[2], P::Adam(opt));
+    }
     f("alpha_opt", P::Adam(r!(s.alpha_opt)));
     f("agent_rng", P::State(r!(s.rng)));
 });

@@ -3,7 +3,8 @@
 //! and no target policy smoothing.
 //!
 //! Networks: a deterministic actor `mu: obs -> act` (tanh output), `n` critics
-//! `Q_i: [obs | act] -> 1` (TD3: 2, DDPG: 1) and Polyak-averaged targets of all of them.
+//! `Q_i: [obs | act] -> 1` (TD3: 2, DDPG: 1; a [`Critics`] ensemble) and Polyak-averaged targets
+//! of all of them.
 //!
 //! One update on a batch `(s, a, r, s', d)`:
 //! 1. target action `a' = mu'(s')`, smoothed (TD3 only):
@@ -15,16 +16,58 @@
 //!    Polyak-averaged, `theta' <- (1 - tau) theta' + tau theta`.
 //!
 //! Exploration: Gaussian or Ornstein-Uhlenbeck noise added to `mu(s)`, clipped to [-1, 1].
+//!
+//! Its own settings: `[agent.td3]`, [`Td3Config`] (exploration, policy delay, target policy
+//! smoothing).
 
+use serde::{Deserialize, Serialize};
+
+use super::config::validate_noise;
+use super::critics::{self, Critics, TargetSide, TWIN};
+use super::ddpg::DdpgConfig;
 use super::noise::ActionNoise;
 use super::parts::learned_parts;
-use super::{
-    fit_forwarded, sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats,
-};
+use super::{sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
-use crate::base::par;
 use crate::base::rng::Rng;
+use crate::base::validate::{at_least_one, non_negative};
 use crate::nn::{concat_cols, Activation, Adam, Mlp};
+use crate::Result;
+
+/// `[agent.td3]`: TD3's exploration, policy delay and target policy smoothing.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Td3Config {
+    /// Exploration noise kind.
+    pub noise: NoiseKind,
+    /// Exploration noise scale sigma (action units, actions in [-1, 1]).
+    pub noise_sigma: f64,
+    /// Ornstein-Uhlenbeck mean-reversion rate theta (per step).
+    pub ou_theta: f64,
+    /// Actor and target updates every this many critic updates.
+    pub policy_delay: u32,
+    /// Target policy smoothing noise sigma (action units).
+    pub target_noise: f64,
+    /// Clip of the smoothing noise (action units).
+    pub target_noise_clip: f64,
+}
+
+impl Default for Td3Config {
+    fn default() -> Self {
+        let DdpgConfig { noise, noise_sigma, ou_theta } = DdpgConfig::default();
+        Td3Config { noise, noise_sigma, ou_theta, policy_delay: 2, target_noise: 0.2, target_noise_clip: 0.5 }
+    }
+}
+
+impl Td3Config {
+    /// Check every value; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        validate_noise("agent.td3", self.noise_sigma, self.ou_theta)?;
+        at_least_one("agent.td3.policy_delay", self.policy_delay.into())?;
+        non_negative("agent.td3.target_noise", self.target_noise)?;
+        non_negative("agent.td3.target_noise_clip", self.target_noise_clip)
+    }
+}
 
 /// What sets a member of the TD3 family apart.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,7 +93,7 @@ impl Family {
         let t = cfg.td3();
         Family {
             algo: Algo::Td3,
-            critics: &[["q1", "q1_target", "q1_opt"], ["q2", "q2_target", "q2_opt"]],
+            critics: TWIN,
             policy_delay: t.policy_delay,
             target_smoothing: Some((t.target_noise, t.target_noise_clip)),
             noise: (t.noise, t.noise_sigma, t.ou_theta),
@@ -65,11 +108,10 @@ pub struct Td3 {
     obs_dim: usize,
     act_dim: usize,
     actor: Mlp<f32>,
-    critics: Vec<Mlp<f32>>,
+    /// The critics (named by `family.critics`), their targets and optimisers.
+    critics: Critics,
     actor_target: Mlp<f32>,
-    critic_targets: Vec<Mlp<f32>>,
     actor_opt: Adam<f32>,
-    critic_opts: Vec<Adam<f32>>,
     noise: ActionNoise,
     rng: Rng,
     updates: u64,
@@ -80,18 +122,6 @@ pub struct Td3 {
     /// Standard normal draws of the target policy smoothing (`batch x act`).
     smoothing_noise: Vec<f64>,
     y: Vec<f32>,
-    dq: Vec<f32>,
-    /// Per critic: its target's values on the batch.
-    q_next: Vec<Vec<f32>>,
-    /// Per critic: its loss gradient (the critics run at once on a pool's threads, see
-    /// `stagerl::base::par`) and its last loss.
-    scratch: Vec<CriticScratch>,
-}
-
-/// One critic's buffers for an update.
-struct CriticScratch {
-    dq: Vec<f32>,
-    loss: f64,
 }
 
 impl Td3 {
@@ -105,17 +135,13 @@ impl Td3 {
         let mut init = Rng::derived(seed, family.salts.0);
         let actor =
             Mlp::new(&sizes(obs_dim, &cfg.hidden, act_dim), Activation::Relu, Activation::Tanh, &mut init);
-        let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
-        let critics: Vec<Mlp<f32>> = (0..family.critics.len())
-            .map(|_| Mlp::new(&critic_sizes, Activation::Relu, Activation::Identity, &mut init))
-            .collect();
-        let (kind, sigma, theta) = family.noise;
         let b = cfg.batch_size;
+        let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
+        let critics = Critics::new(family.critics, &critic_sizes, cfg.critic_lr(), &mut init, b, act_dim);
+        let (kind, sigma, theta) = family.noise;
         Td3 {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
-            critic_opts: critics.iter().map(|q| Adam::new(q.num_params(), cfg.critic_lr())).collect(),
             actor_target: actor.clone(),
-            critic_targets: critics.clone(),
             noise: ActionNoise::new(kind, sigma, theta, act_dim),
             rng: Rng::derived(seed, family.salts.1),
             updates: 0,
@@ -124,11 +150,6 @@ impl Td3 {
             a_next: vec![0.0; b * act_dim],
             smoothing_noise: vec![0.0; b * act_dim],
             y: vec![0.0; b],
-            dq: vec![0.0; b],
-            q_next: vec![vec![0.0; b]; family.critics.len()],
-            scratch: (0..family.critics.len())
-                .map(|_| CriticScratch { dq: vec![0.0; b], loss: 0.0 })
-                .collect(),
             family,
             cfg: cfg.clone(),
             obs_dim,
@@ -178,102 +199,69 @@ impl OffPolicy for Td3 {
         let b = batch.size;
         self.updates += 1;
         let actor_due = self.updates.is_multiple_of(u64::from(self.family.policy_delay));
-        let Td3 { actor, critics, critic_opts, scratch, critic_in, .. } = self;
+        let (od, ad) = (self.obs_dim, self.act_dim);
 
         // 1-2. The targets y (steps 1 and 2's target), while the critics' forward passes on
         // (s, a) run on a second thread (with a pool; the results do not depend on it).
-        let (od, ad) = (self.obs_dim, self.act_dim);
+        concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
         let mut targets = Targets {
             family: &self.family,
             gamma: self.cfg.gamma as f32,
             actor: &mut self.actor_target,
-            critics: &mut self.critic_targets,
             rng: &mut self.rng,
             smoothing_noise: &mut self.smoothing_noise,
             a_next: &mut self.a_next,
             critic_in: &mut self.critic_in_next,
-            q_next: &mut self.q_next,
             y: &mut self.y,
         };
-        par::join(
-            || targets.compute(batch, od, ad),
-            || {
-                concat_cols(&batch.obs, od, &batch.act, ad, b, critic_in);
-                for q in critics.iter_mut() {
-                    q.forward(critic_in, b);
-                }
-            },
-        );
+        let target_side = |critics: TargetSide<'_>| targets.compute(batch, od, ad, critics);
+        self.critics.forward_alongside(&self.critic_in, b, target_side);
 
-        // 2. Each critic minimises its error. One critic shares the step with the actor's forward
-        // pass mu(s) when the actor is due; two run at once.
+        // 2. Each critic minimises its error. A lone critic shares the step with the actor's
+        // forward pass mu(s) when the actor is due.
         let n = self.cfg.max_grad_norm;
-        let y = &self.y[..b];
-        let mut mu_done = false;
-        if let ([q], [opt], [s]) = (&mut critics[..], &mut critic_opts[..], &mut scratch[..]) {
-            let actor_forward = || {
-                if actor_due {
-                    actor.forward(&batch.obs, b);
-                    mu_done = true;
-                }
-            };
-            par::join(|| s.loss = fit_forwarded(q, opt, y, &mut s.dq, n), actor_forward);
-        } else {
-            par::for_each_mut3(critics, critic_opts, scratch, &|_, q, opt, s| {
-                s.loss = fit_forwarded(q, opt, y, &mut s.dq, n)
-            });
-        }
-        let mut critic_loss = 0.0;
-        for s in scratch.iter() {
-            critic_loss += s.loss;
-        }
+        let actor = &mut self.actor;
+        let actor_forward = || {
+            if actor_due {
+                actor.forward(&batch.obs, b);
+            }
+        };
+        let critic_loss = critics::mean(self.critics.fit_forwarded(&self.y[..b], n, actor_forward));
 
         // 3. Delayed actor and targets.
         let mut actor_loss = None;
         if actor_due {
-            if !mu_done {
-                actor.forward(&batch.obs, b);
-            }
-            concat_cols(&batch.obs, od, actor.output(), ad, b, critic_in);
-            let q1 = &mut critics[0];
-            let q = q1.forward(critic_in, b);
+            concat_cols(&batch.obs, od, actor.output(), ad, b, &mut self.critic_in);
+            let q = self.critics.forward_first(&self.critic_in, b);
             actor_loss = Some(-q.iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64);
-            self.dq[..b].fill(-1.0 / b as f32);
-            let da = q1.input_grad_cols(&self.dq[..b], od..od + ad);
+            let da = self.critics.input_grad_first(-1.0 / b as f32, od..od + ad);
             actor.zero_grad();
             actor.backward(da);
             step(actor, &mut self.actor_opt, n);
             let tau = self.cfg.tau as f32;
             self.actor_target.polyak_from(actor, tau);
-            let critics = &*critics;
-            par::for_each_mut(&mut self.critic_targets, &mut scratch[..], &|k, t, _| {
-                t.polyak_from(&critics[k], tau)
-            });
+            self.critics.polyak(tau);
         }
 
-        let critic_loss = critic_loss / critics.len() as f64;
         UpdateStats { critic_loss, actor_loss, alpha: None, entropy: None }
     }
 }
 
-/// The target side of an update: the target networks and their buffers.
+/// The target side of an update: the target actor and the buffers of the target.
 struct Targets<'a> {
     family: &'a Family,
     gamma: f32,
     actor: &'a mut Mlp<f32>,
-    critics: &'a mut [Mlp<f32>],
     rng: &'a mut Rng,
     smoothing_noise: &'a mut [f64],
     a_next: &'a mut [f32],
     critic_in: &'a mut Vec<f32>,
-    /// Per target critic: its values on the batch.
-    q_next: &'a mut [Vec<f32>],
     y: &'a mut [f32],
 }
 
 impl Targets<'_> {
     /// Steps 1 and 2's target: `y = r + gamma (1 - d) min_i Q_i'(s', a')`.
-    fn compute(&mut self, batch: &Batch, od: usize, ad: usize) {
+    fn compute(&mut self, batch: &Batch, od: usize, ad: usize, mut critics: TargetSide<'_>) {
         let b = batch.size;
         // 1. Target action, smoothed for TD3.
         let mu_next = self.actor.predict(&batch.next_obs, b);
@@ -292,15 +280,8 @@ impl Targets<'_> {
         concat_cols(&batch.next_obs, od, a_next, ad, b, self.critic_in);
 
         // 2. Towards the smallest target critic.
-        let ci = &*self.critic_in;
-        par::for_each_mut(self.critics, self.q_next, &|_, t, q| q[..b].copy_from_slice(t.predict(ci, b)));
         let y = &mut self.y[..b];
-        y.copy_from_slice(&self.q_next[0][..b]);
-        for q in &self.q_next[1..] {
-            for (y, &q) in y.iter_mut().zip(&q[..b]) {
-                *y = y.min(q);
-            }
-        }
+        critics.min(self.critic_in, b, y);
         for i in 0..b {
             y[i] = batch.reward[i] + self.gamma * (1.0 - batch.terminal[i]) * y[i];
         }
@@ -308,17 +289,17 @@ impl Targets<'_> {
 }
 
 learned_parts!(Td3, |s, f| {
-    let names = s.family.critics;
+    let names = s.critics.names();
     f("actor", P::Net(r!(s.actor)));
-    for (name, q) in names.iter().zip(each!(s.critics)) {
+    for (name, q) in names.iter().zip(each!(s.critics.nets)) {
         f(name[0], P::Net(q));
     }
     f("actor_target", P::Net(r!(s.actor_target)));
-    for (name, q) in names.iter().zip(each!(s.critic_targets)) {
+    for (name, q) in names.iter().zip(each!(s.critics.targets)) {
         f(name[1], P::Net(q));
     }
     f("actor_opt", P::Adam(r!(s.actor_opt)));
-    for (name, opt) in names.iter().zip(each!(s.critic_opts)) {
+    for (name, opt) in names.iter().zip(each!(s.critics.opts)) {
         f(name[2], P::Adam(opt));
     }
     f("agent_rng", P::State(r!(s.rng)));

@@ -107,7 +107,7 @@ fn ddpg_is_td3_with_one_critic_no_delay_and_no_smoothing() {
     let mut rng = Rng::new(2);
     let batch = random_batch(&mut rng, 16, od, ad);
     let mut ddpg = ddpg::new(&small_cfg(Algo::Ddpg), od, ad, 3);
-    let mut td3 = td3::Td3::new(&small_cfg(Algo::Td3), od, ad, 3);
+    let mut td3 = Td3::new(&small_cfg(Algo::Td3), od, ad, 3);
     assert_eq!((ddpg.algo(), ddpg.num_critics()), (Algo::Ddpg, 1));
     assert_eq!((td3.algo(), td3.num_critics()), (Algo::Td3, 2));
     for i in 1..=6 {

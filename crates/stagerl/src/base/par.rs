@@ -340,9 +340,9 @@ pub fn split_rows_mut<T: Send>(
 
 /// `f(k, &mut a[k], &mut b[k])` for every `k`: [`for_each_mut3`] with two slices.
 pub fn for_each_mut<A: Send, B: Send>(a: &mut [A], b: &mut [B], f: &(dyn Fn(usize, &mut A, &mut B) + Sync)) {
-    let mut units = [(); MAX_THREADS];
-    let units = units.get_mut(..a.len()).expect("par::for_each_mut: at most MAX_THREADS items");
-    for_each_mut3(a, b, units, &|k, x, y, _| f(k, x, y));
+    // A `Vec` of zero-sized values allocates nothing, at any length.
+    let mut units = vec![(); a.len()];
+    for_each_mut3(a, b, &mut units, &|k, x, y, _| f(k, x, y));
 }
 
 /// `f(k, &mut a[k], &mut b[k], &mut c[k])` for every `k`, one item per task across this thread's
@@ -490,6 +490,10 @@ mod tests {
         let (mut c, mut d) = (vec![1], vec![2]);
         for_each_mut(&mut c, &mut d, &|_, x, y| std::mem::swap(x, y));
         assert_eq!((c[0], d[0]), (2, 1));
+        // More items than a pool may have threads.
+        let (mut c, mut d) = (vec![0usize; 3 * MAX_THREADS], vec![1usize; 3 * MAX_THREADS]);
+        install(Some(&pool), || for_each_mut(&mut c, &mut d, &|k, x, y| (*x, *y) = (k, *y + k)));
+        assert!(c.iter().zip(&d).enumerate().all(|(k, (&x, &y))| x == k && y == k + 1));
         // join: both run, on two threads with the pool.
         let (mut x, mut y) = (0, 0);
         let (tx, ty) = (std::sync::Mutex::new(None), std::sync::Mutex::new(None));

@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
 use super::{EpisodeEnd, LoopState};
-use crate::agent::ppo::{Ppo, Rollout};
 use crate::agent::UpdateStats;
+use crate::agent::{Ppo, Rollout};
 use crate::base::rng::Rng;
 use crate::config::Config;
 use crate::env::{EnvState, ReachEnv, VecEnv};

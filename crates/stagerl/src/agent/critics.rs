@@ -1,0 +1,370 @@
+//! An ensemble of `n` critics `Q_i: [obs | act] -> 1` (DDPG: 1, TD3 and SAC: 2, an ensemble
+//! such as REDQ's: N) with their Polyak-averaged targets `Q_i'`, their Adam optimisers and their
+//! buffers, and what the off-policy algorithms do with them:
+//! 1. the target value `min_i Q_i'(s', a')` ([`Critics::target_min`], or
+//!    [`TargetSide::min`] while the critics' forward pass runs, [`Critics::forward_alongside`]);
+//! 2. each critic minimises `mean (Q_i(s, a) - y)^2`, one Adam step ([`Critics::fit`],
+//!    [`Critics::fit_forwarded`]);
+//! 3. the actor's side: SAC's `min_i Q_i(s, a~)`, its gradient dQ/da through the critic of the
+//!    smallest value of each row ([`Critics::forward_min`], [`Critics::input_grad_min`]); TD3's
+//!    and DDPG's `Q_1(s, mu(s))` ([`Critics::forward_first`], [`Critics::input_grad_first`]);
+//! 4. targets `theta_i' <- (1 - tau) theta_i' + tau theta_i` ([`Critics::polyak`]).
+//!
+//! The critics run at once, one task per critic on this thread's pool ([`crate::base::par`]):
+//! each task writes its own critic and its own buffers only, and every value is computed by the
+//! same operations in the same order as one after the other, so the results do not depend on
+//! the number of threads.
+
+use std::ops::Range;
+
+use super::step;
+use crate::base::par;
+use crate::base::rng::Rng;
+use crate::nn::{Activation, Adam, Mlp};
+
+/// Checkpoint names of twin critics (TD3, SAC): `[critic, its target, its optimiser]` each.
+pub const TWIN: &[[&str; 3]] = &[["q1", "q1_target", "q1_opt"], ["q2", "q2_target", "q2_opt"]];
+
+/// The critics, their targets, optimisers and buffers. The networks, targets and optimisers are
+/// listed in the owning agent's learned parts (under [`Critics::names`]).
+pub struct Critics {
+    /// Checkpoint names per critic: `[critic, its target, its optimiser]`.
+    names: &'static [[&'static str; 3]],
+    /// The critics, their targets and their optimisers, `n` each (seen by the agents' lists of
+    /// learned parts, `learned_parts!`, which iterate them).
+    pub(super) nets: Vec<Mlp<f32>>,
+    pub(super) targets: Vec<Mlp<f32>>,
+    pub(super) opts: Vec<Adam<f32>>,
+    /// Per critic: its target's values on the batch.
+    target_q: Vec<Vec<f32>>,
+    scratch: Vec<Scratch>,
+    /// The losses of the last fit, per critic.
+    losses: Vec<f64>,
+    /// Per row of the last [`Critics::forward_min`]: the critic of the smallest value, and it.
+    argmin: Vec<u32>,
+    min: Vec<f32>,
+}
+
+/// One critic's buffers for an update.
+struct Scratch {
+    /// dL/dQ_i per row (the fit's, then the actor side's).
+    dq: Vec<f32>,
+    /// dQ_i/da (actor side, `batch x act`).
+    da: Vec<f32>,
+    /// Its last loss.
+    loss: f64,
+}
+
+impl Critics {
+    /// One critic per entry of `names` (their checkpoint names, at least one), drawn from `init`
+    /// in order, each an MLP of layer sizes `sizes` (ReLU, identity output) with an identical
+    /// target and an Adam optimiser of learning rate `lr`; buffers for batches of `batch` rows
+    /// and actions of `act_dim` values.
+    pub fn new(
+        names: &'static [[&'static str; 3]],
+        sizes: &[usize],
+        lr: f64,
+        init: &mut Rng,
+        batch: usize,
+        act_dim: usize,
+    ) -> Critics {
+        let nets: Vec<Mlp<f32>> =
+            names.iter().map(|_| Mlp::new(sizes, Activation::Relu, Activation::Identity, init)).collect();
+        let n = nets.len();
+        Critics {
+            names,
+            opts: nets.iter().map(|q| Adam::new(q.num_params(), lr)).collect(),
+            targets: nets.clone(),
+            nets,
+            target_q: vec![vec![0.0; batch]; n],
+            scratch: (0..n)
+                .map(|_| Scratch { dq: vec![0.0; batch], da: vec![0.0; batch * act_dim], loss: 0.0 })
+                .collect(),
+            losses: vec![0.0; n],
+            argmin: vec![0; batch],
+            min: vec![0.0; batch],
+        }
+    }
+
+    /// The number of critics.
+    pub fn len(&self) -> usize {
+        self.nets.len()
+    }
+
+    /// Checkpoint names per critic: `[critic, its target, its optimiser]`.
+    pub fn names(&self) -> &'static [[&'static str; 3]] {
+        self.names
+    }
+
+    /// Step 1: `out[r] = min_i Q_i'(input[r])` for the `b` rows of `input`.
+    pub fn target_min(&mut self, input: &[f32], b: usize, out: &mut [f32]) {
+        self.target_side().min(input, b, out)
+    }
+
+    fn target_side(&mut self) -> TargetSide<'_> {
+        TargetSide { targets: &mut self.targets, q: &mut self.target_q }
+    }
+
+    /// The critics' forward pass on `input` (`b` rows, for [`Critics::fit_forwarded`]) at once
+    /// with `f`, which gets the target side (on two threads with a pool; the same values).
+    pub fn forward_alongside(&mut self, input: &[f32], b: usize, f: impl FnOnce(TargetSide<'_>) + Send) {
+        let Critics { nets, targets, target_q, .. } = self;
+        let side = TargetSide { targets, q: target_q };
+        par::join(
+            move || f(side),
+            || {
+                for q in nets.iter_mut() {
+                    q.forward(input, b);
+                }
+            },
+        );
+    }
+
+    /// Step 2: one regression step of every critic towards `y` from its forward pass on `input`
+    /// (`y.len()` rows). Returns the losses.
+    pub fn fit(&mut self, input: &[f32], y: &[f32], max_grad_norm: f64) -> &[f64] {
+        par::for_each_mut3(&mut self.nets, &mut self.opts, &mut self.scratch, &|_, q, opt, s| {
+            q.forward(input, y.len());
+            s.loss = fit_forwarded(q, opt, y, &mut s.dq, max_grad_norm)
+        });
+        self.collect_losses()
+    }
+
+    /// [`Critics::fit`] after the forward pass of [`Critics::forward_alongside`]. `alongside`
+    /// runs at once with the fit of a lone critic (DDPG: the actor's forward pass), else after
+    /// the critics' fits. Returns the losses.
+    pub fn fit_forwarded(
+        &mut self,
+        y: &[f32],
+        max_grad_norm: f64,
+        alongside: impl FnOnce() + Send,
+    ) -> &[f64] {
+        let Critics { nets, opts, scratch, .. } = self;
+        if let ([q], [opt], [s]) = (&mut nets[..], &mut opts[..], &mut scratch[..]) {
+            par::join(|| s.loss = fit_forwarded(q, opt, y, &mut s.dq, max_grad_norm), alongside);
+        } else {
+            par::for_each_mut3(nets, opts, scratch, &|_, q, opt, s| {
+                s.loss = fit_forwarded(q, opt, y, &mut s.dq, max_grad_norm)
+            });
+            alongside();
+        }
+        self.collect_losses()
+    }
+
+    fn collect_losses(&mut self) -> &[f64] {
+        for (l, s) in self.losses.iter_mut().zip(&self.scratch) {
+            *l = s.loss;
+        }
+        &self.losses
+    }
+
+    /// Step 3 (SAC): `min_i Q_i(input[r])` for the `b` rows of `input`, each critic's forward
+    /// pass kept for [`Critics::input_grad_min`]. Of equal values the first critic's is taken.
+    pub fn forward_min(&mut self, input: &[f32], b: usize) -> &[f32] {
+        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, _| {
+            q.forward(input, b);
+        });
+        let (argmin, min) = (&mut self.argmin[..b], &mut self.min[..b]);
+        let first = self.nets[0].output();
+        argmin.fill(0);
+        min.copy_from_slice(&first[..b]);
+        for (k, q) in self.nets.iter().enumerate().skip(1) {
+            for ((best, m), &v) in argmin.iter_mut().zip(min.iter_mut()).zip(q.output()) {
+                // Kept while `m <= v` (not replaced when `v < m`): with two critics, Q_1 unless
+                // `Q_1 <= Q_2` fails, as SAC's `min(Q1, Q2)` (NaN included).
+                let keep = *m <= v;
+                if !keep {
+                    (*best, *m) = (k as u32, v);
+                }
+            }
+        }
+        &self.min[..b]
+    }
+
+    /// Step 3 (SAC): dQ/d(input columns `cols`) of the last [`Critics::forward_min`], the loss's
+    /// gradient being `grad` on each row's smallest value: the sum over the critics of each
+    /// one's input gradient, `grad` on its rows and 0 elsewhere (`b x cols.len()`).
+    pub fn input_grad_min(&mut self, grad: f32, cols: Range<usize>) -> &[f32] {
+        let b = self.nets[0].batch();
+        let m = b * cols.len();
+        let argmin = &self.argmin[..b];
+        par::for_each_mut(&mut self.nets, &mut self.scratch, &|k, q, s| {
+            for (g, &best) in s.dq[..b].iter_mut().zip(argmin) {
+                *g = if best as usize == k { grad } else { 0.0 };
+            }
+            s.da[..m].copy_from_slice(q.input_grad_cols(&s.dq[..b], cols.clone()));
+        });
+        let (first, rest) = self.scratch.split_at_mut(1);
+        let da = &mut first[0].da[..m];
+        for s in rest {
+            for (x, y) in da.iter_mut().zip(&s.da[..m]) {
+                *x += y;
+            }
+        }
+        da
+    }
+
+    /// Step 3 (TD3, DDPG): `Q_1(input[r])` for the `b` rows of `input`, its forward pass kept
+    /// for [`Critics::input_grad_first`].
+    pub fn forward_first(&mut self, input: &[f32], b: usize) -> &[f32] {
+        self.nets[0].forward(input, b)
+    }
+
+    /// Step 3 (TD3, DDPG): dQ_1/d(input columns `cols`) of the last
+    /// [`Critics::forward_first`], the loss's gradient being `grad` on each row.
+    pub fn input_grad_first(&mut self, grad: f32, cols: Range<usize>) -> &[f32] {
+        let b = self.nets[0].batch();
+        let dq = &mut self.scratch[0].dq[..b];
+        dq.fill(grad);
+        self.nets[0].input_grad_cols(dq, cols)
+    }
+
+    /// Step 4: every target `theta_i' <- (1 - tau) theta_i' + tau theta_i`.
+    pub fn polyak(&mut self, tau: f32) {
+        par::for_each_mut(&mut self.targets, &mut self.nets, &|_, t, q| t.polyak_from(q, tau));
+    }
+}
+
+/// The target critics and their buffers alone, lent to a task that runs at once with the
+/// critics' forward pass ([`Critics::forward_alongside`]).
+pub struct TargetSide<'a> {
+    targets: &'a mut [Mlp<f32>],
+    q: &'a mut [Vec<f32>],
+}
+
+impl TargetSide<'_> {
+    /// `out[r] = min_i Q_i'(input[r])` for the `b` rows of `input`.
+    pub fn min(&mut self, input: &[f32], b: usize, out: &mut [f32]) {
+        par::for_each_mut(self.targets, self.q, &|_, t, q| q[..b].copy_from_slice(t.predict(input, b)));
+        let out = &mut out[..b];
+        out.copy_from_slice(&self.q[0][..b]);
+        for q in &self.q[1..] {
+            for (y, &q) in out.iter_mut().zip(&q[..b]) {
+                *y = y.min(q);
+            }
+        }
+    }
+}
+
+/// The mean of the losses of [`Critics::fit`], summed in order.
+pub fn mean(losses: &[f64]) -> f64 {
+    let mut sum = 0.0;
+    for l in losses {
+        sum += l;
+    }
+    sum / losses.len() as f64
+}
+
+/// One regression step of a critic from its last forward pass towards the targets `y`: mean
+/// squared error, backward, Adam. `dq` is scratch of at least `y.len()` values. Returns the loss.
+fn fit_forwarded(
+    q: &mut Mlp<f32>,
+    opt: &mut Adam<f32>,
+    y: &[f32],
+    dq: &mut [f32],
+    max_grad_norm: f64,
+) -> f64 {
+    let b = y.len();
+    let loss = crate::nn::mse_loss(q.output(), y, &mut dq[..b]);
+    q.zero_grad();
+    q.backward(&dq[..b]);
+    step(q, opt, max_grad_norm);
+    f64::from(loss)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::concat_cols;
+
+    const THREE: &[[&str; 3]] =
+        &[["q1", "q1_target", "q1_opt"], ["q2", "q2_target", "q2_opt"], ["q3", "q3_target", "q3_opt"]];
+
+    fn three(seed: u64) -> Critics {
+        Critics::new(THREE, &[5, 16, 16, 1], 1e-3, &mut Rng::new(seed), 8, 2)
+    }
+
+    fn uniform(rng: &mut Rng, n: usize) -> Vec<f32> {
+        (0..n).map(|_| rng.uniform_range(-1.0, 1.0) as f32).collect()
+    }
+
+    #[test]
+    fn three_critics_fit_take_the_minimum_and_follow_with_their_targets() {
+        let (b, od, ad) = (8, 3, 2);
+        let mut c = three(4);
+        assert_eq!((c.len(), c.names()[2][1]), (3, "q3_target"));
+        let mut rng = Rng::new(5);
+        let (obs, act) = (uniform(&mut rng, b * od), uniform(&mut rng, b * ad));
+        let mut input = vec![0.0; b * (od + ad)];
+        concat_cols(&obs, od, &act, ad, b, &mut input);
+        // The target minimum is the elementwise minimum over the three targets.
+        let mut y = vec![0.0; b];
+        c.target_min(&input, b, &mut y);
+        let each: Vec<Vec<f32>> = c.targets.iter_mut().map(|t| t.predict(&input, b).to_vec()).collect();
+        for r in 0..b {
+            assert_eq!(y[r], each[0][r].min(each[1][r]).min(each[2][r]), "row {r}");
+        }
+        assert!((0..b).any(|r| each[0][r] != each[1][r]), "the critics differ");
+        // Fitting lowers every critic's loss on a fixed batch.
+        let target = uniform(&mut rng, b);
+        let first = c.fit(&input, &target, 0.0).to_vec();
+        let mut last = first.clone();
+        for _ in 0..200 {
+            last = c.fit(&input, &target, 0.0).to_vec();
+        }
+        for k in 0..3 {
+            assert!(last[k] < first[k] * 0.1, "critic {k}: loss {} -> {}", first[k], last[k]);
+        }
+        assert_eq!(mean(&last), (last[0] + last[1] + last[2]) / 3.0);
+        // Polyak averaging moves every target towards its critic.
+        let gap = |c: &Critics, k: usize| -> f32 {
+            c.targets[k].params().iter().zip(c.nets[k].params()).map(|(t, q)| (t - q).abs()).sum()
+        };
+        let before: Vec<f32> = (0..3).map(|k| gap(&c, k)).collect();
+        let old: Vec<Vec<f32>> = c.targets.iter().map(|t| t.params().to_vec()).collect();
+        c.polyak(0.5);
+        for k in 0..3 {
+            assert_ne!(c.targets[k].params(), &old[k][..], "target {k} moved");
+            assert!(gap(&c, k) < before[k] * 0.6, "target {k}: {} -> {}", before[k], gap(&c, k));
+        }
+    }
+
+    #[test]
+    fn the_actor_side_goes_through_each_rows_smallest_critic() {
+        // Linear critics of inputs [s_0, s_1, s_2 | a_0, a_1]: Q_k = s_k + (k + 1) a_0 - k a_1, so
+        // that row r, whose smallest s is s_{r mod 3}, goes through critic r mod 3.
+        let (b, od, ad) = (9, 3, 2);
+        let mut c = Critics::new(THREE, &[od + ad, 1], 1e-3, &mut Rng::new(1), b, ad);
+        for (k, q) in c.nets.iter_mut().enumerate() {
+            let p = q.params_mut();
+            p.fill(0.0);
+            (p[k], p[3], p[4]) = (1.0, (k + 1) as f32, -(k as f32));
+        }
+        let mut input = vec![0.0; b * (od + ad)];
+        for r in 0..b {
+            for j in 0..od {
+                input[r * (od + ad) + j] = if j == r % 3 { -1.0 - r as f32 } else { r as f32 };
+            }
+            input[r * (od + ad) + od] = 0.25 * r as f32;
+        }
+        let qmin = c.forward_min(&input, b).to_vec();
+        for r in 0..b {
+            let k = r % 3;
+            assert_eq!(qmin[r], -1.0 - r as f32 + (k + 1) as f32 * 0.25 * r as f32, "row {r}");
+        }
+        let da = c.input_grad_min(-0.5, od..od + ad).to_vec();
+        for r in 0..b {
+            let k = r % 3;
+            assert_eq!(da[r * ad..(r + 1) * ad], [-0.5 * (k + 1) as f32, 0.5 * k as f32], "row {r}");
+        }
+        // The first critic alone (TD3, DDPG).
+        let q1 = c.forward_first(&input, b).to_vec();
+        assert!((0..b).all(|r| q1[r] == input[r * (od + ad)] + input[r * (od + ad) + od]), "{q1:?}");
+        let d1 = c.input_grad_first(0.25, od..od + ad).to_vec();
+        assert_eq!(d1, [0.25, 0.0].repeat(b));
+        // Of equal values the first critic is taken (as SAC's `Q1 <= Q2`).
+        let tie = [0.0; 5];
+        assert_eq!(c.forward_min(&tie, 1), [0.0]);
+        assert_eq!(c.input_grad_min(-1.0, od..od + ad), [-1.0, 0.0]);
+    }
+}
