@@ -70,6 +70,7 @@ pub(crate) fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<
 /// The package's native module.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    stagerl::run::provenance::Code::record_build(env!("STAGERL_GIT_COMMIT"), env!("STAGERL_GIT_DIRTY"));
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("STEP_KEYS", env::STEP_KEYS.to_vec())?;
     m.add_class::<env::ReachCore>()?;
