@@ -27,7 +27,7 @@ pub struct TrainConfig {
     pub checkpoint_every_episodes: u64,
     /// A curriculum for `[task.random_obstacles]`: the probability that a training episode's
     /// first random obstacle is placed in the way, across the straight line from the start
-    /// pose's end effector to the target (`ResolvedTask::place_obstacles`), rather than anywhere
+    /// pose's end effector to the target (`sim::scene::place_obstacles`), rather than anywhere
     /// in the region. Evaluations draw their obstacles as the task says, unbiased. In [0, 1];
     /// 0 (the default, left out of a written config) changes nothing.
     #[serde(skip_serializing_if = "is_zero")]

@@ -28,6 +28,7 @@ use crate::reward::{RewardConfig, RewardInput, RewardTerms};
 use crate::robot::{Chain, Pose};
 use crate::sim::arm::Arm;
 use crate::sim::collision::{CollisionKind, Contact};
+use crate::sim::scene::{place_obstacles, Placement};
 use crate::{Error, Result};
 pub use task::{
     ObservationKind, ObstacleObservation, OnCollision, ResolvedTask, Sim, TaskConfig,
@@ -63,9 +64,7 @@ impl Step {
     pub fn reached(&self) -> bool {
         self.terms.reached
     }
-}
 
-impl Step {
     /// The outcome of a step of `task` from what the arm did (`input`: the end-effector pose
     /// after the step and before it, the joint velocities applied, the target), whether it ended
     /// in contact (`collided`) and the steps taken so far, this one included (the result's
@@ -302,13 +301,18 @@ impl ReachEnv {
     }
 
     fn begin_episode(&mut self) -> &[f32] {
-        if self.task.random_obstacles.is_some() {
-            self.task.place_obstacles(
-                &self.chain,
+        if let Some(random) = &self.task.random_obstacles {
+            let p = Placement {
+                chain: &self.chain,
+                q: &self.q,
+                target: self.target,
+                in_path: self.obstacles_in_path,
+            };
+            place_obstacles(
+                &self.task.obstacles,
+                Some(random),
+                &p,
                 self.arm.collider_mut(),
-                &self.q,
-                self.target,
-                self.obstacles_in_path,
                 &mut self.rng,
                 &mut self.obstacles,
             );
@@ -498,7 +502,7 @@ impl ReachEnv {
     }
     /// From the next reset on, place an episode's first random obstacle in the way from the
     /// start pose's end effector to the target with probability `fraction` (the trainer's
-    /// `train.obstacles_in_path`; see [`ResolvedTask::place_obstacles`]). 0, the default, draws
+    /// `train.obstacles_in_path`; see [`crate::sim::scene::place_obstacles`]). 0, the default, draws
     /// every obstacle from the region.
     ///
     /// Errors: a fraction outside [0, 1] (or NaN), or a positive one for a task without

@@ -7,8 +7,8 @@ use std::f64::consts::FRAC_PI_2;
 
 use crate::base::rng::Rng;
 use crate::robot::{Chain, JointKind};
-use crate::sim::collision::{ArmCollider, Checks};
-use crate::sim::scene::{place_obstacles, Obstacle, Placement, RandomObstacles, MAX_OBSTACLES};
+use crate::sim::collision::Checks;
+use crate::sim::scene::{Obstacle, RandomObstacles, MAX_OBSTACLES};
 use crate::{Error, Result};
 
 /// What the policy observes.
@@ -420,24 +420,6 @@ impl ResolvedTask {
     /// Most obstacles an episode has (fixed and random).
     pub fn max_obstacles(&self) -> usize {
         self.obstacles.len() + self.random_obstacles.as_ref().map_or(0, |r| r.count[1] as usize)
-    }
-
-    /// Draw the episode's obstacles into `out` ([`place_obstacles`]: the fixed ones, then the
-    /// random ones clear of the arm at `q` and of `target`, the first in the way with
-    /// probability `in_path`).
-    #[allow(clippy::too_many_arguments)]
-    pub fn place_obstacles(
-        &self,
-        chain: &Chain,
-        collider: Option<&mut ArmCollider>,
-        q: &[f64],
-        target: nalgebra::Vector3<f64>,
-        in_path: f64,
-        rng: &mut Rng,
-        out: &mut Vec<Obstacle>,
-    ) {
-        let placement = Placement { chain, q, target, in_path };
-        place_obstacles(&self.obstacles, self.random_obstacles.as_ref(), &placement, collider, rng, out);
     }
 
     /// Bounds of the obstacle entries of the observation, per value of one slot (low, high), for
