@@ -1,7 +1,7 @@
 use anyhow::{Context, Result};
-use stagerl::env::{rollout, Flow, Observed, Outcome, ReachEnv, Scratch, Transition};
+use stagerl::env::{rollout, Flow, Observed, Outcome, Policy, ReachEnv, Scratch, Transition};
 use stagerl::plan::controller::JacobianController;
-use stagerl::train::eval::{evaluate_with, stop_when};
+use stagerl::train::eval::{evaluate, EvalOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -80,8 +80,8 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     if args.trials > 0 {
-        let mut driver = Observed(ctl.policy(), stop_when(Some(&stop)));
-        let (s, _) = match evaluate_with(&mut env, args.trials, args.seed, &mut driver) {
+        let opts = EvalOptions::new(args.trials, args.seed).stopped_by(Some(&stop));
+        let (s, _) = match evaluate(&mut env, &mut Policy(ctl.policy()), &opts) {
             Err(e @ stagerl::Error::Stopped { .. }) => stopped(&e.to_string()),
             other => other?,
         };

@@ -1,6 +1,7 @@
 use anyhow::{Context, Result};
-use stagerl::env::Sim;
+use stagerl::env::{Policy, Sim};
 use stagerl::run::dir::{EvalVariant, RunDir};
+use stagerl::train::eval::{deterministic, evaluate, EvalOptions};
 use stagerl::train::{self};
 
 #[derive(clap::Args)]
@@ -41,17 +42,19 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(s) = sim {
         cfg.task.sim = s;
     }
-    let mut loaded = train::eval::load_run_agent(&dir, &cfg, args.run.checkpoint.as_deref())?;
+    let (checkpoint, mut env, mut agent) =
+        train::eval::load_run_agent(&dir, &cfg, args.run.checkpoint.as_deref())?;
     let in_path = args.obstacles_in_path.filter(|&p| p != 0.0);
     if let Some(p) = in_path {
-        loaded.1.set_obstacles_in_path(p).context("--obstacles-in-path")?;
+        env.set_obstacles_in_path(p).context("--obstacles-in-path")?;
     }
     let variant = EvalVariant { sim, obstacles_in_path: in_path };
     // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
     // directory untouched).
     let _lock = crate::run_control::lock_run(&args.run.run)?;
     let stop = crate::run_control::stop_flag()?;
-    let e = match train::eval::evaluate_loaded(loaded, args.trials, args.seed, Some(&stop)) {
+    let opts = EvalOptions::new(args.trials, args.seed).stopped_by(Some(&stop));
+    let (summary, records) = match evaluate(&mut env, &mut Policy(deterministic(agent.as_mut())), &opts) {
         Err(e @ stagerl::Error::Stopped { .. }) => {
             // Standard error may be closed too; the exit code still tells.
             let _ = errln!("stagerl: {e}");
@@ -61,13 +64,13 @@ pub fn run(args: Args) -> Result<()> {
     };
     // Its own file, named by checkpoint, trials and seed: never the closing evaluation
     // (eval-final-seed<N>.csv) a report reads.
-    let (csv, written) = train::eval::write_command_eval(&dir, &e, args.seed, variant, args.force)?;
+    let (csv, written) = train::eval::write_command_eval(&dir, &checkpoint, &records, args.seed, variant, args.force)?;
     if !args.json {
         let other = sim.map(|s| format!(" in the {} simulation (trained {})", s.name(), trained_in.name()));
         let in_path = in_path.map(|p| format!(" with the first obstacle in the way with probability {p}"));
         outln!(
             "{}{}{} on {} trials (seed {}), per-trial CSV {} ({written})",
-            e.checkpoint.display(),
+            checkpoint.display(),
             other.unwrap_or_default(),
             in_path.unwrap_or_default(),
             args.trials,
@@ -75,5 +78,5 @@ pub fn run(args: Args) -> Result<()> {
             csv.display()
         )?;
     }
-    outln!("{}", crate::progress::summary_line(&e.summary, args.json))
+    outln!("{}", crate::progress::summary_line(&summary, args.json))
 }

@@ -70,8 +70,6 @@ pub trait Agent: Send + Learned {
     }
     /// Called at the start of every training episode (resets temporally correlated noise).
     fn begin_episode(&mut self) {}
-    /// How it learns: from a replay buffer or from fresh rollouts.
-    fn learner(&mut self) -> Learner<'_>;
 
     /// Write every network, target network, optimiser state and random state to `ck`.
     fn save(&self, ck: &mut Checkpoint) {
@@ -107,19 +105,38 @@ pub trait OffPolicy: Agent {
     fn update(&mut self, batch: &Batch) -> UpdateStats;
 }
 
-/// An agent as its learning loop needs it.
-pub enum Learner<'a> {
-    OffPolicy(&'a mut dyn OffPolicy),
-    OnPolicy(&'a mut Ppo),
+/// An agent with the kind of learning loop it needs, known from its construction: the
+/// training loop picks its collector from it (`crate::train`), never at run time.
+pub enum Learner {
+    /// Learns from batches sampled from a replay buffer (DDPG, TD3, SAC).
+    OffPolicy(Box<dyn OffPolicy>),
+    /// Learns from fresh rollouts (PPO).
+    OnPolicy(Box<Ppo>),
+}
+
+impl Learner {
+    /// The agent, for what every agent does (act, evaluate, save, load).
+    pub fn into_agent(self) -> Box<dyn Agent> {
+        match self {
+            Learner::OffPolicy(a) => a,
+            Learner::OnPolicy(a) => a,
+        }
+    }
+}
+
+/// Build the agent the config asks for, with its kind of learning. `seed` fixes its initial
+/// weights and its noise.
+pub fn build_learner(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Result<Learner> {
+    cfg.validate()?;
+    Ok(match cfg.algo {
+        Algo::Ppo => Learner::OnPolicy(Box::new(Ppo::new(cfg, obs_dim, act_dim, seed))),
+        _ => Learner::OffPolicy(build_off_policy(cfg, obs_dim, act_dim, seed)?),
+    })
 }
 
 /// Build the agent the config asks for. `seed` fixes its initial weights and its noise.
 pub fn build(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Result<Box<dyn Agent>> {
-    cfg.validate()?;
-    Ok(match cfg.algo {
-        Algo::Ppo => Box::new(Ppo::new(cfg, obs_dim, act_dim, seed)),
-        _ => build_off_policy(cfg, obs_dim, act_dim, seed)?,
-    })
+    build_learner(cfg, obs_dim, act_dim, seed).map(Learner::into_agent)
 }
 
 /// Build the off-policy agent the config asks for (an error for PPO).

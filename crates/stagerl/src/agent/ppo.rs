@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use super::obs_norm::{ObsNorm, ObsNormConfig};
 use super::parts::learned_parts;
-use super::{sizes, Agent, AgentConfig, Algo, Learner, UpdateStats};
+use super::{sizes, Agent, AgentConfig, Algo, UpdateStats};
 use crate::base::rng::Rng;
 use crate::base::validate::{at_least_one, non_negative, positive};
 use crate::nn::{Activation, Adam, Mlp};
@@ -514,9 +514,6 @@ impl Agent for Ppo {
     }
     fn obs_norm(&self) -> Option<&ObsNorm> {
         self.obs_norm.as_ref()
-    }
-    fn learner(&mut self) -> Learner<'_> {
-        Learner::OnPolicy(self)
     }
 }
 

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use super::critics::{self, Critics, TWIN};
 use super::parts::learned_parts;
-use super::{sizes, step, Agent, AgentConfig, Algo, Learner, OffPolicy, UpdateStats};
+use super::{sizes, step, Agent, AgentConfig, Algo, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
 use crate::base::rng::Rng;
 use crate::base::validate::{finite, positive};
@@ -146,10 +146,6 @@ impl Agent for Sac {
     fn predict(&mut self, obs: &[f32], action: &mut [f32]) {
         let raw = self.actor.predict(obs, 1);
         self.head.deterministic(raw, 1, action);
-    }
-
-    fn learner(&mut self) -> Learner<'_> {
-        Learner::OffPolicy(self)
     }
 }
 

@@ -27,7 +27,7 @@ use super::critics::{self, Critics, TargetSide, TWIN};
 use super::ddpg::DdpgConfig;
 use super::noise::ActionNoise;
 use super::parts::learned_parts;
-use super::{sizes, step, Agent, AgentConfig, Algo, Learner, NoiseKind, OffPolicy, UpdateStats};
+use super::{sizes, step, Agent, AgentConfig, Algo, NoiseKind, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
 use crate::base::rng::Rng;
 use crate::base::validate::{at_least_one, non_negative};
@@ -187,10 +187,6 @@ impl Agent for Td3 {
 
     fn begin_episode(&mut self) {
         self.noise.reset();
-    }
-
-    fn learner(&mut self) -> Learner<'_> {
-        Learner::OffPolicy(self)
     }
 }
 

@@ -9,7 +9,7 @@ use super::table::{reward_title, Group, GroupSummary};
 use crate::env::{Policy, ReachEnv};
 use crate::plan::controller::JacobianController;
 use crate::reward::RewardFunction;
-use crate::train::eval::EvalSummary;
+use crate::train::eval::{EvalOptions, EvalSummary};
 use crate::Result;
 
 /// Which settings a study's runs use.
@@ -107,7 +107,7 @@ pub fn evaluate(groups: &[Group], summaries: &[GroupSummary]) -> Result<Vec<Refe
         let chain = env.chain().clone();
         let mut ctl = JacobianController::new(&chain);
         let (summary, _) =
-            crate::train::eval::evaluate_with(&mut env, trials, seed, &mut Policy(ctl.policy()))?;
+            crate::train::eval::evaluate(&mut env, &mut Policy(ctl.policy()), &EvalOptions::new(trials, seed))?;
         out.push(ReferenceRow { reward, seed, summary });
     }
     Ok(out)

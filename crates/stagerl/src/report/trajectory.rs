@@ -66,7 +66,7 @@ pub fn rollout(run: &RunData, trials: u32, eval_seed: u64) -> Result<Rollouts> {
     let cfg = &run.config;
     let (ckpt, mut env, mut agent) = eval::load_run_agent(&RunDir::new(&run.dir), cfg, None)?;
     let mut driver = Tracer { policy: eval::deterministic(agent.as_mut()), paths: Vec::new() };
-    let (_, records) = eval::evaluate_with(&mut env, trials, eval_seed, &mut driver)?;
+    let (_, records) = eval::evaluate(&mut env, &mut driver, &eval::EvalOptions::new(trials, eval_seed))?;
     let points = driver.paths;
     let paths: Vec<TrajectoryPath> = records
         .iter()

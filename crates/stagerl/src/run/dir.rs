@@ -9,7 +9,7 @@
 //!   of the run's best checkpoint on the targets of seed `N` ([`crate::io::csv::TrialRecord`]),
 //!   written by `stagerl train` and `stagerl reproduce` (see `train::final_eval`);
 //! - `eval-<checkpoint>-trials<T>-seed<N>.csv`: evaluations by `stagerl eval` (all through
-//!   `train::evaluate_run`); `eval-seed<N>.csv`: the per-trial evaluations of older versions,
+//!   `train::eval::evaluate`); `eval-seed<N>.csv`: the per-trial evaluations of older versions,
 //!   still read;
 //! - `tb/`: TensorBoard event files with the same scalars and the losses;
 //! - `checkpoints/latest.safetensors`: everything the run needs to continue (networks, targets,

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::agent::Agent;
 use crate::config::Config;
-use crate::env::{rollout, Driver, Flow, Observed, Outcome, ReachEnv, Scratch, Transition};
+use crate::env::{rollout, Driver, Flow, Outcome, ReachEnv, Scratch, Transition};
 use crate::run::dir::RunDir;
 use crate::{Error, Result};
 
@@ -71,36 +71,33 @@ pub const MAX_EVAL_TRIALS: u32 = 10_000_000;
 /// chosen on).
 pub const DEFAULT_EVAL_SEED: u64 = 0;
 
-/// Run `trials` episodes of `agent`'s deterministic policy. The environment's target stream is
-/// reseeded with `seed`, so the same seed gives the same targets whatever ran before.
-pub fn evaluate(
-    agent: &mut dyn Agent,
-    env: &mut ReachEnv,
-    trials: u32,
-    seed: u64,
-) -> Result<(EvalSummary, Vec<TrialRecord>)> {
-    evaluate_until(agent, env, trials, seed, None)
+/// What an evaluation runs: how many trials, on the targets of which seed, until what stop.
+#[derive(Clone, Copy, Debug)]
+pub struct EvalOptions<'a> {
+    /// Episodes (1 to [`MAX_EVAL_TRIALS`]).
+    pub trials: u32,
+    /// Seed of the targets: the same seed gives the same targets whatever ran before (the
+    /// environment's own target stream is left as it was).
+    pub seed: u64,
+    /// Once set (by a signal handler, say), the evaluation ends within a step with
+    /// [`Error::Stopped`], and nothing of it is returned.
+    pub stop: Option<&'a AtomicBool>,
 }
 
-/// [`evaluate`] that a stop request (`stop` set) ends within a step, with [`Error::Stopped`]
-/// (the environment's target stream is restored either way).
-pub fn evaluate_until(
-    agent: &mut dyn Agent,
-    env: &mut ReachEnv,
-    trials: u32,
-    seed: u64,
-    stop: Option<&AtomicBool>,
-) -> Result<(EvalSummary, Vec<TrialRecord>)> {
-    evaluate_with(env, trials, seed, &mut Observed(deterministic(agent), stop_when(stop)))
+impl<'a> EvalOptions<'a> {
+    /// `trials` trials on the targets of `seed`, not stoppable.
+    pub fn new(trials: u32, seed: u64) -> EvalOptions<'a> {
+        EvalOptions { trials, seed, stop: None }
+    }
+
+    /// The same, ended early once `stop` is set.
+    pub fn stopped_by(self, stop: Option<&'a AtomicBool>) -> EvalOptions<'a> {
+        EvalOptions { stop, ..self }
+    }
 }
 
-/// A rollout observer that stops the rollout ([`Flow::Stop`]) once `stop` is set.
-pub fn stop_when(stop: Option<&AtomicBool>) -> impl FnMut(&Transition<'_>) -> Result<Flow> + '_ {
-    move |_| Ok(if stop.is_some_and(|s| s.load(Ordering::SeqCst)) { Flow::Stop } else { Flow::Continue })
-}
-
-/// The deterministic policy of `agent` as a rollout policy; a non-finite action is a
-/// numerical fault.
+/// The deterministic policy of `agent` as a rollout policy (what evaluation and deployment run;
+/// [`crate::env::Policy`]`(deterministic(agent))` is its driver); a non-finite action is a numerical fault.
 pub fn deterministic(agent: &mut dyn Agent) -> impl FnMut(&ReachEnv, &mut [f32]) -> Result<()> + '_ {
     move |env, action| {
         agent.predict(env.observation(), action);
@@ -115,28 +112,45 @@ pub fn deterministic(agent: &mut dyn Agent) -> impl FnMut(&ReachEnv, &mut [f32])
     }
 }
 
-/// Run `trials` episodes (eq. 16 rollouts) of `driver` on the targets of `seed` (the
-/// environment's own target stream is left as it was). A driver that stops a rollout
-/// ([`Flow::Stop`], on a stop request) ends the evaluation with [`Error::Stopped`], for the
-/// caller that owns the stop request to report; nothing of it is returned.
-pub fn evaluate_with(
+/// A driver that also stops its rollout once `stop` is set.
+struct UntilStop<'a, 'b, D: ?Sized> {
+    driver: &'a mut D,
+    stop: Option<&'b AtomicBool>,
+}
+
+impl<D: Driver + ?Sized> Driver for UntilStop<'_, '_, D> {
+    fn act(&mut self, env: &ReachEnv, action: &mut [f32]) -> Result<()> {
+        self.driver.act(env, action)
+    }
+    fn on_step(&mut self, t: &Transition<'_>) -> Result<Flow> {
+        let flow = self.driver.on_step(t)?;
+        Ok(if self.stop.is_some_and(|s| s.load(Ordering::SeqCst)) { Flow::Stop } else { flow })
+    }
+}
+
+/// The one evaluation (as Stable-Baselines3's `evaluate_policy`): `opts.trials` episodes (eq. 16
+/// rollouts) of `policy` (an agent's deterministic policy as `Policy(deterministic(agent))`,
+/// the Jacobian controller, any [`Driver`]) on the targets of `opts.seed`; the summary and every trial's record. A stop
+/// (`opts.stop`, or the driver stopping a rollout with [`Flow::Stop`]) ends it with
+/// [`Error::Stopped`], for the caller that owns the stop request to report.
+pub fn evaluate<D: Driver + ?Sized>(
     env: &mut ReachEnv,
-    trials: u32,
-    seed: u64,
-    driver: &mut impl Driver,
+    policy: &mut D,
+    opts: &EvalOptions<'_>,
 ) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    let trials = opts.trials;
     if trials == 0 || trials > MAX_EVAL_TRIALS {
         return Err(Error::InvalidInput(format!("{trials} evaluation trials: need 1 to {MAX_EVAL_TRIALS}")));
     }
     let saved_rng = env.rng().clone();
-    let result = run_trials(env, trials, seed, driver);
+    let result = run_trials(env, trials, opts.seed, &mut UntilStop { driver: policy, stop: opts.stop });
     env.set_rng(saved_rng);
     let records = result?;
     let summary = EvalSummary::of(&records).expect("at least one trial");
     Ok((summary, records))
 }
 
-/// The trials of [`evaluate_with`].
+/// The trials of [`evaluate`].
 fn run_trials(
     env: &mut ReachEnv,
     trials: u32,
@@ -212,44 +226,6 @@ pub fn load_policy(path: &Path) -> Result<(PathBuf, ReachEnv, Box<dyn Agent>)> {
     Ok((path.to_path_buf(), env, agent))
 }
 
-/// What [`evaluate_run`] found.
-#[derive(Clone, Debug)]
-pub struct RunEval {
-    /// The checkpoint evaluated.
-    pub checkpoint: PathBuf,
-    pub summary: EvalSummary,
-    /// Every trial, for the per-trial CSV.
-    pub trials: Vec<TrialRecord>,
-}
-
-/// Evaluate a run directory's checkpoint (`checkpoint`, else the best available: best, final,
-/// latest) on `trials` targets of `seed`, stopped by `stop` ([`Error::Stopped`]). Writes
-/// nothing: the closing evaluation ([`super::final_eval::run`]) and `stagerl eval`
-/// ([`write_command_eval`]) write their own files.
-pub fn evaluate_run(
-    run: &RunDir,
-    cfg: &Config,
-    checkpoint: Option<&Path>,
-    trials: u32,
-    seed: u64,
-    stop: Option<&AtomicBool>,
-) -> Result<RunEval> {
-    evaluate_loaded(load_run_agent(run, cfg, checkpoint)?, trials, seed, stop)
-}
-
-/// The evaluation of [`evaluate_run`] on an agent [`load_run_agent`] loaded (for a caller that
-/// has something to do between the two, such as taking the run's lock once the agent is known
-/// to load).
-pub fn evaluate_loaded(
-    (checkpoint, mut env, mut agent): (PathBuf, ReachEnv, Box<dyn Agent>),
-    trials: u32,
-    seed: u64,
-    stop: Option<&AtomicBool>,
-) -> Result<RunEval> {
-    let (summary, trials) = evaluate_until(agent.as_mut(), &mut env, trials, seed, stop)?;
-    Ok(RunEval { checkpoint, summary, trials })
-}
-
 /// What [`write_command_eval`] did with the per-trial CSV.
 use crate::io::Written;
 
@@ -261,16 +237,17 @@ use crate::io::Written;
 /// `--obstacles-in-path`); the file is [`RunDir::eval_command_in`]'s.
 pub fn write_command_eval(
     run: &RunDir,
-    e: &RunEval,
+    checkpoint: &Path,
+    records: &[TrialRecord],
     seed: u64,
     variant: crate::run::dir::EvalVariant,
     force: bool,
 ) -> Result<(PathBuf, Written)> {
-    let trials = u32::try_from(e.trials.len()).expect("at most MAX_EVAL_TRIALS trials");
-    let csv = run.eval_command_in(&e.checkpoint, trials, seed, variant);
+    let trials = u32::try_from(records.len()).expect("at most MAX_EVAL_TRIALS trials");
+    let csv = run.eval_command_in(checkpoint, trials, seed, variant);
     let written = if !csv.exists() {
         Written::New
-    } else if read_trials_csv(&csv).ok().as_deref() == Some(&e.trials[..]) {
+    } else if read_trials_csv(&csv).ok().as_deref() == Some(records) {
         return Ok((csv, Written::Unchanged));
     } else if force {
         Written::Replaced
@@ -281,7 +258,7 @@ pub fn write_command_eval(
             csv.display()
         )));
     };
-    write_trials_csv(&csv, &e.trials)?;
+    write_trials_csv(&csv, records)?;
     Ok((csv, written))
 }
 

@@ -15,7 +15,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use super::config_hash;
-use super::eval::{evaluate_run, EvalSummary};
+use super::eval::{deterministic, evaluate, load_run_agent, EvalOptions, EvalSummary};
+use crate::env::Policy;
+use crate::io::csv::TrialRecord;
 use crate::config::Config;
 use crate::run::dir::RunDir;
 use crate::{Error, Result};
@@ -94,22 +96,35 @@ pub fn run(
     let (checkpoint, record) = planned(dir, cfg, trials, seed)
         .ok_or_else(|| Error::InvalidInput(format!("{}: trained but no checkpoint", dir.display())))?;
     let run = RunDir::new(dir);
-    let e = evaluate_run(&run, cfg, Some(&checkpoint), trials, seed, stop)?;
+    let opts = EvalOptions::new(trials, seed).stopped_by(stop);
+    let (summary, records) = evaluate_checkpoint(&run, cfg, &checkpoint, &opts)?;
     // The final checkpoint on the same targets (the same trials when it is the one selected).
     let final_trials = if !record.final_checkpoint {
         None
     } else if checkpoint == run.final_checkpoint() {
-        Some(e.trials.clone())
+        Some(records.clone())
     } else {
-        Some(evaluate_run(&run, cfg, Some(&run.final_checkpoint()), trials, seed, stop)?.trials)
+        Some(evaluate_checkpoint(&run, cfg, &run.final_checkpoint(), &opts)?.1)
     };
     // The record goes last: without it the run is not evaluated, whatever else is on disk.
     let _ = std::fs::remove_file(run.final_eval_record(seed));
-    crate::io::csv::write_trials_csv(&run.final_eval(seed), &e.trials)?;
+    crate::io::csv::write_trials_csv(&run.final_eval(seed), &records)?;
     if let Some(t) = &final_trials {
         crate::io::csv::write_trials_csv(&run.final_checkpoint_eval(seed), t)?;
     }
     let json = serde_json::to_string_pretty(&record).expect("the record serialises");
     crate::io::write_atomic(&run.final_eval_record(seed), json.as_bytes())?;
-    Ok((e.summary, e.checkpoint))
+    Ok((summary, checkpoint))
+}
+
+/// The deterministic policy of the run's checkpoint `checkpoint`, evaluated.
+fn evaluate_checkpoint(
+    run: &RunDir,
+    cfg: &Config,
+    checkpoint: &Path,
+    opts: &EvalOptions<'_>,
+) -> Result<(EvalSummary, Vec<TrialRecord>)> {
+    let (_, mut env, mut agent) = load_run_agent(run, cfg, Some(checkpoint))?;
+    let (summary, records) = evaluate(&mut env, &mut Policy(deterministic(agent.as_mut())), opts)?;
+    Ok((summary, records))
 }

@@ -1,6 +1,10 @@
-//! The off-policy training loop shared by every agent (the paper's Algorithm 1: act, compute the
-//! reward, update the actor and the critic after every environment step), and the run directory
-//! it writes.
+//! The one training loop of every agent, over one of two collectors chosen at construction from
+//! the agent's kind ([`crate::agent::Learner`]): the off-policy one (`off_policy.rs`: the paper's
+//! Algorithm 1, act, store, update the actor and the critic after every environment step, with
+//! HER's relabelling) or the on-policy one (`on_policy.rs`: PPO's parallel environments and
+//! rollout). The loop owns what every algorithm shares: the episode log, the periodic evaluation
+//! and the best checkpoint, checkpoints, TensorBoard and stops ([`Trainer`]). It writes a run
+//! directory.
 //!
 //! A run directory holds:
 //! - `config.toml`: the resolved configuration (seed included);
@@ -27,6 +31,7 @@
 pub mod eval;
 pub mod final_eval;
 pub mod her;
+mod off_policy;
 mod on_policy;
 pub mod replace;
 
@@ -35,20 +40,20 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use crate::agent::replay::{Batch, ReplayBuffer};
-use crate::agent::{self, Agent, AgentConfig, Learner, OffPolicy, UpdateStats};
+use crate::agent::{self, Agent, Learner, UpdateStats};
 use crate::base::rng::Rng;
 use crate::config::Config;
-use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
+use crate::env::{Policy, ReachEnv};
 use crate::io::checkpoint::Checkpoint;
 use crate::io::csv::{parse_line, push_row, CsvRecord, CsvRow};
 use crate::io::csv::{EpisodeCsv, EpisodeRecord, EvalPoint};
 use crate::io::tensorboard::EventWriter;
-use crate::train::her::{HerState, Relabeller};
 use crate::{Error, Result};
 
 use crate::run::dir::RunDir;
-use eval::{evaluate_until, EvalSummary};
+use eval::{deterministic, evaluate, EvalOptions, EvalSummary};
+use off_policy::OffPolicyCollector;
+use on_policy::OnPolicyCollector;
 
 /// What the loop reports after each episode.
 pub struct Progress<'a> {
@@ -104,40 +109,34 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
     Ok(agent)
 }
 
-/// Counters and random states of a run, saved in every full checkpoint.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-struct LoopState {
+/// The checkpoint metadata holding the training state: the loop's [`LoopState`] and its
+/// collector's state, as fields of one JSON object.
+const TRAIN_STATE: &str = "train_state";
+
+/// What the loop counts, shared with the collectors.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+struct Counters {
     /// Episodes completed.
     episode: u64,
     env_steps: u64,
     updates: u64,
-    /// A checkpoint taken mid-episode: the episode `episode + 1` is under way.
-    in_episode: bool,
-    /// The eq. 16 reward of the episode under way so far.
-    episode_reward: f64,
-    env: EnvState,
-    replay_rng: Rng,
-    warmup_rng: Rng,
-    replay_len: usize,
-    replay_pos: usize,
+}
+
+/// The loop's counters and progress, saved in every full checkpoint (beside the collector's
+/// state, [`Collector::save`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct LoopState {
+    #[serde(flatten)]
+    n: Counters,
     /// Wall seconds of the run before this session (so `wall_s` keeps counting).
     wall_s: f64,
     finished: bool,
     /// Best periodic evaluation so far: (success rate, mean reward), for `best.safetensors`.
     #[serde(default)]
     best_eval: Option<(f64, f64)>,
-    /// A stop came between the updates of this environment step: they go on first.
-    #[serde(default)]
-    step_under_way: Option<StepUnderWay>,
     /// A stop came during the periodic evaluation of episode `episode`: it runs first.
     #[serde(default)]
     eval_due: bool,
-    /// Hindsight relabelling (`agent.her`): the episode under way and the goal sampler.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    her: Option<HerState>,
-    /// PPO's environments and rollout ([`on_policy`]).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    on_policy: Option<on_policy::OnPolicyState>,
 }
 
 /// How an episode ended, as its `episodes.csv` row needs it.
@@ -153,30 +152,28 @@ struct EpisodeEnd {
     collision_steps: Option<u32>,
 }
 
-/// An environment step taken whose updates are not all done yet (see [`LoopState`]); once they
-/// are, what the episode's end needs of it.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-struct StepUnderWay {
-    /// Updates of this step still to do.
-    updates_left: u32,
-    /// The target was reached (older checkpoints: `terminated`, which meant the same).
-    #[serde(alias = "terminated")]
-    reached: bool,
-    done: bool,
-    /// D_PT after the step, metres, as `f64::to_bits` (exact through JSON).
-    final_distance_m_bits: u64,
-}
-
-impl StepUnderWay {
-    /// The step `step` with `updates_left` updates to do.
-    fn of(step: &Step, updates_left: u32) -> StepUnderWay {
-        StepUnderWay {
-            updates_left,
-            reached: step.reached(),
-            done: step.done(),
-            final_distance_m_bits: step.terms.distance.to_bits(),
-        }
-    }
+/// How experience is collected and learnt from: a replay buffer and updates after every step
+/// ([`OffPolicyCollector`]) or rollouts of parallel environments ([`OnPolicyCollector`]). The
+/// loop asks it for episodes; it owns the agent, its training environments and what they need
+/// to resume.
+trait Collector {
+    /// The agent being trained.
+    fn agent(&self) -> &dyn Agent;
+    fn agent_mut(&mut self) -> &mut dyn Agent;
+    /// Step (and learn) until an episode ends; `None` when `stop_requested` said so first.
+    fn next_episode(
+        &mut self,
+        n: &mut Counters,
+        last_stats: &mut Option<UpdateStats>,
+        stop_requested: &dyn Fn() -> bool,
+    ) -> Result<Option<EpisodeEnd>>;
+    /// An episode not yet logged is under way (a checkpoint taken mid-episode).
+    fn mid_episode(&self) -> bool;
+    /// Write its arrays to `ck`; the rest of its state, a JSON object, is returned to join the
+    /// loop's in [`TRAIN_STATE`].
+    fn save(&mut self, ck: &mut Checkpoint) -> serde_json::Value;
+    /// Restore what [`Collector::save`] wrote (`path` names the checkpoint in errors).
+    fn restore(&mut self, ck: &Checkpoint, path: &Path) -> Result<()>;
 }
 
 /// Options of a training session.
@@ -191,15 +188,11 @@ struct Trainer {
     cfg: Config,
     dir: RunDir,
     hash: String,
-    env: ReachEnv,
+    /// The periodic evaluations' environment (obstacles drawn as the task says).
     eval_env: ReachEnv,
-    agent: Box<dyn Agent>,
-    buffer: ReplayBuffer,
-    batch: Batch,
+    collector: Box<dyn Collector>,
     state: LoopState,
     eval_csv: String,
-    relabeller: Relabeller,
-    on_policy: Option<on_policy::OnPolicy>,
 }
 
 impl Trainer {
@@ -207,64 +200,39 @@ impl Trainer {
     fn new(cfg: &Config, dir: RunDir) -> Result<Trainer> {
         let seed = cfg.train.seed;
         let env = ReachEnv::from_config(cfg, Rng::derived(seed, 0).next_u64())?;
-        let (od, ad) = (env.obs_dim(), env.act_dim());
-        let agent = build_agent(cfg, &env)?;
-        let state = LoopState {
-            episode: 0,
-            env_steps: 0,
-            updates: 0,
-            in_episode: false,
-            episode_reward: 0.0,
-            env: env.state(),
-            replay_rng: Rng::derived(seed, 1),
-            warmup_rng: Rng::derived(seed, 2),
-            replay_len: 0,
-            replay_pos: 0,
-            wall_s: 0.0,
-            finished: false,
-            best_eval: None,
-            step_under_way: None,
-            eval_due: false,
-            her: cfg.agent.her.map(|_| HerState::new(Rng::derived(seed, 4))),
-            on_policy: None,
-        };
+        let agent_seed = Rng::derived(seed, 3).next_u64();
+        let learner = agent::build_learner(&cfg.agent, env.obs_dim(), env.act_dim(), agent_seed)?;
         // Evaluations draw obstacles as the task says; only training places them in the way.
         let eval_env = env.clone();
-        let mut env = env;
-        env.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
-        let on_policy =
-            if cfg.agent.algo.is_off_policy() { None } else { Some(on_policy::OnPolicy::new(cfg, &env)?) };
-        // PPO keeps no replay buffer.
-        let capacity = if on_policy.is_none() { cfg.agent.buffer_size } else { 1 };
+        let collector: Box<dyn Collector> = match learner {
+            Learner::OffPolicy(agent) => Box::new(OffPolicyCollector::new(cfg, env, agent)?),
+            Learner::OnPolicy(ppo) => Box::new(OnPolicyCollector::new(cfg, &env, ppo)?),
+        };
         Ok(Trainer {
             hash: config_hash(cfg),
             eval_env,
-            buffer: ReplayBuffer::new(capacity, od, ad)?,
-            on_policy,
-            batch: Batch::new(cfg.agent.batch_size, od, ad),
+            collector,
             cfg: cfg.clone(),
             dir,
-            env,
-            agent,
-            state,
+            state: LoopState {
+                n: Counters::default(),
+                wall_s: 0.0,
+                finished: false,
+                best_eval: None,
+                eval_due: false,
+            },
             eval_csv: format!("{}\n", EvalPoint::HEADER),
-            relabeller: Relabeller::default(),
         })
     }
 
     /// Write the full training state to `latest.safetensors` (atomically).
     fn save_latest(&mut self) -> Result<()> {
         let mut ck = self.checkpoint_base();
-        self.state.env = self.env.state();
-        self.state.replay_len = self.buffer.len();
-        self.state.replay_pos = self.buffer.position();
-        for (name, data) in self.buffer.arrays() {
-            ck.put_tensor(name, &[data.len()], data);
+        let mut state = serde_json::to_value(&self.state).expect("the state serialises");
+        if let (Some(all), serde_json::Value::Object(theirs)) = (state.as_object_mut(), self.collector.save(&mut ck)) {
+            all.extend(theirs);
         }
-        if let Some(op) = &self.on_policy {
-            self.state.on_policy = Some(op.save(&mut ck));
-        }
-        ck.put_json("train_state", &self.state);
+        ck.put_json(TRAIN_STATE, &state);
         ck.put_meta("eval_csv", self.eval_csv.clone());
         ck.save(&self.dir.latest())
     }
@@ -272,20 +240,18 @@ impl Trainer {
     /// The agent and the run's identity, shared by both checkpoint kinds.
     fn checkpoint_base(&self) -> Checkpoint {
         let mut ck = Checkpoint::new();
-        self.agent.save(&mut ck);
-        ck.put_meta("algorithm", self.agent.algo().name());
-        ck.put_json(
-            crate::run::policy::POLICY_KEY,
-            &crate::run::policy::PolicySpec::new(&self.cfg, &self.env, self.agent.as_ref()),
-        );
-        ck.put_json("obs_dim", &self.env.obs_dim());
-        ck.put_json("act_dim", &self.env.act_dim());
+        let (agent, env) = (self.collector.agent(), &self.eval_env);
+        agent.save(&mut ck);
+        ck.put_meta("algorithm", agent.algo().name());
+        ck.put_json(crate::run::policy::POLICY_KEY, &crate::run::policy::PolicySpec::new(&self.cfg, env, agent));
+        ck.put_json("obs_dim", &env.obs_dim());
+        ck.put_json("act_dim", &env.act_dim());
         ck.put_json("hidden", &self.cfg.agent.hidden);
         ck.put_meta("config_hash", self.hash.clone());
         ck.put_meta("config", self.cfg.to_toml_string());
-        ck.put_json("episode", &self.state.episode);
-        ck.put_json("env_steps", &self.state.env_steps);
-        ck.put_json("updates", &self.state.updates);
+        ck.put_json("episode", &self.state.n.episode);
+        ck.put_json("env_steps", &self.state.n.env_steps);
+        ck.put_json("updates", &self.state.n.updates);
         ck
     }
 
@@ -310,35 +276,9 @@ impl Trainer {
                 cfg.agent.algo
             )));
         }
-        t.agent.load(ck)?;
-        t.state = ck.json("train_state")?;
-        if t.state.her.is_some() != cfg.agent.her.is_some() {
-            return Err(Error::InvalidInput(format!(
-                "{}: its training state {} hindsight relabelling, the run's config (agent.her) {}",
-                path.display(),
-                if t.state.her.is_some() { "has" } else { "lacks" },
-                if cfg.agent.her.is_some() { "sets it" } else { "does not" }
-            )));
-        }
-        let data: Vec<&[f32]> =
-            ReplayBuffer::ARRAY_NAMES.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
-        t.buffer.restore(
-            t.state.replay_len,
-            t.state.replay_pos,
-            [data[0], data[1], data[2], data[3], data[4]],
-        )?;
-        t.env.restore(&t.state.env)?;
-        match (&mut t.on_policy, &t.state.on_policy) {
-            (Some(op), Some(s)) => op.restore(ck, s)?,
-            (None, None) => {}
-            _ => {
-                return Err(Error::InvalidInput(format!(
-                    "{}: its training state does not match the run's algorithm ({})",
-                    path.display(),
-                    cfg.agent.algo
-                )))
-            }
-        }
+        t.collector.agent_mut().load(ck)?;
+        t.state = ck.json(TRAIN_STATE)?;
+        t.collector.restore(ck, &path)?;
         t.eval_csv = ck.meta("eval_csv")?.to_string();
         Ok(t)
     }
@@ -347,7 +287,7 @@ impl Trainer {
     fn rewind_logs(&self) -> Result<()> {
         let path = self.dir.episodes();
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let keep = self.state.episode as usize;
+        let keep = self.state.n.episode as usize;
         let mut lines = text.lines();
         let header = lines.next().unwrap_or_default();
         if header != EpisodeRecord::HEADER && !EpisodeRecord::OLDER_HEADERS.contains(&header) {
@@ -367,7 +307,7 @@ impl Trainer {
         crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
         // The TensorBoard log too: each tag's steps up to the checkpoint, once (but an evaluation
         // still due at the checkpoint's episode, which runs again).
-        let (ep, eval_due) = (self.state.episode as i64, self.state.eval_due);
+        let (ep, eval_due) = (self.state.n.episode as i64, self.state.eval_due);
         let keep =
             |tag: &str, step: i64| step < ep || (step == ep && !(eval_due && tag.starts_with("eval/")));
         crate::io::tensorboard::rewind(&self.dir.tb(), keep).map(|_| ())
@@ -383,15 +323,15 @@ impl Trainer {
         let (start, wall0) = (Instant::now(), self.state.wall_s);
         let wall = || wall0 + start.elapsed().as_secs_f64();
         let stop_requested = || opts.stop.is_some_and(|s| s.load(Ordering::SeqCst));
-        let mut scratch = Scratch::new(&self.env);
         let mut last_stats: Option<UpdateStats> = None;
         let episodes = self.cfg.train.episodes;
         // A periodic evaluation a stop interrupted runs first, as it would have.
         if let Err(e) = self.periodic_eval(&mut logs.tb, opts.stop) {
             return Err(self.stopped(e, wall()));
         }
-        while self.state.episode < episodes {
-            let Some(end) = self.next_episode(&mut scratch, &mut last_stats, &stop_requested)? else {
+        while self.state.n.episode < episodes {
+            let next = self.collector.next_episode(&mut self.state.n, &mut last_stats, &stop_requested)?;
+            let Some(end) = next else {
                 return Err(self.interrupted(wall()));
             };
             let record = self.end_episode(&end, wall(), &mut logs, last_stats.as_ref())?;
@@ -422,7 +362,7 @@ impl Trainer {
         for d in [self.dir.root.clone(), self.dir.tb(), self.dir.checkpoints()] {
             std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
         }
-        let episodes = if self.state.episode == 0 && !self.state.in_episode {
+        let episodes = if self.state.n.episode == 0 && !self.collector.mid_episode() {
             EpisodeCsv::create(&self.dir.episodes())?
         } else {
             EpisodeCsv::append(&self.dir.episodes())?
@@ -443,90 +383,8 @@ impl Trainer {
     fn interrupted(&mut self, wall_s: f64) -> Error {
         self.state.wall_s = wall_s;
         match self.save_latest() {
-            Ok(()) => Error::Interrupted { episode: self.state.episode, checkpoint: self.dir.latest() },
+            Ok(()) => Error::Interrupted { episode: self.state.n.episode, checkpoint: self.dir.latest() },
             Err(e) => e,
-        }
-    }
-
-    /// The next episode to log: the off-policy agents collect one ([`Trainer::collect_episode`]),
-    /// PPO steps its environments until one ends ([`on_policy`]). `None` when a stop request
-    /// left it unfinished.
-    fn next_episode(
-        &mut self,
-        scratch: &mut Scratch,
-        last_stats: &mut Option<UpdateStats>,
-        stop_requested: &dyn Fn() -> bool,
-    ) -> Result<Option<EpisodeEnd>> {
-        if let Some(op) = &mut self.on_policy {
-            let Learner::OnPolicy(ppo) = self.agent.learner() else {
-                return Err(Error::InvalidInput(format!(
-                    "agent.algo = {}: not an on-policy agent",
-                    self.cfg.agent.algo
-                )));
-            };
-            return op.next_episode(ppo, &mut self.state, last_stats, stop_requested);
-        }
-        let Some(last) = self.collect_episode(scratch, last_stats, stop_requested)? else {
-            return Ok(None);
-        };
-        self.relabel_episode();
-        Ok(Some(EpisodeEnd {
-            reward: self.state.episode_reward,
-            steps: self.env.steps(),
-            success: last.reached,
-            final_distance_m: f64::from_bits(last.final_distance_m_bits),
-            collision_steps: Some(self.env.collision_steps()),
-        }))
-    }
-
-    /// Collect a step at a time until the episode under way (or a new one) ends: the eq. 16
-    /// rollout of the exploring agent, storing every transition and updating after each step
-    /// (first the updates left of a step a stop interrupted). `None` when a stop request left
-    /// it unfinished.
-    fn collect_episode(
-        &mut self,
-        scratch: &mut Scratch,
-        last_stats: &mut Option<UpdateStats>,
-        stop_requested: &dyn Fn() -> bool,
-    ) -> Result<Option<StepUnderWay>> {
-        let steps = self.env.steps();
-        let Learner::OffPolicy(agent) = self.agent.learner() else {
-            return Err(Error::InvalidInput(format!(
-                "agent.algo = {}: not an off-policy agent",
-                self.cfg.agent.algo
-            )));
-        };
-        let mut collector = Collector {
-            agent,
-            buffer: &mut self.buffer,
-            batch: &mut self.batch,
-            state: &mut self.state,
-            cfg: &self.cfg.agent,
-            last_stats,
-            stop_requested,
-        };
-        if let Some(step) = collector.state.step_under_way.take() {
-            if !collector.update(step, steps)? {
-                return Ok(None);
-            }
-            if step.done {
-                return Ok(Some(step));
-            }
-        }
-        if !collector.state.in_episode {
-            self.env.reset();
-            if let Some(her) = &mut collector.state.her {
-                her.log.begin(self.env.ee_pose().position);
-            }
-            collector.agent.begin_episode();
-            collector.state.episode_reward = 0.0;
-            collector.state.in_episode = true;
-        }
-        match rollout(&mut self.env, scratch, &mut collector)? {
-            // A stop between the last step's updates leaves them (and the episode's end) to do.
-            Outcome::Finished { .. } if collector.state.step_under_way.is_some() => Ok(None),
-            Outcome::Finished { last, .. } => Ok(Some(StepUnderWay::of(&last, 0))),
-            Outcome::Stopped => Ok(None),
         }
     }
 
@@ -538,22 +396,21 @@ impl Trainer {
         logs: &mut Logs,
         stats: Option<&UpdateStats>,
     ) -> Result<EpisodeRecord> {
-        if let Some(fault) = self.agent.first_non_finite() {
+        if let Some(fault) = self.collector.agent().first_non_finite() {
             return Err(Error::NumericalFault(format!(
-                "{fault} at episode {}, step {}; the last good checkpoint is left in place",
-                self.state.episode + 1,
-                self.env.steps()
+                "{fault} at the end of episode {} ({} steps); the last good checkpoint is left in place",
+                self.state.n.episode + 1,
+                end.steps
             )));
         }
-        self.state.in_episode = false;
-        self.state.episode += 1;
+        self.state.n.episode += 1;
         let record = EpisodeRecord {
-            episode: self.state.episode,
+            episode: self.state.n.episode,
             reward: end.reward,
             steps: end.steps,
             success: end.success,
             final_distance_m: end.final_distance_m,
-            env_steps: self.state.env_steps,
+            env_steps: self.state.n.env_steps,
             wall_s,
             collision_steps: end.collision_steps,
         };
@@ -579,19 +436,6 @@ impl Trainer {
         Ok(record)
     }
 
-    /// With `agent.her`: store the relabelled transitions of the episode just ended.
-    fn relabel_episode(&mut self) {
-        let (Some(cfg), Some(her)) = (self.cfg.agent.her, self.state.her.as_mut()) else {
-            return;
-        };
-        let buffer = &mut self.buffer;
-        let (task, reward) = (self.env.task(), self.env.reward_config());
-        self.relabeller.relabel(&cfg, task, reward, &her.log, &mut her.rng, |x| {
-            buffer.push(x.obs, x.action, x.terms.total, x.next_obs, x.terminal)
-        });
-        her.log.begin(self.env.ee_pose().position);
-    }
-
     /// The periodic evaluation of the episode just finished, when due (`state.eval_due`, at an
     /// evaluation point): evaluate the deterministic policy on the `eval_seed` targets, append
     /// the row to `eval.csv`, its TensorBoard scalars, and keep the agent as `best.safetensors`
@@ -602,20 +446,16 @@ impl Trainer {
         tb: &mut EventWriter,
         stop: Option<&AtomicBool>,
     ) -> Result<Option<EvalSummary>> {
-        let (train, episode) = (&self.cfg.train, self.state.episode);
+        let (train, episode) = (&self.cfg.train, self.state.n.episode);
         if !self.state.eval_due {
             return Ok(None);
         }
-        let (summary, _) = evaluate_until(
-            self.agent.as_mut(),
-            &mut self.eval_env,
-            train.eval_trials,
-            train.eval_seed,
-            stop,
-        )?;
+        let opts = EvalOptions::new(train.eval_trials, train.eval_seed).stopped_by(stop);
+        let (summary, _) =
+            evaluate(&mut self.eval_env, &mut Policy(deterministic(self.collector.agent_mut())), &opts)?;
         let point = EvalPoint {
             episode,
-            env_steps: self.state.env_steps,
+            env_steps: self.state.n.env_steps,
             success_rate: summary.success_rate,
             mean_reward: summary.mean_reward,
             mean_steps: summary.mean_steps,
@@ -653,9 +493,9 @@ impl Trainer {
 
     fn summary(&self) -> TrainSummary {
         TrainSummary {
-            episodes: self.state.episode,
-            env_steps: self.state.env_steps,
-            updates: self.state.updates,
+            episodes: self.state.n.episode,
+            env_steps: self.state.n.env_steps,
+            updates: self.state.n.updates,
             wall_s: self.state.wall_s,
             final_checkpoint: self.dir.final_checkpoint(),
         }
@@ -666,88 +506,6 @@ impl Trainer {
 struct Logs {
     episodes: EpisodeCsv,
     tb: EventWriter,
-}
-
-/// Algorithm 1 at each step of a training episode: explore (uniform actions before
-/// `learning_starts`, then the agent's exploring policy), store the transition, update.
-struct Collector<'a> {
-    agent: &'a mut dyn OffPolicy,
-    buffer: &'a mut ReplayBuffer,
-    batch: &'a mut Batch,
-    state: &'a mut LoopState,
-    cfg: &'a AgentConfig,
-    last_stats: &'a mut Option<UpdateStats>,
-    stop_requested: &'a dyn Fn() -> bool,
-}
-
-impl Collector<'_> {
-    fn check_loss(&self, what: &str, v: Option<f64>, steps: u32) -> Result<()> {
-        match v {
-            Some(v) if !v.is_finite() => Err(Error::NumericalFault(format!(
-                "{what} = {v} at episode {}, step {steps} (update {}); the last good checkpoint is left in place",
-                self.state.episode + 1,
-                self.state.updates
-            ))),
-            _ => Ok(()),
-        }
-    }
-
-    /// The updates left of `step` (the environment's step `steps` of the episode). A stop
-    /// request between two updates keeps the step under way in the state and returns `false`
-    /// (many `updates_per_step` do not delay a stop).
-    fn update(&mut self, mut step: StepUnderWay, steps: u32) -> Result<bool> {
-        while step.updates_left > 0 {
-            if (self.stop_requested)() {
-                self.state.step_under_way = Some(step);
-                return Ok(false);
-            }
-            self.buffer.sample_into(&mut self.state.replay_rng, self.batch);
-            let stats = self.agent.update(self.batch);
-            self.state.updates += 1;
-            step.updates_left -= 1;
-            self.check_loss("critic loss", Some(stats.critic_loss), steps)?;
-            self.check_loss("actor loss", stats.actor_loss, steps)?;
-            *self.last_stats = Some(stats);
-        }
-        Ok(true)
-    }
-}
-
-impl Driver for Collector<'_> {
-    fn act(&mut self, env: &ReachEnv, action: &mut [f32]) -> Result<()> {
-        if self.state.env_steps < self.cfg.learning_starts {
-            for a in action.iter_mut() {
-                *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;
-            }
-            return Ok(());
-        }
-        self.agent.act(env.observation(), action);
-        match action.iter().position(|a| !a.is_finite()) {
-            None => Ok(()),
-            Some(i) => Err(Error::NumericalFault(format!(
-                "the actor's action[{i}] = {} at episode {}, step {} (update {}); \
-                 the last good checkpoint is left in place",
-                action[i],
-                self.state.episode + 1,
-                env.steps() + 1,
-                self.state.updates
-            ))),
-        }
-    }
-
-    fn on_step(&mut self, t: &Transition<'_>) -> Result<Flow> {
-        let reward = t.step.total();
-        self.state.episode_reward += reward;
-        self.buffer.push(t.obs, t.action, reward, t.env.observation(), t.step.terminated);
-        if let Some(her) = &mut self.state.her {
-            her.log.push(t);
-        }
-        self.state.env_steps += 1;
-        let learning = self.state.env_steps >= self.cfg.learning_starts;
-        let step = StepUnderWay::of(t.step, if learning { self.cfg.updates_per_step } else { 0 });
-        let finished = self.update(step, t.env.steps())?;
-        Ok(if !finished || (self.stop_requested)() { Flow::Stop } else { Flow::Continue })
-    }
 }
 
 /// Train from scratch into `out` (created if needed; files of a previous run there are replaced,
@@ -816,6 +574,6 @@ pub fn checkpointed_episode(out: &Path) -> Result<Option<(u64, bool)>> {
         return Ok(None);
     }
     let ck = Checkpoint::load(&latest)?;
-    let st: LoopState = ck.json("train_state")?;
-    Ok(Some((st.episode, st.finished)))
+    let st: LoopState = ck.json(TRAIN_STATE)?;
+    Ok(Some((st.n.episode, st.finished)))
 }

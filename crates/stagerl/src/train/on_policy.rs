@@ -1,7 +1,8 @@
-//! The on-policy side of the training loop (PPO): `num_envs` environments stepped together
-//! ([`VecEnv`], same-step autoreset), their steps recorded into a [`Rollout`], an update when it
-//! is full, and the episodes they end handed to the loop one at a time, so that the episode
-//! log, the periodic evaluations, the best checkpoint and the stops are those of every agent.
+//! The on-policy collector (PPO): `num_envs` environments stepped together ([`VecEnv`],
+//! same-step autoreset), their steps recorded into a [`Rollout`], an update when it is full, and
+//! the episodes they end handed to the loop one at a time, so that the episode log, the periodic
+//! evaluations, the best checkpoint and the stops are those of every agent. It keeps no replay
+//! buffer.
 //!
 //! Everything it holds (the environments mid-episode, the rollout so far, the episodes ended but
 //! not yet logged) is saved in `latest.safetensors`, so a resumed PPO run is bit-identical to an
@@ -11,18 +12,26 @@
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
-use super::{EpisodeEnd, LoopState};
-use crate::agent::UpdateStats;
-use crate::agent::{Ppo, Rollout};
+use std::path::Path;
+
+use super::{Collector, Counters, EpisodeEnd};
+use crate::agent::{Agent, Ppo, Rollout, UpdateStats};
 use crate::base::rng::Rng;
 use crate::config::Config;
 use crate::env::{EnvState, ReachEnv, VecEnv};
 use crate::io::checkpoint::Checkpoint;
 use crate::{Error, Result};
 
-/// The saved state of [`OnPolicy`] (with the rollout's arrays as tensors).
+/// The saved state of [`OnPolicyCollector`]: the field `on_policy` of the training state, as in
+/// every earlier version.
+#[derive(Serialize, Deserialize)]
+struct Saved {
+    on_policy: OnPolicyState,
+}
+
+/// The state of the environments and the rollout (with the rollout's arrays as tensors).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub(super) struct OnPolicyState {
+struct OnPolicyState {
     envs: Vec<EnvState>,
     /// Each environment's episode under way: reward so far (eq. 16) and steps.
     episode_reward: Vec<f64>,
@@ -36,8 +45,9 @@ pub(super) struct OnPolicyState {
     rollout_steps: usize,
 }
 
-/// PPO's environments and rollout.
-pub(super) struct OnPolicy {
+/// PPO, its environments and its rollout.
+pub(super) struct OnPolicyCollector {
+    ppo: Box<Ppo>,
     vec: VecEnv,
     rollout: Rollout,
     episode_reward: Vec<f64>,
@@ -56,10 +66,10 @@ pub(super) struct OnPolicy {
     obs_buf: Vec<f32>,
 }
 
-impl OnPolicy {
-    /// The environments of run `cfg` (the arm, task and reward of `env`), their targets drawn
-    /// from the run's seed.
-    pub(super) fn new(cfg: &Config, env: &ReachEnv) -> Result<OnPolicy> {
+impl OnPolicyCollector {
+    /// The collector of run `cfg`: `ppo` trained on environments of the arm, task and reward of
+    /// `env`, their targets drawn from the run's seed.
+    pub(super) fn new(cfg: &Config, env: &ReachEnv, ppo: Box<Ppo>) -> Result<OnPolicyCollector> {
         let p = cfg.agent.ppo();
         let seed = Rng::derived(cfg.train.seed, 5).next_u64();
         let mut vec = VecEnv::new(
@@ -71,7 +81,8 @@ impl OnPolicy {
         )?;
         vec.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
         let (n, ad) = (p.num_envs, env.act_dim());
-        Ok(OnPolicy {
+        Ok(OnPolicyCollector {
+            ppo,
             rollout: Rollout::new(&p, env.obs_dim(), ad),
             vec,
             episode_reward: vec![0.0; n],
@@ -89,34 +100,9 @@ impl OnPolicy {
         })
     }
 
-    /// The next ended episode, stepping the environments (and updating) until one ends; `None`
-    /// when `stop_requested` says so first.
-    pub(super) fn next_episode(
-        &mut self,
-        ppo: &mut Ppo,
-        st: &mut LoopState,
-        last_stats: &mut Option<UpdateStats>,
-        stop_requested: &dyn Fn() -> bool,
-    ) -> Result<Option<EpisodeEnd>> {
-        loop {
-            if let Some(e) = self.ended.pop_front() {
-                return Ok(Some(e));
-            }
-            if stop_requested() {
-                return Ok(None);
-            }
-            self.step(ppo, st, last_stats)?;
-        }
-    }
-
     /// One step of every environment, recorded; the update when the rollout is full.
-    fn step(
-        &mut self,
-        ppo: &mut Ppo,
-        st: &mut LoopState,
-        last_stats: &mut Option<UpdateStats>,
-    ) -> Result<()> {
-        let n = self.vec.len();
+    fn step(&mut self, st: &mut Counters, last_stats: &mut Option<UpdateStats>) -> Result<()> {
+        let (n, ppo) = (self.vec.len(), self.ppo.as_mut());
         let obs = ppo.normalized(self.vec.observations(), n, true, &mut self.obs_buf);
         ppo.act_batch(obs, n, &mut self.actions, &mut self.logp, &mut self.values);
         if let Some(i) = self.actions.iter().position(|a| !a.is_finite()) {
@@ -179,23 +165,8 @@ impl OnPolicy {
         Ok(())
     }
 
-    /// Write the rollout's arrays to `ck` and return the rest of the state.
-    pub(super) fn save(&self, ck: &mut Checkpoint) -> OnPolicyState {
-        for (name, data) in Rollout::ARRAY_NAMES.iter().zip(self.rollout.arrays()) {
-            ck.put_tensor(name, &[data.len()], data);
-        }
-        OnPolicyState {
-            envs: self.vec.states(),
-            episode_reward: self.episode_reward.clone(),
-            episode_steps: self.episode_steps.clone(),
-            episode_collisions: self.episode_collisions.clone(),
-            ended: self.ended.iter().copied().collect(),
-            rollout_steps: self.rollout.t,
-        }
-    }
-
-    /// Restore what [`OnPolicy::save`] wrote.
-    pub(super) fn restore(&mut self, ck: &Checkpoint, s: &OnPolicyState) -> Result<()> {
+    /// Restore the state [`Collector::save`] wrote.
+    fn restore_state(&mut self, ck: &Checkpoint, s: &OnPolicyState) -> Result<()> {
         let n = self.vec.len();
         if s.episode_reward.len() != n || s.episode_steps.len() != n {
             return Err(Error::InvalidInput(format!(
@@ -220,5 +191,66 @@ impl OnPolicy {
         }
         self.ended = s.ended.iter().copied().collect();
         Ok(())
+    }
+}
+
+impl Collector for OnPolicyCollector {
+    fn agent(&self) -> &dyn Agent {
+        self.ppo.as_ref()
+    }
+
+    fn agent_mut(&mut self) -> &mut dyn Agent {
+        self.ppo.as_mut()
+    }
+
+    /// The next ended episode, stepping the environments (and updating) until one ends.
+    fn next_episode(
+        &mut self,
+        n: &mut Counters,
+        last_stats: &mut Option<UpdateStats>,
+        stop_requested: &dyn Fn() -> bool,
+    ) -> Result<Option<EpisodeEnd>> {
+        loop {
+            if let Some(e) = self.ended.pop_front() {
+                return Ok(Some(e));
+            }
+            if stop_requested() {
+                return Ok(None);
+            }
+            self.step(n, last_stats)?;
+        }
+    }
+
+    /// The loop logs whole episodes only; the environments' episodes under way are in the state.
+    fn mid_episode(&self) -> bool {
+        false
+    }
+
+    fn save(&mut self, ck: &mut Checkpoint) -> serde_json::Value {
+        for (name, data) in Rollout::ARRAY_NAMES.iter().zip(self.rollout.arrays()) {
+            ck.put_tensor(name, &[data.len()], data);
+        }
+        let on_policy = OnPolicyState {
+            envs: self.vec.states(),
+            episode_reward: self.episode_reward.clone(),
+            episode_steps: self.episode_steps.clone(),
+            episode_collisions: self.episode_collisions.clone(),
+            ended: self.ended.iter().copied().collect(),
+            rollout_steps: self.rollout.t,
+        };
+        serde_json::to_value(Saved { on_policy }).expect("the state serialises")
+    }
+
+    fn restore(&mut self, ck: &Checkpoint, path: &Path) -> Result<()> {
+        let state: serde_json::Value = ck.json(super::TRAIN_STATE)?;
+        if state.get("on_policy").is_none_or(serde_json::Value::is_null) {
+            return Err(Error::InvalidInput(format!(
+                "{}: its training state holds no PPO environments and rollout (`on_policy`): \
+                 not a checkpoint of an on-policy run",
+                path.display()
+            )));
+        }
+        let saved: Saved = ck.json(super::TRAIN_STATE)?;
+        self.restore_state(ck, &saved.on_policy)
     }
 }

@@ -271,14 +271,12 @@ mod tests {
         let cfg = Config::default();
         let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
         let ts = eval_targets(&cfg, 3, 42).unwrap();
-        let mut driver = crate::env::Observed(
-            |_: &ReachEnv, a: &mut [f32]| {
-                a.fill(0.0);
-                Ok(())
-            },
-            |_: &crate::env::Transition<'_>| Ok(crate::env::Flow::Continue),
-        );
-        let (_, records) = crate::train::eval::evaluate_with(&mut env, 3, 42, &mut driver).unwrap();
+        let mut driver = crate::env::Policy(|_: &ReachEnv, a: &mut [f32]| {
+            a.fill(0.0);
+            Ok(())
+        });
+        let opts = crate::train::eval::EvalOptions::new(3, 42);
+        let (_, records) = crate::train::eval::evaluate(&mut env, &mut driver, &opts).unwrap();
         let want: Vec<[f64; 3]> = records.iter().map(|r| r.target).collect();
         assert_eq!(ts, want);
     }

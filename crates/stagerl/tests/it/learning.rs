@@ -4,10 +4,16 @@
 //! final distance of decimetres.
 
 use stagerl::config::Config;
-use stagerl::env::ReachEnv;
+use stagerl::agent::Agent;
+use stagerl::env::{Policy, ReachEnv};
 use stagerl::run::dir::RunDir;
-use stagerl::train::eval::evaluate;
+use stagerl::train::eval::{deterministic, evaluate, EvalOptions, EvalSummary};
 use stagerl::train::{load_agent, train};
+
+/// The deterministic policy of `agent` on the 200 targets of seed 77.
+fn evaluate_200(agent: &mut dyn Agent, env: &mut ReachEnv) -> EvalSummary {
+    evaluate(env, &mut Policy(deterministic(agent)), &EvalOptions::new(200, 77)).unwrap().0
+}
 
 fn short_run_config(seed: u64) -> Config {
     let mut cfg = Config::default();
@@ -23,7 +29,7 @@ fn untrained_policy_fails_the_task() {
     let cfg = short_run_config(0);
     let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
     let mut agent = stagerl::train::build_agent(&cfg, &env).unwrap();
-    let (s, _) = evaluate(agent.as_mut(), &mut env, 200, 77).unwrap();
+    let s = evaluate_200(agent.as_mut(), &mut env);
     assert!(s.success_rate < 0.02, "untrained success {}", s.success_rate);
     assert!(s.median_final_distance_m > 0.1, "untrained median distance {}", s.median_final_distance_m);
 }
@@ -35,7 +41,7 @@ fn train_and_evaluate(cfg: &Config, tag: &str) -> (f64, f64, usize) {
     let summary = train(cfg, &dir, |_| {}).unwrap();
     let mut env = ReachEnv::from_config(cfg, 0).unwrap();
     let mut agent = load_agent(cfg, &env, &summary.final_checkpoint).unwrap();
-    let (s, _) = evaluate(agent.as_mut(), &mut env, 200, 77).unwrap();
+    let s = evaluate_200(agent.as_mut(), &mut env);
     let rows = stagerl::io::csv::read_episodes(&RunDir::new(&dir).episodes()).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     eprintln!(
@@ -82,7 +88,7 @@ fn sac_sar_learns_to_reach_in_a_short_run() {
     let summary = train(&cfg, &dir, |_| {}).unwrap();
     let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
     let mut agent = load_agent(&cfg, &env, &summary.final_checkpoint).unwrap();
-    let (s, _) = evaluate(agent.as_mut(), &mut env, 200, 77).unwrap();
+    let s = evaluate_200(agent.as_mut(), &mut env);
     let rows = stagerl::io::csv::read_episodes(&RunDir::new(&dir).episodes()).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     assert_eq!(rows.len(), 800);

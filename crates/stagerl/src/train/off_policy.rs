@@ -1,0 +1,316 @@
+//! The off-policy collector (DDPG, TD3, SAC; the paper's Algorithm 1): one environment, a step at
+//! a time: explore (uniform actions before `learning_starts`, then the agent's exploring
+//! policy), store the transition in the replay buffer, then `updates_per_step` updates on sampled
+//! batches; with `agent.her`, the episode's relabelled transitions join the buffer when it ends.
+//!
+//! Everything it holds (the environment mid-episode, the buffer, the random streams, the updates
+//! left of a step a stop interrupted, HER's episode log) is saved in `latest.safetensors`, so a
+//! resumed run is bit-identical to an uninterrupted one. A stop is honoured between two updates.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+use super::her::{HerState, Relabeller};
+use super::{Collector, Counters, EpisodeEnd};
+use crate::agent::replay::{Batch, ReplayBuffer};
+use crate::agent::{Agent, AgentConfig, HerConfig, OffPolicy, UpdateStats};
+use crate::base::rng::Rng;
+use crate::config::Config;
+use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
+use crate::io::checkpoint::Checkpoint;
+use crate::{Error, Result};
+
+/// The collector's saved state (the replay buffer's arrays are tensors beside it). Its fields are
+/// those of the training state of every earlier version, so older checkpoints resume.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct OffPolicyState {
+    /// A checkpoint taken mid-episode: the episode `episode + 1` is under way.
+    in_episode: bool,
+    /// The eq. 16 reward of the episode under way so far.
+    episode_reward: f64,
+    env: EnvState,
+    replay_rng: Rng,
+    warmup_rng: Rng,
+    replay_len: usize,
+    replay_pos: usize,
+    /// A stop came between the updates of this environment step: they go on first.
+    #[serde(default)]
+    step_under_way: Option<StepUnderWay>,
+    /// Hindsight relabelling (`agent.her`): the episode under way and the goal sampler.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    her: Option<HerState>,
+}
+
+/// An environment step taken whose updates are not all done yet; once they are, what the
+/// episode's end needs of it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+struct StepUnderWay {
+    /// Updates of this step still to do.
+    updates_left: u32,
+    /// The target was reached (older checkpoints: `terminated`, which meant the same).
+    #[serde(alias = "terminated")]
+    reached: bool,
+    done: bool,
+    /// D_PT after the step, metres, as `f64::to_bits` (exact through JSON).
+    final_distance_m_bits: u64,
+}
+
+impl StepUnderWay {
+    /// The step `step` with `updates_left` updates to do.
+    fn of(step: &Step, updates_left: u32) -> StepUnderWay {
+        StepUnderWay {
+            updates_left,
+            reached: step.reached(),
+            done: step.done(),
+            final_distance_m_bits: step.terms.distance.to_bits(),
+        }
+    }
+}
+
+/// The off-policy agent, its training environment and its replay buffer.
+pub(super) struct OffPolicyCollector {
+    agent: Box<dyn OffPolicy>,
+    env: ReachEnv,
+    scratch: Scratch,
+    buffer: ReplayBuffer,
+    batch: Batch,
+    cfg: AgentConfig,
+    her: Option<HerConfig>,
+    relabeller: Relabeller,
+    state: OffPolicyState,
+}
+
+impl OffPolicyCollector {
+    /// The collector of run `cfg`: `agent` trained on `env` (obstacles placed in the way as
+    /// `train.obstacles_in_path` says), its random streams drawn from the run's seed.
+    pub(super) fn new(cfg: &Config, mut env: ReachEnv, agent: Box<dyn OffPolicy>) -> Result<OffPolicyCollector> {
+        let seed = cfg.train.seed;
+        env.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
+        let (od, ad) = (env.obs_dim(), env.act_dim());
+        Ok(OffPolicyCollector {
+            agent,
+            scratch: Scratch::new(&env),
+            buffer: ReplayBuffer::new(cfg.agent.buffer_size, od, ad)?,
+            batch: Batch::new(cfg.agent.batch_size, od, ad),
+            cfg: cfg.agent.clone(),
+            her: cfg.agent.her,
+            relabeller: Relabeller::default(),
+            state: OffPolicyState {
+                in_episode: false,
+                episode_reward: 0.0,
+                env: env.state(),
+                replay_rng: Rng::derived(seed, 1),
+                warmup_rng: Rng::derived(seed, 2),
+                replay_len: 0,
+                replay_pos: 0,
+                step_under_way: None,
+                her: cfg.agent.her.map(|_| HerState::new(Rng::derived(seed, 4))),
+            },
+            env,
+        })
+    }
+
+    /// Collect a step at a time until the episode under way (or a new one) ends: the eq. 16
+    /// rollout of the exploring agent, storing every transition and updating after each step
+    /// (first the updates left of a step a stop interrupted). `None` when a stop request left
+    /// it unfinished.
+    fn collect_episode(
+        &mut self,
+        n: &mut Counters,
+        last_stats: &mut Option<UpdateStats>,
+        stop_requested: &dyn Fn() -> bool,
+    ) -> Result<Option<StepUnderWay>> {
+        let steps = self.env.steps();
+        let mut explorer = Explorer {
+            agent: self.agent.as_mut(),
+            buffer: &mut self.buffer,
+            batch: &mut self.batch,
+            state: &mut self.state,
+            n,
+            cfg: &self.cfg,
+            last_stats,
+            stop_requested,
+        };
+        if let Some(step) = explorer.state.step_under_way.take() {
+            if !explorer.update(step, steps)? {
+                return Ok(None);
+            }
+            if step.done {
+                return Ok(Some(step));
+            }
+        }
+        if !explorer.state.in_episode {
+            self.env.reset();
+            if let Some(her) = &mut explorer.state.her {
+                her.log.begin(self.env.ee_pose().position);
+            }
+            explorer.agent.begin_episode();
+            explorer.state.episode_reward = 0.0;
+            explorer.state.in_episode = true;
+        }
+        match rollout(&mut self.env, &mut self.scratch, &mut explorer)? {
+            // A stop between the last step's updates leaves them (and the episode's end) to do.
+            Outcome::Finished { .. } if explorer.state.step_under_way.is_some() => Ok(None),
+            Outcome::Finished { last, .. } => Ok(Some(StepUnderWay::of(&last, 0))),
+            Outcome::Stopped => Ok(None),
+        }
+    }
+
+    /// With `agent.her`: store the relabelled transitions of the episode just ended.
+    fn relabel_episode(&mut self) {
+        let (Some(cfg), Some(her)) = (self.her, self.state.her.as_mut()) else {
+            return;
+        };
+        let buffer = &mut self.buffer;
+        let (task, reward) = (self.env.task(), self.env.reward_config());
+        self.relabeller.relabel(&cfg, task, reward, &her.log, &mut her.rng, |x| {
+            buffer.push(x.obs, x.action, x.terms.total, x.next_obs, x.terminal)
+        });
+        her.log.begin(self.env.ee_pose().position);
+    }
+}
+
+impl Collector for OffPolicyCollector {
+    fn agent(&self) -> &dyn Agent {
+        self.agent.as_ref()
+    }
+
+    fn agent_mut(&mut self) -> &mut dyn Agent {
+        self.agent.as_mut()
+    }
+
+    fn next_episode(
+        &mut self,
+        n: &mut Counters,
+        last_stats: &mut Option<UpdateStats>,
+        stop_requested: &dyn Fn() -> bool,
+    ) -> Result<Option<EpisodeEnd>> {
+        let Some(last) = self.collect_episode(n, last_stats, stop_requested)? else {
+            return Ok(None);
+        };
+        self.relabel_episode();
+        self.state.in_episode = false;
+        Ok(Some(EpisodeEnd {
+            reward: self.state.episode_reward,
+            steps: self.env.steps(),
+            success: last.reached,
+            final_distance_m: f64::from_bits(last.final_distance_m_bits),
+            collision_steps: Some(self.env.collision_steps()),
+        }))
+    }
+
+    fn mid_episode(&self) -> bool {
+        self.state.in_episode
+    }
+
+    fn save(&mut self, ck: &mut Checkpoint) -> serde_json::Value {
+        self.state.env = self.env.state();
+        self.state.replay_len = self.buffer.len();
+        self.state.replay_pos = self.buffer.position();
+        for (name, data) in self.buffer.arrays() {
+            ck.put_tensor(name, &[data.len()], data);
+        }
+        serde_json::to_value(&self.state).expect("the state serialises")
+    }
+
+    fn restore(&mut self, ck: &Checkpoint, path: &Path) -> Result<()> {
+        let state: OffPolicyState = ck.json(super::TRAIN_STATE)?;
+        if state.her.is_some() != self.her.is_some() {
+            return Err(Error::InvalidInput(format!(
+                "{}: its training state {} hindsight relabelling, the run's config (agent.her) {}",
+                path.display(),
+                if state.her.is_some() { "has" } else { "lacks" },
+                if self.her.is_some() { "sets it" } else { "does not" }
+            )));
+        }
+        let data: Vec<&[f32]> =
+            ReplayBuffer::ARRAY_NAMES.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
+        self.buffer.restore(state.replay_len, state.replay_pos, [data[0], data[1], data[2], data[3], data[4]])?;
+        self.env.restore(&state.env)?;
+        self.state = state;
+        Ok(())
+    }
+}
+
+/// Algorithm 1 at each step of a training episode: explore (uniform actions before
+/// `learning_starts`, then the agent's exploring policy), store the transition, update.
+struct Explorer<'a> {
+    agent: &'a mut dyn OffPolicy,
+    buffer: &'a mut ReplayBuffer,
+    batch: &'a mut Batch,
+    state: &'a mut OffPolicyState,
+    n: &'a mut Counters,
+    cfg: &'a AgentConfig,
+    last_stats: &'a mut Option<UpdateStats>,
+    stop_requested: &'a dyn Fn() -> bool,
+}
+
+impl Explorer<'_> {
+    fn check_loss(&self, what: &str, v: Option<f64>, steps: u32) -> Result<()> {
+        match v {
+            Some(v) if !v.is_finite() => Err(Error::NumericalFault(format!(
+                "{what} = {v} at episode {}, step {steps} (update {}); the last good checkpoint is left in place",
+                self.n.episode + 1,
+                self.n.updates
+            ))),
+            _ => Ok(()),
+        }
+    }
+
+    /// The updates left of `step` (the environment's step `steps` of the episode). A stop
+    /// request between two updates keeps the step under way in the state and returns `false`
+    /// (many `updates_per_step` do not delay a stop).
+    fn update(&mut self, mut step: StepUnderWay, steps: u32) -> Result<bool> {
+        while step.updates_left > 0 {
+            if (self.stop_requested)() {
+                self.state.step_under_way = Some(step);
+                return Ok(false);
+            }
+            self.buffer.sample_into(&mut self.state.replay_rng, self.batch);
+            let stats = self.agent.update(self.batch);
+            self.n.updates += 1;
+            step.updates_left -= 1;
+            self.check_loss("critic loss", Some(stats.critic_loss), steps)?;
+            self.check_loss("actor loss", stats.actor_loss, steps)?;
+            *self.last_stats = Some(stats);
+        }
+        Ok(true)
+    }
+}
+
+impl Driver for Explorer<'_> {
+    fn act(&mut self, env: &ReachEnv, action: &mut [f32]) -> Result<()> {
+        if self.n.env_steps < self.cfg.learning_starts {
+            for a in action.iter_mut() {
+                *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;
+            }
+            return Ok(());
+        }
+        self.agent.act(env.observation(), action);
+        match action.iter().position(|a| !a.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(Error::NumericalFault(format!(
+                "the actor's action[{i}] = {} at episode {}, step {} (update {}); \
+                 the last good checkpoint is left in place",
+                action[i],
+                self.n.episode + 1,
+                env.steps() + 1,
+                self.n.updates
+            ))),
+        }
+    }
+
+    fn on_step(&mut self, t: &Transition<'_>) -> Result<Flow> {
+        let reward = t.step.total();
+        self.state.episode_reward += reward;
+        self.buffer.push(t.obs, t.action, reward, t.env.observation(), t.step.terminated);
+        if let Some(her) = &mut self.state.her {
+            her.log.push(t);
+        }
+        self.n.env_steps += 1;
+        let learning = self.n.env_steps >= self.cfg.learning_starts;
+        let step = StepUnderWay::of(t.step, if learning { self.cfg.updates_per_step } else { 0 });
+        let finished = self.update(step, t.env.steps())?;
+        Ok(if !finished || (self.stop_requested)() { Flow::Stop } else { Flow::Continue })
+    }
+}
