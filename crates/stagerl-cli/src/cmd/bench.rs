@@ -239,9 +239,9 @@ fn plan(a: PlanArgs) -> Result<()> {
             let mut cfg = Config::default();
             cfg.agent.algo = a.algo;
             cfg.agent.hidden = vec![a.hidden, a.hidden];
-            cfg.validate()?;
-            let env = ReachEnv::from_config(&cfg, 0).context("building the environment")?;
-            let agent = stagerl::train::build_agent(&cfg, &env)?;
+            let run = cfg.resolve()?;
+            let env = run.env(0).context("building the environment")?;
+            let agent = run.learner(0).into_agent();
             (
                 Planner::new(env, PlanPolicy::Agent(agent)),
                 format!("untrained {} hidden {}x{}", a.algo, a.hidden, a.hidden),

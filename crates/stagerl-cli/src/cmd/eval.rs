@@ -64,7 +64,8 @@ pub fn run(args: Args) -> Result<()> {
     };
     // Its own file, named by checkpoint, trials and seed: never the closing evaluation
     // (eval-final-seed<N>.csv) a report reads.
-    let (csv, written) = train::eval::write_command_eval(&dir, &checkpoint, &records, args.seed, variant, args.force)?;
+    let (csv, written) =
+        train::eval::write_command_eval(&dir, &checkpoint, &records, args.seed, variant, args.force)?;
     if !args.json {
         let other = sim.map(|s| format!(" in the {} simulation (trained {})", s.name(), trained_in.name()));
         let in_path = in_path.map(|p| format!(" with the first obstacle in the way with probability {p}"));

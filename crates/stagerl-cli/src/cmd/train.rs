@@ -80,7 +80,8 @@ fn run_on_pool(args: Args) -> Result<()> {
     if let Some(e) = args.episodes {
         cfg.train.episodes = e;
     }
-    cfg.validate()?;
+    // The config's one check, with the flags applied, and its resolution against the arm.
+    let run = cfg.resolve()?;
     // Without --out, the first free runs/<algo>-<reward>-seed<N>[-k]: running the same command
     // again starts a new run beside the old one instead of failing or overwriting it.
     let out = args
@@ -122,7 +123,7 @@ fn run_on_pool(args: Args) -> Result<()> {
     let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };
     let mut reporter = Reporter::new(cfg.train.episodes, &output);
-    let summary = finish(train::train_with(&cfg, &out, &opts, &mut |p| reporter.episode(p)), &out, &output)?;
+    let summary = finish(train::train_with(&run, &out, &opts, &mut |p| reporter.episode(p)), &out, &output)?;
     reporter.finish();
     print_summary(&summary, &output);
     closing_evaluation(&cfg, &out, args.eval_trials, &signals, &output)?;

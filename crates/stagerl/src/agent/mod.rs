@@ -128,10 +128,17 @@ impl Learner {
 /// weights and its noise.
 pub fn build_learner(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Result<Learner> {
     cfg.validate()?;
-    Ok(match cfg.algo {
+    Ok(learner_of(cfg, obs_dim, act_dim, seed))
+}
+
+/// [`build_learner`] of a section checked already (by [`crate::config::Config::resolve`]).
+pub(crate) fn learner_of(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Learner {
+    match cfg.algo {
         Algo::Ppo => Learner::OnPolicy(Box::new(Ppo::new(cfg, obs_dim, act_dim, seed))),
-        _ => Learner::OffPolicy(build_off_policy(cfg, obs_dim, act_dim, seed)?),
-    })
+        Algo::Ddpg => Learner::OffPolicy(Box::new(ddpg::new(cfg, obs_dim, act_dim, seed))),
+        Algo::Td3 => Learner::OffPolicy(Box::new(Td3::new(cfg, obs_dim, act_dim, seed))),
+        Algo::Sac => Learner::OffPolicy(Box::new(Sac::new(cfg, obs_dim, act_dim, seed))),
+    }
 }
 
 /// Build the agent the config asks for. `seed` fixes its initial weights and its noise.
@@ -147,18 +154,12 @@ pub fn build_off_policy(
     seed: u64,
 ) -> Result<Box<dyn OffPolicy>> {
     cfg.validate()?;
-    Ok(match cfg.algo {
-        Algo::Ddpg => Box::new(ddpg::new(cfg, obs_dim, act_dim, seed)),
-        Algo::Td3 => Box::new(Td3::new(cfg, obs_dim, act_dim, seed)),
-        Algo::Sac => Box::new(Sac::new(cfg, obs_dim, act_dim, seed)),
-        Algo::Ppo => {
-            return Err(crate::Error::config(
-                "agent.algo",
-                "ppo",
-                "an off-policy algorithm here (ddpg, td3, sac)",
-            ))
+    match learner_of(cfg, obs_dim, act_dim, seed) {
+        Learner::OffPolicy(agent) => Ok(agent),
+        Learner::OnPolicy(_) => {
+            Err(crate::Error::config("agent.algo", "ppo", "an off-policy algorithm here (ddpg, td3, sac)"))
         }
-    })
+    }
 }
 
 /// Layer sizes `[input, hidden..., output]`.

@@ -1,15 +1,15 @@
 //! The TOML configuration: one schema for the arm, the task, the reward, the agent and the
 //! training run, assembled here from the sections their modules own ([`RobotConfig`] beside the
 //! robot, [`TaskConfig`] beside the environment, [`RewardConfig`] beside the rewards,
-//! [`AgentConfig`] beside the agents, [`TrainConfig`] beside the training schedule), and the
-//! wiring that builds an environment from a whole config. Unknown fields are rejected; every
+//! [`AgentConfig`] beside the agents, [`TrainConfig`] beside the training schedule), and its one
+//! check and resolution against the arm ([`Config::resolve`], `resolved.rs`), which builds the
+//! environments and the agent. Unknown fields are rejected; every
 //! value is validated with an error that names the field, the value and what is allowed.
 //!
 //! Defaults are the paper's where it gives a value, and the design notes' choices elsewhere.
 
 use serde::{Deserialize, Serialize};
 use std::path::Path;
-use std::sync::Arc;
 
 use crate::env::{ReachEnv, VecEnv};
 use crate::{Error, Result};
@@ -19,7 +19,9 @@ use crate::env::TaskConfig;
 use crate::reward::RewardConfig;
 use crate::robot::RobotConfig;
 
+mod resolved;
 mod train;
+pub use resolved::Resolved;
 pub use train::{TrainConfig, MAX_EVAL_TRIALS};
 
 /// The whole configuration.
@@ -178,24 +180,17 @@ impl Config {
 }
 
 impl ReachEnv {
-    /// Build the arm, resolve the task and create the environment from a whole config.
+    /// Build the arm, resolve the task and create the environment from a whole config
+    /// ([`Config::resolve`], then [`Resolved::env`]).
     pub fn from_config(cfg: &Config, seed: u64) -> Result<ReachEnv> {
-        cfg.validate()?;
-        let chain = Arc::new(cfg.robot.load()?);
-        // The memory estimate again, with the arm's own joint count.
-        cfg.check_memory(chain.dof())?;
-        let task = cfg.task.resolve(&chain)?;
-        ReachEnv::new(chain, task, cfg.reward.clone(), seed)
+        cfg.resolve()?.env(seed)
     }
 }
 
 impl VecEnv {
-    /// `n` environments from a whole config.
+    /// `n` environments from a whole config ([`Config::resolve`], then [`Resolved::vec_env`]).
     pub fn from_config(n: usize, cfg: &Config, seed: u64) -> Result<VecEnv> {
-        cfg.validate()?;
-        let chain = Arc::new(cfg.robot.load()?);
-        let task = cfg.task.resolve(&chain)?;
-        VecEnv::new(n, chain, task, cfg.reward.clone(), seed)
+        cfg.resolve()?.vec_env(n, seed)
     }
 }
 

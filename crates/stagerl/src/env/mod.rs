@@ -201,30 +201,56 @@ pub struct ReachEnv {
     obstacles_in_path: f64,
 }
 
+/// The checks of an environment's parts: the reward's values and collision settings, and the
+/// task against the arm ([`check_task_for_arm`]).
+pub fn check_parts(chain: &Chain, task: &ResolvedTask, reward: &RewardConfig) -> Result<()> {
+    reward.validate()?;
+    check_collision_settings(task.on_collision, reward)?;
+    check_task_for_arm(chain, task)
+}
+
+/// The checks of a resolved task against the arm: one value per joint, and contacts that can
+/// end an episode only on an arm with collision shapes.
+pub fn check_task_for_arm(chain: &Chain, task: &ResolvedTask) -> Result<()> {
+    let n = chain.dof();
+    if task.on_collision == OnCollision::Terminate && chain.collision_shapes().is_empty() {
+        return Err(Error::config(
+            "task.on_collision",
+            "\"terminate\"",
+            format!(
+                "\"record\" for this arm: no link of `{}` to `{}` has a collision shape (box, \
+                 sphere or cylinder), so no contact can end an episode",
+                chain.base_link(),
+                chain.tip_link()
+            ),
+        ));
+    }
+    if task.home_pose.len() != n || task.target_joint_range.len() != n {
+        return Err(Error::InvalidInput(format!(
+            "the task was resolved for {} joints, the arm has {n}",
+            task.home_pose.len()
+        )));
+    }
+    Ok(())
+}
+
 impl ReachEnv {
-    /// An environment for `chain`, seeded; call [`ReachEnv::reset`] before stepping.
+    /// An environment for `chain`, seeded; call [`ReachEnv::reset`] before stepping. Its parts
+    /// are checked ([`check_parts`]); a config's are checked once by
+    /// [`crate::config::Config::resolve`].
     pub fn new(chain: Arc<Chain>, task: ResolvedTask, reward: RewardConfig, seed: u64) -> Result<ReachEnv> {
-        reward.validate()?;
-        check_collision_settings(task.on_collision, &reward)?;
+        check_parts(&chain, &task, &reward)?;
+        ReachEnv::assemble(chain, task, reward, seed)
+    }
+
+    /// [`ReachEnv::new`] of parts checked already.
+    pub(crate) fn assemble(
+        chain: Arc<Chain>,
+        task: ResolvedTask,
+        reward: RewardConfig,
+        seed: u64,
+    ) -> Result<ReachEnv> {
         let n = chain.dof();
-        if task.on_collision == OnCollision::Terminate && chain.collision_shapes().is_empty() {
-            return Err(Error::config(
-                "task.on_collision",
-                "\"terminate\"",
-                format!(
-                    "\"record\" for this arm: no link of `{}` to `{}` has a collision shape (box, \
-                     sphere or cylinder), so no contact can end an episode",
-                    chain.base_link(),
-                    chain.tip_link()
-                ),
-            ));
-        }
-        if task.home_pose.len() != n || task.target_joint_range.len() != n {
-            return Err(Error::InvalidInput(format!(
-                "the task was resolved for {} joints, the arm has {n}",
-                task.home_pose.len()
-            )));
-        }
         let layout = ObservationLayout::of(&task);
         let mut obstacles = Vec::with_capacity(task.max_obstacles());
         obstacles.extend(task.obstacles.iter().cloned());

@@ -310,6 +310,12 @@ impl TaskConfig {
     /// that the target distribution can be sampled.
     pub fn resolve(&self, chain: &Chain) -> Result<ResolvedTask> {
         self.validate()?;
+        self.resolve_checked(chain)
+    }
+
+    /// [`TaskConfig::resolve`] of a task whose values are checked already (by
+    /// [`crate::config::Config::resolve`]).
+    pub(crate) fn resolve_checked(&self, chain: &Chain) -> Result<ResolvedTask> {
         let n = chain.dof();
         let per_joint = |field: &str, given: &Option<Vec<f64>>, default: &[f64; 6]| -> Result<Vec<f64>> {
             match given {

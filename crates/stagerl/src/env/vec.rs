@@ -40,12 +40,24 @@ impl VecEnv {
         reward: RewardConfig,
         seed: u64,
     ) -> Result<VecEnv> {
+        super::check_parts(&chain, &task, &reward)?;
+        VecEnv::assemble(n, chain, task, reward, seed)
+    }
+
+    /// [`VecEnv::new`] of parts checked already.
+    pub(crate) fn assemble(
+        n: usize,
+        chain: Arc<Chain>,
+        task: ResolvedTask,
+        reward: RewardConfig,
+        seed: u64,
+    ) -> Result<VecEnv> {
         if n == 0 {
             return Err(Error::InvalidInput("a vector env needs at least one environment".into()));
         }
         let mut envs = Vec::with_capacity(n);
         for i in 0..n {
-            let mut e = ReachEnv::new(chain.clone(), task.clone(), reward.clone(), 0)?;
+            let mut e = ReachEnv::assemble(chain.clone(), task.clone(), reward.clone(), 0)?;
             e.set_rng(Rng::derived(seed, i as u64));
             e.reset();
             envs.push(e);

@@ -2,7 +2,9 @@
 //! our tuned defaults), its seeds and episodes, and the scripted Jacobian (damped least squares)
 //! controller evaluated as a reference on the same targets as the runs' closing evaluations.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use std::io::Read;
+use std::path::Path;
 
 use super::runs::RunData;
 use super::table::{reward_title, Group, GroupSummary};
@@ -12,8 +14,9 @@ use crate::reward::RewardFunction;
 use crate::train::eval::{EvalOptions, EvalSummary};
 use crate::Result;
 
-/// Which settings a study's runs use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+/// Which settings a study's runs use, as the preset of their sweep names it (`[sweep] regime`,
+/// recorded in the sweep directory's `preset.toml`); never inferred from the runs' values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Regime {
     /// gamma 0.99 and unscaled observations (obs_delta_scale 1): the values most RL libraries
@@ -21,27 +24,41 @@ pub enum Regime {
     Paper,
     /// Our measured defaults: gamma 0.95, obs_delta_scale 10.
     Tuned,
-    /// Anything else, or runs of several regimes.
+    /// Runs whose preset names no regime, runs of no sweep, or runs of several regimes.
     Custom,
 }
 
+/// The largest `preset.toml` read for its regime, bytes.
+const MAX_PRESET_BYTES: u64 = 1 << 20;
+
 impl Regime {
-    /// The regime of one run's settings.
-    pub fn of(gamma: f64, obs_delta_scale: f64) -> Regime {
-        match (gamma, obs_delta_scale) {
-            (g, k) if g == 0.99 && k == 1.0 => Regime::Paper,
-            (g, k) if g == 0.95 && k == 10.0 => Regime::Tuned,
-            _ => Regime::Custom,
+    /// The values `(agent.gamma, task.obs_delta_scale)` of the regime (none for `Custom`): a
+    /// preset that names the regime must use them (the sweep checks it).
+    pub fn settings(self) -> Option<(f64, f64)> {
+        match self {
+            Regime::Paper => Some((0.99, 1.0)),
+            Regime::Tuned => Some((0.95, 10.0)),
+            Regime::Custom => None,
         }
+    }
+
+    /// The regime named by the preset of the sweep the run in `run_dir` belongs to: the
+    /// `[sweep] regime` of the nearest `preset.toml` from `run_dir` up to `root`, the report's
+    /// input directory; `Custom` when none names one.
+    pub fn of_run(run_dir: &Path, root: &Path) -> Regime {
+        let named = |dir: &Path| -> Option<Regime> {
+            let mut text = String::new();
+            let file = std::fs::File::open(dir.join("preset.toml")).ok()?;
+            file.take(MAX_PRESET_BYTES).read_to_string(&mut text).ok()?;
+            let table: toml::Table = toml::from_str(&text).ok()?;
+            table.get("sweep")?.get("regime")?.clone().try_into().ok()
+        };
+        run_dir.ancestors().take_while(|d| d.starts_with(root)).find_map(named).unwrap_or(Regime::Custom)
     }
 
     /// The regime every primary run shares (`Custom` when they differ).
     pub fn of_groups(groups: &[Group]) -> Regime {
-        let mut regimes = groups
-            .iter()
-            .filter(|g| g.primary)
-            .flat_map(|g| g.runs.iter())
-            .map(|r| Regime::of(r.config.agent.gamma, r.config.task.obs_delta_scale));
+        let mut regimes = groups.iter().filter(|g| g.primary).flat_map(|g| g.runs.iter()).map(|r| r.regime);
         let first = regimes.next().unwrap_or(Regime::Custom);
         if regimes.all(|r| r == first) {
             first
@@ -54,7 +71,9 @@ impl Regime {
         match self {
             Regime::Paper => "paper regime (gamma 0.99, unscaled observations: obs_delta_scale 1)",
             Regime::Tuned => "tuned regime (our defaults: gamma 0.95, obs_delta_scale 10)",
-            Regime::Custom => "custom settings (neither the paper regime nor the tuned defaults)",
+            Regime::Custom => {
+                "custom settings (no sweep preset names the paper or the tuned regime for all runs)"
+            }
         }
     }
 }
@@ -106,8 +125,11 @@ pub fn evaluate(groups: &[Group], summaries: &[GroupSummary]) -> Result<Vec<Refe
         let mut env = ReachEnv::from_config(&cfg, 0)?;
         let chain = env.chain().clone();
         let mut ctl = JacobianController::new(&chain);
-        let (summary, _) =
-            crate::train::eval::evaluate(&mut env, &mut Policy(ctl.policy()), &EvalOptions::new(trials, seed))?;
+        let (summary, _) = crate::train::eval::evaluate(
+            &mut env,
+            &mut Policy(ctl.policy()),
+            &EvalOptions::new(trials, seed),
+        )?;
         out.push(ReferenceRow { reward, seed, summary });
     }
     Ok(out)
@@ -143,15 +165,28 @@ mod tests {
     use super::*;
 
     #[test]
-    fn regimes_from_settings() {
-        assert_eq!(Regime::of(0.99, 1.0), Regime::Paper);
-        assert_eq!(Regime::of(0.95, 10.0), Regime::Tuned);
-        assert_eq!(Regime::of(0.99, 10.0), Regime::Custom);
+    fn the_tuned_regime_is_the_defaults() {
         let d = crate::config::Config::default();
-        assert_eq!(
-            Regime::of(d.agent.gamma, d.task.obs_delta_scale),
-            Regime::Tuned,
-            "the defaults are the tuned regime"
-        );
+        assert_eq!(Regime::Tuned.settings(), Some((d.agent.gamma, d.task.obs_delta_scale)));
+        assert_eq!(Regime::Custom.settings(), None);
+    }
+
+    #[test]
+    fn a_runs_regime_is_the_one_its_nearest_preset_names() {
+        let root = std::env::temp_dir().join(format!("stagerl-regime-{}", std::process::id()));
+        let (sweep, run) = (root.join("sweep"), root.join("sweep/sac-sar-seed1"));
+        std::fs::create_dir_all(&run).unwrap();
+        let write = |dir: &Path, text: &str| std::fs::write(dir.join("preset.toml"), text).unwrap();
+        assert_eq!(Regime::of_run(&run, &root), Regime::Custom, "no preset");
+        write(&root, "[sweep]\nregime = \"tuned\"\n");
+        write(&sweep, "[sweep]\nalgorithms = [\"sac\"]\nregime = \"paper\"\n");
+        assert_eq!(Regime::of_run(&run, &root), Regime::Paper, "the nearest preset");
+        assert_eq!(Regime::of_run(&run, &sweep), Regime::Paper);
+        write(&sweep, "[sweep]\nalgorithms = [\"sac\"]\n");
+        assert_eq!(Regime::of_run(&run, &root), Regime::Tuned, "a preset naming none: the next one up");
+        assert_eq!(Regime::of_run(&run, &sweep), Regime::Custom, "nothing above the report's input");
+        write(&sweep, "[sweep]\nregime = \"fast\"\n");
+        assert_eq!(Regime::of_run(&run, &sweep), Regime::Custom, "an unknown name");
+        std::fs::remove_dir_all(&root).unwrap();
     }
 }

@@ -29,6 +29,8 @@ pub struct RunData {
     /// Path relative to the report's input directory.
     pub name: String,
     pub config: Config,
+    /// The regime its sweep's preset names ([`super::reference::Regime::of_run`]).
+    pub regime: super::reference::Regime,
     /// Empty when `episodes.csv` could not be read (see `notes`).
     pub episodes: Vec<EpisodeRecord>,
     /// Empty when there is no `eval.csv`.
@@ -129,6 +131,7 @@ pub fn load_run(dir: &Path, root: &Path) -> Result<RunData> {
     let complete = episodes.len() as u64 >= config.train.episodes
         && episodes.last().is_some_and(|r| r.episode >= config.train.episodes);
     Ok(RunData {
+        regime: super::reference::Regime::of_run(dir, root),
         dir: dir.to_path_buf(),
         name,
         config,

@@ -36,6 +36,7 @@ use std::time::Instant;
 use crate::agent::Algo;
 use crate::agent::HerConfig;
 use crate::config::Config;
+use crate::report::reference::Regime;
 use crate::reward::RewardFunction;
 use crate::run::dir::RunDir;
 use crate::train::eval::EvalSummary;
@@ -60,6 +61,11 @@ pub struct SweepSpec {
     /// `[agent.her]`, else 4). Empty (absent): as the preset's `[agent]` says.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub her: Vec<String>,
+    /// The regime the study's runs are in (`"paper"` or `"tuned"`), which its report names;
+    /// the preset must then use the regime's `agent.gamma` and `task.obs_delta_scale`. Absent:
+    /// custom settings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub regime: Option<Regime>,
 }
 
 impl SweepSpec {
@@ -209,6 +215,25 @@ impl Preset {
             self.base.agent.for_algo(algo).validate()?;
         }
         s.her_variants(self.base.agent.her)?;
+        self.check_regime()
+    }
+
+    /// A named regime's settings are the preset's.
+    fn check_regime(&self) -> Result<()> {
+        let Some(regime) = self.sweep.regime else { return Ok(()) };
+        let Some((gamma, scale)) = regime.settings() else { return Ok(()) };
+        let (agent, task) = (&self.base.agent, &self.base.task);
+        for (field, value, want) in
+            [("agent.gamma", agent.gamma, gamma), ("task.obs_delta_scale", task.obs_delta_scale, scale)]
+        {
+            if value != want {
+                return Err(Error::config(
+                    field,
+                    value,
+                    format!("{want}: the value of the regime `sweep.regime` names ({})", regime.describe()),
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -364,7 +389,7 @@ pub fn run_one(
             train::resume(&dir, opts, on_episode)?;
         }
         RunStatus::New => {
-            train::train_with(&spec.config, &dir, opts, on_episode)?;
+            train::train_with(&spec.config.resolve()?, &dir, opts, on_episode)?;
         }
     }
     let (summary, _) = final_eval::run(&dir, &spec.config, sweep.eval_trials, sweep.eval_seed, opts.stop)?;

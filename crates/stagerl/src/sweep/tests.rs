@@ -222,11 +222,9 @@ fn bundled_presets_parse() {
         (20, 10000, 500)
     );
     assert_eq!(paper.base.task.max_steps, 50);
-    // The paper regime: gamma 0.99 and unscaled observations.
-    assert_eq!(
-        crate::report::reference::Regime::of(paper.base.agent.gamma, paper.base.task.obs_delta_scale),
-        crate::report::reference::Regime::Paper
-    );
+    // The paper regime, named: gamma 0.99 and unscaled observations (the check that the values
+    // are the regime's is below).
+    assert_eq!(paper.sweep.regime, Some(crate::report::reference::Regime::Paper));
     // The tuned regime: the library's defaults at 10 seeds x 5000 episodes.
     let (tuned, _) = Preset::resolve("tuned").unwrap();
     assert_eq!((tuned.sweep.seeds.len(), tuned.base.train.episodes), (10, 5000));
@@ -235,4 +233,26 @@ fn bundled_presets_parse() {
         (tuned.base.agent.gamma, tuned.base.task.obs_delta_scale),
         (d.agent.gamma, d.task.obs_delta_scale)
     );
+}
+
+#[test]
+fn a_named_regime_must_be_the_presets_settings() {
+    let named = |regime: &str, rest: &str| {
+        let text =
+            PRESET.replace("eval_trials = 20\n", &format!("eval_trials = 20\nregime = \"{regime}\"\n"));
+        Preset::from_toml_str(&format!("{text}{rest}"), Path::new("p.toml"))
+    };
+    // The defaults are the tuned regime's settings; the paper regime needs its own.
+    assert_eq!(named("tuned", "").unwrap().sweep.regime, Some(crate::report::reference::Regime::Tuned));
+    let e = named("paper", "").unwrap_err().to_string();
+    assert!(e.contains("agent.gamma") && e.contains("0.99") && e.contains("sweep.regime"), "{e}");
+    let e = named("paper", "[agent]\ngamma = 0.99\n").unwrap_err().to_string();
+    assert!(e.contains("task.obs_delta_scale"), "{e}");
+    assert!(named("paper", "[agent]\ngamma = 0.99\n[task]\nobs_delta_scale = 1.0\n").is_ok());
+    assert!(named("custom", "[agent]\ngamma = 0.9\n").is_ok());
+    assert!(named("fast", "").is_err(), "an unknown regime");
+    // Every bundled preset's regime holds (each constructor checks it).
+    for name in ["paper", "tuned", "quick", "smoke", "learners", "learners-long"] {
+        Preset::resolve(name).unwrap();
+    }
 }

@@ -206,8 +206,7 @@ pub fn load_run_agent(
             Error::InvalidInput(format!("{} holds no checkpoint yet", run.checkpoints().display()))
         })?,
     };
-    let env = ReachEnv::from_config(cfg, 0)?;
-    let agent = super::load_agent(cfg, &env, &checkpoint)?;
+    let (env, agent) = super::load_resolved(&cfg.resolve()?, &checkpoint)?;
     Ok((checkpoint, env, agent))
 }
 
@@ -221,8 +220,7 @@ pub fn load_policy(path: &Path) -> Result<(PathBuf, ReachEnv, Box<dyn Agent>)> {
     }
     let ck = crate::io::checkpoint::Checkpoint::load(path)?;
     let cfg = Config::from_toml_str(ck.meta("config")?, path)?;
-    let env = ReachEnv::from_config(&cfg, 0)?;
-    let agent = super::load_agent(&cfg, &env, path)?;
+    let (env, agent) = super::load_resolved(&cfg.resolve()?, path)?;
     Ok((path.to_path_buf(), env, agent))
 }
 

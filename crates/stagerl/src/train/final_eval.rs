@@ -16,9 +16,9 @@ use std::sync::atomic::AtomicBool;
 
 use super::config_hash;
 use super::eval::{deterministic, evaluate, load_run_agent, EvalOptions, EvalSummary};
+use crate::config::Config;
 use crate::env::Policy;
 use crate::io::csv::TrialRecord;
-use crate::config::Config;
 use crate::run::dir::RunDir;
 use crate::{Error, Result};
 

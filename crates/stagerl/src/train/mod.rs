@@ -42,7 +42,7 @@ use std::time::Instant;
 
 use crate::agent::{self, Agent, Learner, UpdateStats};
 use crate::base::rng::Rng;
-use crate::config::Config;
+use crate::config::{Config, Resolved};
 use crate::env::{Policy, ReachEnv};
 use crate::io::checkpoint::Checkpoint;
 use crate::io::csv::{parse_line, push_row, CsvRecord, CsvRow};
@@ -94,6 +94,22 @@ pub fn build_agent(cfg: &Config, env: &ReachEnv) -> Result<Box<dyn Agent>> {
 /// Load an agent from a checkpoint, checking that it was written for this config's algorithm and
 /// shapes.
 pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn Agent>> {
+    let ck = checkpoint_for(cfg, path)?;
+    let mut agent = build_agent(cfg, env)?;
+    agent.load(&ck)?; // the checkpoint's errors name its file
+    Ok(agent)
+}
+
+/// [`load_agent`] for a resolved config, with an environment for it.
+fn load_resolved(run: &Resolved, path: &Path) -> Result<(ReachEnv, Box<dyn Agent>)> {
+    let ck = checkpoint_for(run.config(), path)?;
+    let mut agent = run.learner(Rng::derived(run.config().train.seed, 3).next_u64()).into_agent();
+    agent.load(&ck)?;
+    Ok((run.env(0)?, agent))
+}
+
+/// The checkpoint at `path`, if written for the algorithm of `cfg`.
+fn checkpoint_for(cfg: &Config, path: &Path) -> Result<Checkpoint> {
     let ck = Checkpoint::load(path)?;
     let algo = ck.meta("algorithm")?;
     if algo != cfg.agent.algo.name() {
@@ -104,9 +120,7 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
             cfg.agent.algo
         )));
     }
-    let mut agent = build_agent(cfg, env)?;
-    agent.load(&ck)?; // the checkpoint's errors name its file
-    Ok(agent)
+    Ok(ck)
 }
 
 /// The checkpoint metadata holding the training state: the loop's [`LoopState`] and its
@@ -197,16 +211,15 @@ struct Trainer {
 
 impl Trainer {
     /// A fresh run.
-    fn new(cfg: &Config, dir: RunDir) -> Result<Trainer> {
+    fn new(run: &Resolved, dir: RunDir) -> Result<Trainer> {
+        let cfg = run.config();
         let seed = cfg.train.seed;
-        let env = ReachEnv::from_config(cfg, Rng::derived(seed, 0).next_u64())?;
-        let agent_seed = Rng::derived(seed, 3).next_u64();
-        let learner = agent::build_learner(&cfg.agent, env.obs_dim(), env.act_dim(), agent_seed)?;
+        let env = run.env(Rng::derived(seed, 0).next_u64())?;
         // Evaluations draw obstacles as the task says; only training places them in the way.
         let eval_env = env.clone();
-        let collector: Box<dyn Collector> = match learner {
+        let collector: Box<dyn Collector> = match run.learner(Rng::derived(seed, 3).next_u64()) {
             Learner::OffPolicy(agent) => Box::new(OffPolicyCollector::new(cfg, env, agent)?),
-            Learner::OnPolicy(ppo) => Box::new(OnPolicyCollector::new(cfg, &env, ppo)?),
+            Learner::OnPolicy(ppo) => Box::new(OnPolicyCollector::new(run, ppo)?),
         };
         Ok(Trainer {
             hash: config_hash(cfg),
@@ -229,7 +242,9 @@ impl Trainer {
     fn save_latest(&mut self) -> Result<()> {
         let mut ck = self.checkpoint_base();
         let mut state = serde_json::to_value(&self.state).expect("the state serialises");
-        if let (Some(all), serde_json::Value::Object(theirs)) = (state.as_object_mut(), self.collector.save(&mut ck)) {
+        if let (Some(all), serde_json::Value::Object(theirs)) =
+            (state.as_object_mut(), self.collector.save(&mut ck))
+        {
             all.extend(theirs);
         }
         ck.put_json(TRAIN_STATE, &state);
@@ -243,7 +258,10 @@ impl Trainer {
         let (agent, env) = (self.collector.agent(), &self.eval_env);
         agent.save(&mut ck);
         ck.put_meta("algorithm", agent.algo().name());
-        ck.put_json(crate::run::policy::POLICY_KEY, &crate::run::policy::PolicySpec::new(&self.cfg, env, agent));
+        ck.put_json(
+            crate::run::policy::POLICY_KEY,
+            &crate::run::policy::PolicySpec::new(&self.cfg, env, agent),
+        );
         ck.put_json("obs_dim", &env.obs_dim());
         ck.put_json("act_dim", &env.act_dim());
         ck.put_json("hidden", &self.cfg.agent.hidden);
@@ -256,8 +274,9 @@ impl Trainer {
     }
 
     /// Restore a run from its `latest.safetensors`.
-    fn restore(cfg: &Config, dir: RunDir, ck: &Checkpoint) -> Result<Trainer> {
-        let mut t = Trainer::new(cfg, dir)?;
+    fn restore(run: &Resolved, dir: RunDir, ck: &Checkpoint) -> Result<Trainer> {
+        let cfg = run.config();
+        let mut t = Trainer::new(run, dir)?;
         let path = t.dir.latest();
         let hash = ck.meta("config_hash")?;
         if hash != t.hash {
@@ -398,7 +417,7 @@ impl Trainer {
     ) -> Result<EpisodeRecord> {
         if let Some(fault) = self.collector.agent().first_non_finite() {
             return Err(Error::NumericalFault(format!(
-                "{fault} at the end of episode {} ({} steps); the last good checkpoint is left in place",
+                "{fault} at episode {}, step {}; the last good checkpoint is left in place",
                 self.state.n.episode + 1,
                 end.steps
             )));
@@ -511,23 +530,22 @@ struct Logs {
 /// Train from scratch into `out` (created if needed; files of a previous run there are replaced,
 /// the caller decides whether that is allowed). `on_episode` sees every finished episode.
 pub fn train(cfg: &Config, out: &Path, mut on_episode: impl FnMut(&Progress<'_>)) -> Result<TrainSummary> {
-    train_with(cfg, out, &TrainOptions::default(), &mut on_episode)
+    train_with(&cfg.resolve()?, out, &TrainOptions::default(), &mut on_episode)
 }
 
-/// [`train`] with options (a stop flag).
+/// [`train`] of a config resolved already ([`Config::resolve`]), with options (a stop flag).
 pub fn train_with(
-    cfg: &Config,
+    run: &Resolved,
     out: &Path,
     opts: &TrainOptions<'_>,
     on_episode: &mut dyn FnMut(&Progress<'_>),
 ) -> Result<TrainSummary> {
-    cfg.validate()?;
     let dir = RunDir::new(out);
     std::fs::create_dir_all(&dir.root).map_err(|e| Error::io(&dir.root, e))?;
     // A new run: nothing of an older one may be mistaken for this run's.
     replace::remove_previous_run(&dir)?;
-    crate::io::write_atomic(&dir.config(), cfg.to_toml_string().as_bytes())?;
-    Trainer::new(cfg, dir)?.run(opts, on_episode)
+    crate::io::write_atomic(&dir.config(), run.config().to_toml_string().as_bytes())?;
+    Trainer::new(run, dir)?.run(opts, on_episode)
 }
 
 /// What [`resume`] found and did.
@@ -547,10 +565,10 @@ pub fn resume(
     on_episode: &mut dyn FnMut(&Progress<'_>),
 ) -> Result<Resumed> {
     let dir = RunDir::new(out);
-    let cfg = dir.load_config()?;
+    let run = dir.load_config()?.resolve()?;
     let latest = dir.latest();
     if !latest.exists() {
-        return train_with(&cfg, out, opts, on_episode).map(Resumed::Finished);
+        return train_with(&run, out, opts, on_episode).map(Resumed::Finished);
     }
     let ck = Checkpoint::load(&latest)?;
     // The run's other checkpoints are checked too: a corrupted one is refused, not kept.
@@ -559,7 +577,7 @@ pub fn resume(
             Checkpoint::load(&p)?;
         }
     }
-    let mut t = Trainer::restore(&cfg, dir, &ck)?;
+    let mut t = Trainer::restore(&run, dir, &ck)?;
     if t.state.finished {
         return Ok(Resumed::AlreadyFinished(t.summary()));
     }

@@ -83,7 +83,11 @@ pub(super) struct OffPolicyCollector {
 impl OffPolicyCollector {
     /// The collector of run `cfg`: `agent` trained on `env` (obstacles placed in the way as
     /// `train.obstacles_in_path` says), its random streams drawn from the run's seed.
-    pub(super) fn new(cfg: &Config, mut env: ReachEnv, agent: Box<dyn OffPolicy>) -> Result<OffPolicyCollector> {
+    pub(super) fn new(
+        cfg: &Config,
+        mut env: ReachEnv,
+        agent: Box<dyn OffPolicy>,
+    ) -> Result<OffPolicyCollector> {
         let seed = cfg.train.seed;
         env.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
         let (od, ad) = (env.obs_dim(), env.act_dim());
@@ -225,7 +229,11 @@ impl Collector for OffPolicyCollector {
         }
         let data: Vec<&[f32]> =
             ReplayBuffer::ARRAY_NAMES.iter().map(|n| ck.tensor(n).map(|(_, d)| d)).collect::<Result<_>>()?;
-        self.buffer.restore(state.replay_len, state.replay_pos, [data[0], data[1], data[2], data[3], data[4]])?;
+        self.buffer.restore(
+            state.replay_len,
+            state.replay_pos,
+            [data[0], data[1], data[2], data[3], data[4]],
+        )?;
         self.env.restore(&state.env)?;
         self.state = state;
         Ok(())

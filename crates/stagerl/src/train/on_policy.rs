@@ -17,8 +17,8 @@ use std::path::Path;
 use super::{Collector, Counters, EpisodeEnd};
 use crate::agent::{Agent, Ppo, Rollout, UpdateStats};
 use crate::base::rng::Rng;
-use crate::config::Config;
-use crate::env::{EnvState, ReachEnv, VecEnv};
+use crate::config::Resolved;
+use crate::env::{EnvState, VecEnv};
 use crate::io::checkpoint::Checkpoint;
 use crate::{Error, Result};
 
@@ -67,23 +67,18 @@ pub(super) struct OnPolicyCollector {
 }
 
 impl OnPolicyCollector {
-    /// The collector of run `cfg`: `ppo` trained on environments of the arm, task and reward of
-    /// `env`, their targets drawn from the run's seed.
-    pub(super) fn new(cfg: &Config, env: &ReachEnv, ppo: Box<Ppo>) -> Result<OnPolicyCollector> {
+    /// The collector of run `run`: `ppo` trained on its environments, their targets drawn from
+    /// the run's seed.
+    pub(super) fn new(run: &Resolved, ppo: Box<Ppo>) -> Result<OnPolicyCollector> {
+        let cfg = run.config();
         let p = cfg.agent.ppo();
         let seed = Rng::derived(cfg.train.seed, 5).next_u64();
-        let mut vec = VecEnv::new(
-            p.num_envs,
-            env.chain().clone(),
-            env.task().clone(),
-            env.reward_config().clone(),
-            seed,
-        )?;
+        let mut vec = run.vec_env(p.num_envs, seed)?;
         vec.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
-        let (n, ad) = (p.num_envs, env.act_dim());
+        let (n, ad) = (p.num_envs, run.act_dim());
         Ok(OnPolicyCollector {
             ppo,
-            rollout: Rollout::new(&p, env.obs_dim(), ad),
+            rollout: Rollout::new(&p, run.obs_dim(), ad),
             vec,
             episode_reward: vec![0.0; n],
             episode_steps: vec![0; n],

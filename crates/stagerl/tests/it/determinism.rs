@@ -149,3 +149,35 @@ fn threads_do_not_change_the_run() {
         }
     }
 }
+
+/// The loop's collector is chosen from the agent: the off-policy one saves its replay buffer and
+/// random streams, PPO's its environments and rollout and no replay buffer.
+#[test]
+fn each_collector_saves_its_own_state_and_ppo_keeps_no_replay_buffer() {
+    for algo in [Algo::Sac, Algo::Ppo] {
+        let mut cfg = Config::default();
+        cfg.agent.algo = algo;
+        cfg.agent.hidden = vec![16, 16];
+        cfg.agent.ppo =
+            (algo == Algo::Ppo).then(|| PpoConfig { num_envs: 2, num_steps: 16, ..PpoConfig::default() });
+        cfg.agent.learning_starts = 50;
+        cfg.train.episodes = 4;
+        cfg.train.eval_every_episodes = 0;
+        let dir = std::env::temp_dir().join(format!("stagerl-collector-{}-{algo}", std::process::id()));
+        train(&cfg, &dir, |_| {}).unwrap();
+        let ck = Checkpoint::load(&RunDir::new(&dir).latest()).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        let replay: Vec<&str> = ck.tensor_names().filter(|n| n.starts_with("replay.")).collect();
+        let state: serde_json::Value = ck.json("train_state").unwrap();
+        let has = |key: &str| state.get(key).is_some();
+        if algo == Algo::Ppo {
+            assert!(replay.is_empty(), "PPO saved {replay:?}");
+            assert!(has("on_policy") && !has("replay_rng") && !has("replay_len"), "{state}");
+        } else {
+            assert_eq!(replay.len(), 5, "{replay:?}");
+            assert_eq!(state["replay_len"].as_u64(), state["env_steps"].as_u64(), "every step stored");
+            assert!(has("replay_rng") && has("warmup_rng") && !has("on_policy"), "{state}");
+        }
+        assert_eq!(state["episode"].as_u64(), Some(4));
+    }
+}

@@ -3,8 +3,8 @@
 //! (see the numbers beside them); an untrained or broken agent scores 0 % success and a median
 //! final distance of decimetres.
 
-use stagerl::config::Config;
 use stagerl::agent::Agent;
+use stagerl::config::Config;
 use stagerl::env::{Policy, ReachEnv};
 use stagerl::run::dir::RunDir;
 use stagerl::train::eval::{deterministic, evaluate, EvalOptions, EvalSummary};
