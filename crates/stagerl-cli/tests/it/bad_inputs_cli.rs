@@ -79,7 +79,7 @@ const ARGS: &[Case] = &[
     Case { args: &["bench", "update", "--algo", "ppo"], stdin: "", expect: &["ppo", "off-policy"] },
     // Unbounded resources: refused before allocating, with the estimate.
     Case { args: &["train", "--config", "$DIR/huge_hidden.toml", "--out", "$DIR/out/hh"], stdin: "", expect: &["agent.hidden", "would need about 60.8 GiB"] },
-    Case { args: &["train", "--config", "$DIR/huge_replay.toml", "--out", "$DIR/out/hr"], stdin: "", expect: &["agent.buffer_size", "replay buffer 14.9"] },
+    Case { args: &["train", "--config", "$DIR/huge_replay.toml", "--out", "$DIR/out/hr"], stdin: "", expect: &["agent.buffer_size", "replay buffer or rollout 14.9"] },
     Case { args: &["bench", "update", "--hidden", "16384"], stdin: "", expect: &["agent.hidden", "GiB"] },
     Case { args: &["bench", "train", "--hidden", "16384"], stdin: "", expect: &["agent.hidden", "GiB"] },
     Case { args: &["bench", "update", "--updates", "4294967295"], stdin: "", expect: &["--updates", "4294967295"] },

@@ -50,8 +50,9 @@ pub struct MemoryEstimate {
     pub networks: f64,
     /// Activations and their gradients: batch x every layer's width x 5 networks x 2, f32.
     pub activations: f64,
-    /// The preallocated replay buffer: buffer_size x (2 observations + action + reward +
-    /// terminal), f32.
+    /// What the collector preallocates, f32: the off-policy agents' replay buffer (buffer_size x
+    /// (2 observations + action + reward + terminal)), PPO's rollout (num_steps x num_envs x
+    /// (observation + action + log-probability + value + reward + done)).
     pub replay: f64,
     /// One record per evaluation trial (64 bytes each).
     pub evaluation: f64,
@@ -85,7 +86,12 @@ impl Config {
         MemoryEstimate {
             networks: params * nets * 4.0 * f32_bytes,
             activations: self.agent.batch_size as f64 * layer_values * nets * 2.0 * f32_bytes,
-            replay: self.agent.buffer_size as f64 * (2.0 * obs + act + 2.0) * f32_bytes,
+            replay: if self.agent.algo.is_off_policy() {
+                self.agent.buffer_size as f64 * (2.0 * obs + act + 2.0) * f32_bytes
+            } else {
+                let p = self.agent.ppo();
+                (p.num_steps * p.num_envs) as f64 * (obs + act + 4.0) * f32_bytes
+            },
             evaluation: f64::from(self.train.eval_trials) * 64.0,
         }
     }
@@ -101,7 +107,10 @@ impl Config {
         let parts = [
             (m.networks, "agent.hidden", format!("{:?}", self.agent.hidden)),
             (m.activations, "agent.batch_size", self.agent.batch_size.to_string()),
-            (m.replay, "agent.buffer_size", self.agent.buffer_size.to_string()),
+            match self.agent.algo.is_off_policy() {
+                true => (m.replay, "agent.buffer_size", self.agent.buffer_size.to_string()),
+                false => (m.replay, "agent.ppo.num_steps", self.agent.ppo().num_steps.to_string()),
+            },
             (m.evaluation, "train.eval_trials", self.train.eval_trials.to_string()),
         ];
         let (_, field, value) = parts.iter().max_by(|a, b| a.0.total_cmp(&b.0)).expect("four parts");
@@ -110,7 +119,8 @@ impl Config {
             value,
             format!(
                 "the run would need about {:.1} GiB (networks {:.1}, activations {:.1}, replay buffer \
-                 {:.1}, evaluation {:.1} GiB), more than the {:.0} GiB allowed; use smaller values",
+                 or rollout {:.1}, evaluation {:.1} GiB), more than the {:.0} GiB allowed; use smaller \
+                 values",
                 gib(m.total()),
                 gib(m.networks),
                 gib(m.activations),
@@ -277,6 +287,23 @@ mod tests {
             assert!(text.contains(&format!("[agent.{algo}]")), "{text}");
             assert_eq!(parse(&text).unwrap(), c, "{algo}");
         }
+    }
+
+    #[test]
+    fn the_memory_estimate_counts_what_the_collector_allocates() {
+        // PPO keeps no replay buffer: a buffer_size it does not use is not refused; its rollout is
+        // what it preallocates.
+        let big = "buffer_size = 100000000\nhidden = [4096, 4096]\n";
+        let ppo = parse(&format!("[agent]\nalgo = \"ppo\"\n{big}")).unwrap();
+        let sac = parse(&format!("[agent]\nalgo = \"sac\"\n{big}")).unwrap_err().to_string();
+        assert!(sac.contains("agent.buffer_size") && sac.contains("replay buffer or rollout"), "{sac}");
+        let m = ppo.estimated_memory(6);
+        let obs = crate::env::ObservationLayout::new(ppo.task.observation, 6, 0).dim() as f64;
+        assert_eq!(m.replay, (256.0 * 8.0) * (obs + 6.0 + 4.0) * 4.0, "num_steps x num_envs rows");
+        let e = parse("[agent]\nalgo = \"ppo\"\n[agent.ppo]\nnum_envs = 64\nnum_steps = 4000000\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("agent.ppo.num_steps"), "{e}");
     }
 
     #[test]
