@@ -56,8 +56,9 @@ enum Command {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(cmd::bench::Bench),
-    /// Print the default configuration as TOML (every field, with the paper's values).
-    Config,
+    /// Print every config section and field with its default and help (a valid config), or the
+    /// config's JSON Schema.
+    Config(cmd::config::Args),
 }
 
 fn main() -> ExitCode {
@@ -78,7 +79,7 @@ fn main() -> ExitCode {
         Command::Reward(a) => cmd::reward::run(a),
         Command::Report(a) => cmd::report::run(a),
         Command::Bench(b) => cmd::bench::run(b),
-        Command::Config => out::text(&stagerl::config::Config::default().to_toml_string()),
+        Command::Config(a) => cmd::config::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

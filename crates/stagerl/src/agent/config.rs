@@ -18,7 +18,7 @@ use crate::base::validate::{at_least_one, non_negative, positive};
 use crate::{Error, Result};
 
 /// The learning algorithm.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Algo {
     /// Deep Deterministic Policy Gradient (Lillicrap et al. 2015), the paper's first method.
@@ -66,7 +66,7 @@ impl FromStr for Algo {
 }
 
 /// Exploration noise of DDPG and TD3.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum NoiseKind {
     /// Independent N(0, sigma^2) per step and joint.
@@ -82,7 +82,7 @@ pub const MAX_BUFFER_SIZE: usize = 100_000_000;
 pub const MAX_BATCH_VALUES: usize = 1 << 28;
 
 /// Hyper-parameters of the agents: the `[agent]` section.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct AgentConfig {
     pub algo: Algo,

@@ -23,7 +23,7 @@ use super::{AgentConfig, Algo, NoiseKind};
 use crate::Result;
 
 /// `[agent.ddpg]`: DDPG's exploration.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DdpgConfig {
     /// Exploration noise kind.

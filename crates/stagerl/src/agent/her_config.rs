@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::{Error, Result};
 
 /// How substituted goals are chosen.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum HerStrategy {
     /// A position reached at this step or later in the episode.
@@ -44,7 +44,7 @@ impl std::str::FromStr for HerStrategy {
 pub const MAX_HER_K: u32 = 64;
 
 /// `agent.her`: hindsight relabelling of the off-policy agents' replay.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct HerConfig {
     pub strategy: HerStrategy,

@@ -20,7 +20,7 @@ use crate::{Error, Result};
 
 /// `agent.ppo.norm_obs = { clip = 10.0 }`: normalise observations with running statistics;
 /// unset: off.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ObsNormConfig {
     /// The normalised values are clipped to `[-clip, clip]` (Gymnasium and CleanRL: 10).

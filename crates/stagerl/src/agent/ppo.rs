@@ -41,7 +41,7 @@ use crate::{Error, Result};
 /// (tanh units, as CleanRL), `actor_lr` and `critic_lr` (default 3e-4) and `gamma`; the shared
 /// `max_grad_norm` (per network) and the replay settings (`batch_size`, `buffer_size`,
 /// `learning_starts`, `updates_per_step`, `tau`) are the off-policy agents' and unused.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct PpoConfig {
     /// Environments stepped together (CleanRL: 1; 8 here, as a reaching episode is short).

@@ -28,7 +28,7 @@ use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussia
 use crate::Result;
 
 /// `[agent.sac]`: SAC's entropy coefficient.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SacConfig {
     /// Learning rate of log(alpha).

@@ -35,7 +35,7 @@ use crate::nn::{concat_cols, Activation, Adam, Mlp};
 use crate::Result;
 
 /// `[agent.td3]`: TD3's exploration, policy delay and target policy smoothing.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Td3Config {
     /// Exploration noise kind.

@@ -20,12 +20,13 @@ use crate::reward::RewardConfig;
 use crate::robot::RobotConfig;
 
 mod resolved;
+pub mod schema;
 mod train;
 pub use resolved::Resolved;
 pub use train::{TrainConfig, MAX_EVAL_TRIALS};
 
 /// The whole configuration.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
     pub robot: RobotConfig,

@@ -9,7 +9,7 @@ use crate::{Error, Result};
 pub const MAX_EVAL_TRIALS: u32 = 10_000_000;
 
 /// Training settings (the `[train]` section).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
     /// The run's seed: environment targets, initial weights, exploration, replay sampling.

@@ -12,7 +12,7 @@ use crate::sim::scene::{Obstacle, RandomObstacles, MAX_OBSTACLES};
 use crate::{Error, Result};
 
 /// What the policy observes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ObservationKind {
     /// N + 10 values (16 for six joints), f32: q / pi (N), end-effector position (3, m),
@@ -22,7 +22,7 @@ pub enum ObservationKind {
 }
 
 /// The reaching task.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TaskConfig {
     /// Control period: each joint-velocity command is held this long, seconds (paper: 0.05).
@@ -89,7 +89,7 @@ pub struct TaskConfig {
 }
 
 /// `task.sim`: the simulator.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Sim {
     /// Joint positions integrated from the commands, clamped to the limits (the paper's V-REP
@@ -134,7 +134,7 @@ fn is_false(b: &bool) -> bool {
 pub const OBSTACLE_OBS_LEN: usize = 7;
 
 /// `task.obstacle_observation`: the 7 values of an observed obstacle's slot.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ObstacleObservation {
     /// Centre in the base frame (3, m), half size along the obstacle's axes (3, m) and 1 for a
@@ -159,7 +159,7 @@ impl ObstacleObservation {
 }
 
 /// `task.on_collision`: what a step that ends in contact does.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum OnCollision {
     /// Count it (episodes.csv's `collision_steps`, the evaluations' collision rate); nothing else.

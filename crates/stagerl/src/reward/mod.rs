@@ -18,7 +18,7 @@ use crate::{Error, Result};
 pub mod batch;
 
 /// Which reward the agent is trained on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum RewardFunction {
     /// Sparse: 1 when the task is done, else 0 (eq. 18).
@@ -72,7 +72,7 @@ impl FromStr for RewardFunction {
 }
 
 /// Where the "actual direction" of eq. 4 comes from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum DirectionSource {
     /// The paper's eq. 4: the rotation axis of the end-effector's orientation quaternion,
@@ -84,7 +84,7 @@ pub enum DirectionSource {
 }
 
 /// Reward settings; every constant of the paper is here with the paper's value as default.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RewardConfig {
     /// The reward the agent is trained on.

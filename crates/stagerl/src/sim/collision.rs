@@ -123,7 +123,7 @@ fn pose3(m: &[f64; 12]) -> Pose3 {
 
 /// `[task.collision]`: which contacts of the arm are looked for (all are recorded, none
 /// changes the episode: the paper's task has no collision term). Unset: both.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Checks {
     /// The floor, the plane z = 0 of the base frame.

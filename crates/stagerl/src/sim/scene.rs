@@ -11,7 +11,7 @@ use crate::robot::{Chain, Shape};
 use crate::{Error, Result};
 
 /// An obstacle's kind.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ObstacleShape {
     /// A box: `half_extents_m`.
@@ -21,7 +21,7 @@ pub enum ObstacleShape {
 }
 
 /// An obstacle: a box or a sphere at a fixed pose in the base frame (`[[task.obstacles]]`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Obstacle {
     pub shape: ObstacleShape,
@@ -199,7 +199,7 @@ pub const MAX_RANDOM_OBSTACLES: u32 = 32;
 /// region. A candidate is drawn again (up to [`PLACEMENT_TRIES`] times, then the obstacle is left
 /// out of that episode) while it touches the arm at the episode's start pose or comes closer to
 /// the target than `target_clearance_m`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RandomObstacles {
     /// Obstacles per episode, an integer drawn uniformly from `[count[0], count[1]]`.
