@@ -24,7 +24,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Train an agent (DDPG, TD3, SAC) on the reaching task; ends with an evaluation.
+    /// Train an agent (DDPG, TD3, SAC, PPO) on the reaching task; ends with an evaluation.
     Train(cmd::train::Args),
     /// Evaluate a trained run's deterministic policy on random targets.
     Eval(cmd::eval::Args),
@@ -54,7 +54,7 @@ enum Command {
     /// Table 1, the paper's claims, Figures 7 and 8 and trajectories from finished run directories.
     Report(cmd::report::Args),
     /// Benchmarks.
-    #[command(subcommand)]
+    #[command(subcommand, after_help = "Example:\n  stagerl bench update --algo sac --hidden 256")]
     Bench(cmd::bench::Bench),
     /// Print every config section and field with its default and help (a valid config), or the
     /// config's JSON Schema.

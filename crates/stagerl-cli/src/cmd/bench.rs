@@ -19,6 +19,7 @@ pub enum Bench {
 }
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl bench plan --plans 2000")]
 pub struct PlanArgs {
     /// A trained run to plan with; unset: an untrained agent of --algo and --hidden (whose plans
     /// rarely reach the target, so each runs the full max_steps: the slowest case).
@@ -36,6 +37,7 @@ pub struct PlanArgs {
 }
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl bench update --algo sac --hidden 256 --batch 256")]
 pub struct UpdateArgs {
     #[arg(long, value_parser = super::algo_parser(), default_value = "sac")]
     algo: stagerl::agent::Algo,
@@ -53,6 +55,7 @@ pub struct UpdateArgs {
 }
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl bench train --algo sac --hidden 64")]
 pub struct TrainArgs {
     #[arg(long, value_parser = super::algo_parser(), default_value = "sac")]
     algo: stagerl::agent::Algo,
@@ -68,6 +71,7 @@ pub struct TrainArgs {
 }
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl bench env --steps 1000000 --reward sar")]
 pub struct EnvArgs {
     /// Steps to time.
     #[arg(long, default_value_t = 5_000_000, value_parser = clap::value_parser!(u64).range(1..=10_000_000_000))]

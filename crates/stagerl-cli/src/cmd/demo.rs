@@ -5,6 +5,7 @@ use stagerl::train::eval::{evaluate, EvalOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl demo --show 1 --trials 500")]
 pub struct Args {
     /// A TOML config (arm, task, reward); defaults otherwise.
     #[arg(long)]

@@ -5,6 +5,7 @@ use stagerl::train::eval::{deterministic, evaluate, EvalOptions};
 use stagerl::train::{self};
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl eval --run runs/sac-sar --trials 500 --seed 0")]
 pub struct Args {
     #[command(flatten)]
     run: super::RunArgs,

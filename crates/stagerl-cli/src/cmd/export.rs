@@ -3,6 +3,7 @@ use stagerl::run::dir::RunDir;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl export --run runs/sac-sar --out policy.onnx")]
 pub struct Args {
     #[command(flatten)]
     run: super::RunArgs,

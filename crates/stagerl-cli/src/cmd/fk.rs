@@ -2,6 +2,7 @@ use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  echo '{\"joints\":[0,-1.57,1.57,-1.57,-1.57,0]}' | stagerl fk")]
 pub struct Args {
     #[command(flatten)]
     robot: super::RobotArgs,

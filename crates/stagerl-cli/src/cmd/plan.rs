@@ -6,6 +6,9 @@ use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
+#[command(
+    after_help = "Examples:\n  stagerl plan --run runs/sac-sar --target 0.4,0.2,0.5\n  stagerl plan --controller jacobian --target 0.4,0.2,0.5 --format csv"
+)]
 pub struct Args {
     /// The run directory whose policy plans (holds config.toml and checkpoints/).
     #[arg(long, required_unless_present = "controller")]

@@ -4,6 +4,7 @@ use stagerl::report::{self, claims::Verdict, ReportOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl report runs/quick --out runs/quick/report")]
 pub struct Args {
     /// Directory holding run directories (at depth 1 or 2; a run has config.toml and episodes.csv).
     dir: PathBuf,

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl reproduce --preset quick --out runs/quick --jobs 2")]
 pub struct Args {
     /// `smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long` (bundled, see configs/presets/), or a path to a preset TOML file.
     #[arg(long)]

@@ -5,6 +5,9 @@ use stagerl::reward::{Reported, RewardFunction, RewardInput, RewardTerms};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
+#[command(
+    after_help = "Example:\n  echo '{\"ee_pos\":[0.4,0.1,0.5],\"ee_quat\":[0,0,0,1],\"target\":[0.5,0.1,0.4],\"joint_vel\":[0,0,0,0,0,0]}' | stagerl reward --function sar"
+)]
 pub struct Args {
     /// The reward whose value goes in `reward` (overrides the config's reward.function).
     #[arg(long, value_parser = super::reward_parser())]

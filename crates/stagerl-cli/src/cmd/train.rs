@@ -12,6 +12,9 @@ use crate::progress::{print_summary, Reporter};
 use crate::run_control::{finish, lock_run, output_ok, stop_flags};
 
 #[derive(clap::Args)]
+#[command(
+    after_help = "Examples:\n  stagerl train --algo sac --reward sar --seed 1 --out runs/sac-sar\n  stagerl train --resume runs/sac-sar"
+)]
 pub struct Args {
     /// Algorithm (overrides agent.algo).
     #[arg(long, value_parser = super::algo_parser())]

@@ -4,6 +4,7 @@ use stagerl::view::{self, ViewSource};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl view --run runs/sac-sar --targets 5 --out view.html")]
 pub struct Args {
     #[command(flatten)]
     run: super::RunArgs,

@@ -161,3 +161,32 @@ fn reproduce_whose_output_closes_stops_and_resumes() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("all 3 runs done"));
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// Every command's `--help` ends with an example to copy.
+#[test]
+fn every_commands_help_has_an_example() {
+    let top = String::from_utf8(bin().arg("--help").output().unwrap().stdout).unwrap();
+    // The commands, as the top-level help lists them (two spaces, the name, spaces, the text).
+    let commands: Vec<String> = top
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .filter(|c| c != "help")
+        .collect();
+    assert!(commands.len() >= 12, "{commands:?} from\n{top}");
+    let mut helps: Vec<Vec<String>> = commands.iter().map(|c| vec![c.clone()]).collect();
+    helps.extend(["env", "update", "train", "plan"].map(|b| vec!["bench".to_string(), b.to_string()]));
+    for args in helps {
+        let o = bin().args(&args).arg("--help").output().unwrap();
+        let text = String::from_utf8(o.stdout).unwrap();
+        assert!(o.status.success(), "{args:?}");
+        assert!(
+            text.contains("\nExample:\n  stagerl ")
+                || text.contains("\nExamples:\n  stagerl ")
+                || text.contains("\nExample:\n  echo "),
+            "{args:?} --help has no example:\n{text}"
+        );
+    }
+}
