@@ -6,7 +6,8 @@
 //! environments and the agent. Unknown fields are rejected; every
 //! value is validated with an error that names the field, the value and what is allowed.
 //!
-//! Defaults are the paper's where it gives a value, and the design notes' choices elsewhere.
+//! Defaults are the paper's where it gives a value, and the choices of the design notes
+//! (`docs/design.md`) elsewhere.
 
 use serde::{Deserialize, Serialize};
 use std::path::Path;

@@ -1,4 +1,5 @@
-//! The random-target reaching task of the paper (section VI), as the design notes fix it.
+//! The random-target reaching task of the paper (section VI), as the design notes
+//! (`docs/design.md`) fix it.
 //!
 //! Every episode starts at the home pose with a new target drawn from the task's distribution.
 //! An action is one value per joint, clipped to [-1, 1] and scaled by the joint's speed limit to

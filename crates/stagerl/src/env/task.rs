@@ -198,9 +198,9 @@ impl Default for TaskConfig {
     }
 }
 
-/// The UR5 home pose of the design notes, radians.
+/// The UR5 home pose of the design notes (`docs/design.md`), radians.
 pub const UR5_HOME_POSE_RAD: [f64; 6] = [0.0, -FRAC_PI_2, FRAC_PI_2, -FRAC_PI_2, -FRAC_PI_2, 0.0];
-/// The default target joint range of the design notes, radians.
+/// The default target joint range of the design notes (`docs/design.md`), radians.
 pub const DEFAULT_TARGET_JOINT_RANGE_RAD: [f64; 6] = [1.2, 0.8, 0.8, 0.0, 0.0, 0.0];
 
 /// Largest `task.obs_delta_scale`: the scaled `target - end-effector` entries are f32, and a

@@ -310,7 +310,7 @@ impl Serialize for Reported {
 }
 
 /// phi of eq. 5: the angle between `expected` and `actual`, in [0, pi]. 0 when either vector is
-/// degenerate (|V_PT| < 1e-12 or |V_PP'| < 1e-9), as the design notes fix.
+/// degenerate (|V_PT| < 1e-12 or |V_PP'| < 1e-9), as the design notes (`docs/design.md`) fix.
 #[inline]
 pub fn angle_between(expected: &Vector3<f64>, actual: &Vector3<f64>) -> f64 {
     angle_from_cosine(cosine_between(expected, actual))

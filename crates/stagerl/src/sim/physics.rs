@@ -9,7 +9,7 @@
 //! as cylinders; meshes are not simulated). Links that share a joint do not collide with each
 //! other; other links do.
 //!
-//! Settings (those that held a UR5 still and tracked its commands, see the design notes):
+//! Settings (those that held a UR5 still and tracked its commands, see `docs/design.md`):
 //! one physics step per control step ([`DynamicArm::new`]'s `dt_s`), [`SOLVER_ITERATIONS`] solver
 //! iteration with [`INTERNAL_PGS_ITERATIONS`] internal PGS iterations, motor damping
 //! [`MOTOR_DAMPING`], sleeping off, continuous collision detection off (see `params`). Pairs of

@@ -4,6 +4,7 @@
 mod bad_inputs;
 mod code_shape;
 mod determinism;
+mod docs_links;
 mod float_roundtrip;
 mod learning;
 mod nan_guard;
