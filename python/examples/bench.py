@@ -1,4 +1,4 @@
-"""Speed of the Python bindings (figures in the README's Python section; not run in CI).
+"""Speed of the Python bindings (figures in docs/python.md; not run in CI).
 
     target/py-venv/bin/python python/examples/bench.py
 """

@@ -1,5 +1,5 @@
 """Stable-Baselines3 SAC on ``stagerl/Reach-v0``, beside stagerl's own SAC on the same number
-of environment steps (figures in the README's Python section; not run in CI: torch is heavy).
+of environment steps (figures in docs/python.md; not run in CI: torch is heavy).
 
     python -m venv sb3-venv && sb3-venv/bin/pip install ./python stable-baselines3
     sb3-venv/bin/python python/examples/sb3_sac.py --stagerl-bin target/release/stagerl --episodes 1000

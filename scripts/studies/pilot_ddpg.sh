@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The DDPG pilot of the paper regime (issue 13.6), in two stages (the rule is in the README,
+# The DDPG pilot of the paper regime (issue 13.6), in two stages (the rule is in docs/reproducing.md,
 # "Paper regime"): presets in configs/studies/pilot-ddpg/, each DDPG on the four dense rewards, seed 1,
 # 2000 episodes, 200 evaluation trials.
 #   1. hidden 64: learning rate 1e-3 | 3e-4 x Gaussian 0.1 | OU 0.2 noise (four cells);

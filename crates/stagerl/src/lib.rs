@@ -54,3 +54,9 @@ pub mod view;
 pub use base::error::{Error, Result};
 /// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).
 pub use nalgebra;
+
+/// The README's Rust example, compiled by `cargo test` (rustdoc tests the README's `rust` code
+/// blocks) so that the front door stays true of the code.
+#[doc = include_str!("../../../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;

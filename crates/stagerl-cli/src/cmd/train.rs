@@ -52,7 +52,7 @@ pub struct Args {
     /// Threads for this run's updates, 1 to 64. The run is the same, bit for bit, on any number
     /// (work is split only into parts that write separate values, see `stagerl::base::par`); wide
     /// networks gain most (hidden 256), hidden 64 less (end to end on two cores: -5 to +40 %,
-    /// see the README's Performance section).
+    /// see docs/performance.md).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     threads: u32,
 }

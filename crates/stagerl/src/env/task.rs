@@ -76,7 +76,7 @@ pub struct TaskConfig {
     /// With `obstacle_observation = "nearest"`: obstacles whose surface is farther than this
     /// from the end effector (m, > 0) are left out of the observation (their slots read as
     /// empty, far away), so that the obstacle entries change only near an obstacle. Unset: every
-    /// obstacle is observed. See the README's random-obstacles results for what it changes.
+    /// obstacle is observed. See docs/physics.md's random-obstacles results for what it changes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub obstacle_range_m: Option<f64>,
     /// How a joint-velocity command moves the arm: `"kinematic"` (the default: integrated and
