@@ -143,7 +143,11 @@ impl Config {
         let cfg: Config = toml::from_str(text).map_err(|e| {
             let raw: Option<toml::Table> = toml::from_str(text).ok();
             let agent = raw.as_ref().and_then(|t| t.get("agent")).and_then(toml::Value::as_table);
-            let message = agent.and_then(AgentConfig::misplaced_key).unwrap_or_else(|| e.to_string());
+            let missing = raw.as_ref().map(schema::missing_required).unwrap_or_default();
+            let message = agent.and_then(AgentConfig::misplaced_key).unwrap_or_else(|| match missing.len() {
+                0 => e.to_string(),
+                _ => format!("missing required settings (all of them): {}", missing.join(", ")),
+            });
             Error::ConfigParse {
                 path: origin.to_path_buf(),
                 message: crate::base::text::bound_message(&message),

@@ -55,6 +55,41 @@ fn written_order() -> Vec<String> {
     order
 }
 
+/// Every required setting `table` (a config file's TOML) lacks, as `section.field` paths
+/// (`task.obstacles[1].position_m`): serde names the first missing field only, a user wants
+/// them all at once.
+pub fn missing_required(table: &toml::Table) -> Vec<String> {
+    let schema = json_schema();
+    let mut out = Vec::new();
+    missing_in(&schema, &schema, table, "", &mut out);
+    out
+}
+
+fn missing_in(schema: &Value, node: &Value, table: &toml::Table, path: &str, out: &mut Vec<String>) {
+    let at = |name: &str| if path.is_empty() { name.to_string() } else { format!("{path}.{name}") };
+    for name in node.get("required").and_then(Value::as_array).into_iter().flatten().filter_map(Value::as_str)
+    {
+        if !table.contains_key(name) {
+            out.push(at(name));
+        }
+    }
+    let Some(props) = node.get("properties").and_then(Value::as_object) else { return };
+    for (name, value) in table {
+        let Some(def) = props.get(name).and_then(|p| resolve(schema, p)) else { continue };
+        match value {
+            toml::Value::Table(t) => missing_in(schema, def, t, &at(name), out),
+            toml::Value::Array(items) => {
+                for (i, item) in items.iter().enumerate() {
+                    if let toml::Value::Table(t) = item {
+                        missing_in(schema, def, t, &format!("{}[{i}]", at(name)), out);
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
 /// A `$ref` (or a nullable `anyOf` of one) resolved to its definition.
 fn resolve<'a>(schema: &'a Value, prop: &'a Value) -> Option<&'a Value> {
     let target = prop

@@ -163,3 +163,15 @@ fn first_sentences_lose_their_links() {
     assert_eq!(first_sentence("See [`a::B`](crate::a::B)\nand on. Next."), "See `a::B` and on.");
     assert_eq!(first_sentence("No period"), "No period");
 }
+
+#[test]
+fn a_file_missing_required_settings_is_refused_naming_every_one() {
+    let text = "[[task.obstacles]]\nradius_m = 0.05\n[[task.obstacles]]\nshape = \"sphere\"\n\
+                [task.random_obstacles]\ncount = [1, 2]\n";
+    let e = Config::from_toml_str(text, std::path::Path::new("m.toml")).unwrap_err().to_string();
+    for field in ["task.obstacles[0].shape", "task.obstacles[0].position_m", "task.obstacles[1].position_m"] {
+        assert!(e.contains(field), "{field} in {e}");
+    }
+    assert!(!e.contains("obstacles[1].shape"), "{e}");
+    assert!(e.contains("m.toml"), "{e}");
+}
