@@ -5,7 +5,11 @@
 //! Mechanism of Dense Reward for Robotic Trajectory Planning* (the "paper").
 //!
 //! The folders follow the pipeline from the bottom up; each imports only the folders above it in
-//! this list (`tests/it/code_shape.rs` asserts it):
+//! this list (`tests/it/code_shape.rs` asserts it). Four of them are crates of their own, so that
+//! an edit above them does not recompile them and they compile side by side: `stagerl-base`
+//! ([`base`]), `stagerl-nn` ([`nn`]) and `stagerl-sim` ([`robot`] and [`sim`], with parry3d and
+//! rapier3d); this crate re-exports them at the same paths (`stagerl::nn::Mlp`,
+//! `stagerl::base::rng::Rng`) and holds the other twelve.
 //! - [`base`]: the error type, the seeded random generator, scalar math, run-time SIMD dispatch,
 //!   the fork-join pool one run splits its work over, text bounds and shared value checks.
 //! - [`nn`]: a small multilayer-perceptron engine (forward, backward, Adam) with its own
@@ -35,25 +39,26 @@
 //! Units: metres, radians, seconds; quaternions are `(x, y, z, w)` on every interface.
 
 pub mod agent;
-pub mod base;
 pub mod config;
 pub mod env;
 pub mod export;
 pub mod io;
-pub mod nn;
 pub mod plan;
 pub mod report;
 pub mod reward;
-pub mod robot;
 pub mod run;
-pub mod sim;
 pub mod sweep;
 pub mod train;
 pub mod view;
 
-pub use base::error::{Error, Result};
+// The folders of the lower crates, at the same paths as the folders of this one.
+pub use stagerl_base::base;
+pub use stagerl_nn::nn;
+pub use stagerl_sim::{robot, sim};
+
 /// The linear-algebra crate of the public interfaces (`Vector3`, `UnitQuaternion`).
 pub use nalgebra;
+pub use stagerl_base::{Error, Result};
 
 /// The README's Rust example, compiled by `cargo test` (rustdoc tests the README's `rust` code
 /// blocks) so that the front door stays true of the code.

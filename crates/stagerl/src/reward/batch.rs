@@ -16,8 +16,9 @@ use std::mem::MaybeUninit;
 use nalgebra::Vector3;
 
 use super::{angle_from_cosine, direction_cosine, movement_reward, RewardConfig, RewardInput, RewardTerms};
-use crate::base::simd::{multiversion, SimdLevel};
+use crate::base::simd::SimdLevel;
 use crate::{Error, Result};
+use stagerl_base::multiversion;
 
 /// The float columns of [`compute_rows`]: the names of [`RewardTerms::reported`] but `reached`,
 /// in that order.

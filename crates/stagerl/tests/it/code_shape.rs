@@ -1,7 +1,9 @@
 //! The shape of the code itself: no function in `crates/*/src` longer than 100 lines; the
 //! library's folders in the pipeline's order, each importing only the folders below it (which
-//! also rules out any import cycle between them); re-exports only in `lib.rs`; and no import
-//! cycle between the command-line tool's commands.
+//! also rules out any import cycle between them), across the library's crates (each folder in
+//! one crate, importing only its own crate's folders and those of the crates it depends on, and
+//! the facade `stagerl` re-exporting the lower crates' folders at `stagerl::<folder>`);
+//! re-exports only in `lib.rs`; and no import cycle between the command-line tool's commands.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -132,45 +134,103 @@ fn the_counter_sees_function_bodies() {
     assert_eq!(f, [(4, "a".to_string(), 1), (3, "b".to_string(), 6)]);
 }
 
-/// The top-level modules each library module names through `crate::<module>` in its code.
-fn module_uses() -> BTreeMap<String, BTreeSet<String>> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
-    let mut uses: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for f in files {
-        let rel = f.strip_prefix(&src).unwrap();
-        let top = rel
-            .components()
-            .next()
-            .unwrap()
-            .as_os_str()
-            .to_string_lossy()
-            .trim_end_matches(".rs")
-            .to_string();
-        if top == "lib" {
-            continue;
+/// The library's crates from the bottom up, each with the folders it holds (`src/<folder>/`): a
+/// crate depends only on crates before it, and the last, `stagerl`, is the facade that re-exports
+/// the folders of the others.
+const CRATES: [(&str, &[&str]); 4] = [
+    ("stagerl-base", &["base"]),
+    ("stagerl-nn", &["nn"]),
+    ("stagerl-sim", &["robot", "sim"]),
+    (
+        "stagerl",
+        &[
+            "io", "agent", "reward", "env", "config", "run", "train", "plan", "export", "view", "report",
+            "sweep",
+        ],
+    ),
+];
+
+/// The crate that holds a folder.
+fn crate_of(folder: &str) -> &'static str {
+    CRATES.iter().find(|(_, folders)| folders.contains(&folder)).map(|(c, _)| *c).unwrap()
+}
+
+/// The library crates `krate`'s Cargo.toml names among its `[dependencies]`.
+fn crate_deps(krate: &str) -> BTreeSet<String> {
+    let toml = std::fs::read_to_string(crates_dir().join(krate).join("Cargo.toml")).unwrap();
+    let mut section = String::new();
+    let mut deps = BTreeSet::new();
+    for line in toml.lines().map(str::trim) {
+        if line.starts_with('[') {
+            section = line.to_string();
+        } else if section == "[dependencies]" {
+            let name = line.split(['.', '=', ' ']).next().unwrap();
+            if CRATES.iter().any(|(c, _)| *c == name) {
+                deps.insert(name.to_string());
+            }
         }
-        // Code only: a doc link to another module is no dependency.
-        let text: String = std::fs::read_to_string(&f).unwrap().lines().map(|l| code_of(l) + "\n").collect();
-        let edges = uses.entry(top.clone()).or_default();
-        for (k, _) in text.match_indices("crate::") {
-            let rest = &text[k + "crate::".len()..];
-            let names: Vec<&str> = if let Some(group) = rest.strip_prefix('{') {
-                group
-                    .split('}')
-                    .next()
-                    .unwrap()
-                    .split(',')
-                    .map(|n| n.split("::").next().unwrap().trim())
-                    .collect()
-            } else {
-                vec![rest.split(|c: char| !(c.is_alphanumeric() || c == '_')).next().unwrap()]
-            };
-            for n in names {
-                let is_module = n.chars().next().is_some_and(|c| c.is_ascii_lowercase());
-                if is_module && n != top && n != "self" {
-                    edges.insert(n.to_string());
+    }
+    deps
+}
+
+/// The top-level modules each library module (a folder of one of the library's crates) names
+/// through `crate::<module>` in its code, or through a lower crate's path (`stagerl_base::...`).
+fn module_uses() -> BTreeMap<String, BTreeSet<String>> {
+    let mut uses: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (krate, _) in CRATES {
+        let src = crates_dir().join(krate).join("src");
+        let mut files = Vec::new();
+        rust_files(&src, &mut files);
+        for f in files {
+            let rel = f.strip_prefix(&src).unwrap();
+            let top = rel
+                .components()
+                .next()
+                .unwrap()
+                .as_os_str()
+                .to_string_lossy()
+                .trim_end_matches(".rs")
+                .to_string();
+            if top == "lib" {
+                continue;
+            }
+            // Code only: a doc link to another module is no dependency.
+            let text: String =
+                std::fs::read_to_string(&f).unwrap().lines().map(|l| code_of(l) + "\n").collect();
+            let edges = uses.entry(top.clone()).or_default();
+            for (k, _) in text.match_indices("crate::") {
+                let rest = &text[k + "crate::".len()..];
+                let names: Vec<&str> = if let Some(group) = rest.strip_prefix('{') {
+                    group
+                        .split('}')
+                        .next()
+                        .unwrap()
+                        .split(',')
+                        .map(|n| n.split("::").next().unwrap().trim())
+                        .collect()
+                } else {
+                    vec![rest.split(|c: char| !(c.is_alphanumeric() || c == '_')).next().unwrap()]
+                };
+                for n in names {
+                    // A folder (not a type, nor a macro at a crate's root such as `multiversion`).
+                    let is_folder = CRATES.iter().any(|(_, folders)| folders.contains(&n));
+                    if is_folder && n != top {
+                        edges.insert(n.to_string());
+                    }
+                }
+            }
+            // A lower crate named directly (its macros sit at its root): a use of its folders.
+            for (other, folders) in &CRATES[..CRATES.len() - 1] {
+                let path = format!("{}::", other.replace('-', "_"));
+                for (k, _) in text.match_indices(&path) {
+                    let next =
+                        text[k + path.len()..].split(|c: char| !(c.is_alphanumeric() || c == '_')).next();
+                    let named = folders.iter().find(|f| Some(**f) == next);
+                    for f in named.map_or(*folders, std::slice::from_ref) {
+                        if *f != top {
+                            edges.insert(f.to_string());
+                        }
+                    }
                 }
             }
         }
@@ -210,19 +270,27 @@ const ORDER: [&str; 16] = [
     "view", "report", "sweep",
 ];
 
+/// The folders a crate's `lib.rs` declares (`pub mod` or `mod`).
+fn declared_modules(krate: &str) -> BTreeSet<String> {
+    let lib = std::fs::read_to_string(crates_dir().join(krate).join("src/lib.rs")).unwrap();
+    lib.lines()
+        .filter_map(|l| l.trim().strip_prefix("pub mod ").or(l.trim().strip_prefix("mod ")))
+        .map(|m| m.trim_end_matches(';').to_string())
+        .collect()
+}
+
 #[test]
 fn folders_import_only_the_folders_below_them() {
     let uses = module_uses();
     let declared: BTreeSet<String> = uses.keys().cloned().collect();
     let ordered: BTreeSet<String> = ORDER.iter().map(|s| s.to_string()).collect();
     assert_eq!(declared, ordered, "the library's top-level modules are the folders of ORDER");
-    let lib = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("src/lib.rs")).unwrap();
-    let mods: BTreeSet<String> = lib
-        .lines()
-        .filter_map(|l| l.trim().strip_prefix("pub mod ").or(l.trim().strip_prefix("mod ")))
-        .map(|m| m.trim_end_matches(';').to_string())
-        .collect();
-    assert_eq!(mods, ordered, "lib.rs declares exactly the folders of ORDER");
+    let held: BTreeSet<String> = CRATES.iter().flat_map(|(_, f)| f.iter().map(|s| s.to_string())).collect();
+    assert_eq!(held, ordered, "each folder of ORDER sits in one of CRATES");
+    for (krate, folders) in CRATES {
+        let own: BTreeSet<String> = folders.iter().map(|s| s.to_string()).collect();
+        assert_eq!(declared_modules(krate), own, "{krate}'s lib.rs declares exactly its folders of CRATES");
+    }
     let mut wrong = Vec::new();
     for (i, m) in ORDER.iter().enumerate() {
         for used in &uses[*m] {
@@ -233,17 +301,66 @@ fn folders_import_only_the_folders_below_them() {
         }
     }
     assert!(
-        uses["train"].contains("agent") && uses["agent"].contains("nn"),
+        uses["train"].contains("agent") && uses["agent"].contains("nn") && uses["nn"].contains("base"),
         "the scan sees imports: {uses:?}"
     );
     assert!(wrong.is_empty(), "imports against the pipeline's order:\n{}", wrong.join("\n"));
 }
 
+/// The crates' layering: a crate depends only on library crates below it in CRATES, and each
+/// folder imports only its own crate's folders and those of the crates its crate depends on
+/// (directly: a folder does not reach through a crate's dependency to the crate below it).
+#[test]
+fn crates_import_only_the_crates_below_them() {
+    let uses = module_uses();
+    let mut wrong = Vec::new();
+    for (i, (krate, folders)) in CRATES.iter().enumerate() {
+        let deps = crate_deps(krate);
+        let below: BTreeSet<String> = CRATES[..i].iter().map(|(c, _)| c.to_string()).collect();
+        for d in deps.difference(&below) {
+            wrong.push(format!("crate {krate} depends on {d}, not below it"));
+        }
+        for folder in *folders {
+            for used in &uses[*folder] {
+                let c = crate_of(used);
+                if c != *krate && !deps.contains(c) {
+                    wrong.push(format!("{krate}: {folder} imports {used} of {c}, not a dependency"));
+                }
+            }
+        }
+    }
+    assert!(crate_deps("stagerl").contains("stagerl-sim"), "the scan sees the crates' dependencies");
+    assert!(wrong.is_empty(), "imports against the crates' layering:\n{}", wrong.join("\n"));
+}
+
+/// The facade re-exports every lower crate's folders, so that users' paths are `stagerl::<folder>`
+/// wherever the folder lives.
+#[test]
+fn the_facade_re_exports_the_lower_crates_folders() {
+    let lib = std::fs::read_to_string(crates_dir().join("stagerl/src/lib.rs")).unwrap();
+    let mut missing = Vec::new();
+    for (krate, folders) in &CRATES[..CRATES.len() - 1] {
+        let name = krate.replace('-', "_");
+        for f in *folders {
+            let single = format!("pub use {name}::{f};");
+            let grouped = lib
+                .lines()
+                .filter_map(|l| l.trim().strip_prefix(&format!("pub use {name}::{{")))
+                .any(|g| g.trim_end_matches("};").split(',').any(|n| n.trim() == *f));
+            if !lib.contains(&single) && !grouped {
+                missing.push(format!("{name}::{f}"));
+            }
+        }
+    }
+    assert!(missing.is_empty(), "stagerl's lib.rs does not re-export: {missing:?}");
+}
+
 #[test]
 fn re_exports_only_in_lib_rs() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = Vec::new();
-    rust_files(&src, &mut files);
+    for (krate, _) in CRATES {
+        rust_files(&crates_dir().join(krate).join("src"), &mut files);
+    }
     let offenders: Vec<String> = files
         .iter()
         .filter(|f| !f.ends_with("lib.rs"))
@@ -255,6 +372,7 @@ fn re_exports_only_in_lib_rs() {
         })
         .map(|f| f.display().to_string())
         .collect();
+    assert!(files.len() > 100, "found the sources: {}", files.len());
     assert!(offenders.is_empty(), "`pub use crate::` outside lib.rs: {offenders:?}");
 }
 

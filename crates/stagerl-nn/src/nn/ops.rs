@@ -4,7 +4,7 @@
 //! All of them are single passes over slices and allocate nothing.
 
 use super::Scalar;
-use crate::base::simd::multiversion;
+use stagerl_base::multiversion;
 
 /// Lanes of the independent partial sums in reductions, so that the loops vectorise.
 const LANES: usize = 16;

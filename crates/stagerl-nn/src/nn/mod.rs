@@ -17,6 +17,8 @@
 //!
 //! # Example: a critic regression and a DDPG-style actor update
 //! ```
+//! # // The paths of the `stagerl` crate, which re-exports this one (this crate's tests cannot use it).
+//! # mod stagerl { pub use stagerl_base::base; pub use stagerl_nn::nn; }
 //! use stagerl::nn::{concat_cols, mse_loss, Activation, Adam, Mlp};
 //! use stagerl::base::rng::Rng;
 //!

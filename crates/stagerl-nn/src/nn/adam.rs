@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::Scalar;
-use crate::base::simd::multiversion;
+use stagerl_base::multiversion;
 
 /// Adam over one flat parameter slice.
 ///

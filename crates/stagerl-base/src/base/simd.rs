@@ -5,7 +5,7 @@
 //! run time by [`simd_level`] as well; the element-wise loops (bias and
 //! activation, their backward passes, Adam, Polyak averaging, norms, the squashed Gaussian head,
 //! the Box-Muller sampler) do the same through
-//! [`multiversion!`]: the loop is written once and compiled three times, for AVX-512F, for
+//! [`multiversion!`](crate::multiversion!): the loop is written once and compiled three times, for AVX-512F, for
 //! AVX2 + FMA and for the baseline, and the widest version the CPU supports runs.
 //!
 //! Results are bit-identical whichever version runs: each element's arithmetic is the same
@@ -24,7 +24,7 @@ pub enum SimdLevel {
     Baseline,
 }
 
-/// The level [`multiversion!`] functions run at on this CPU (detected once, then cached by the
+/// The level [`multiversion!`](crate::multiversion!) functions run at on this CPU (detected once, then cached by the
 /// standard library).
 #[inline]
 pub fn simd_level() -> SimdLevel {
@@ -47,6 +47,9 @@ pub fn simd_level() -> SimdLevel {
 /// Written `fn name / name_at<T: Bound>(args) -> Ret { body }`: `name_at(level, args)` is the
 /// same function at a given level (the baseline where the CPU lacks it), for the tests that
 /// compare the versions.
+///
+/// Exported at the crate's root (`stagerl_base::multiversion`) for the network engine's crate.
+#[macro_export]
 macro_rules! multiversion {
     (
         $(#[$meta:meta])*
@@ -93,5 +96,3 @@ macro_rules! multiversion {
         }
     };
 }
-
-pub(crate) use multiversion;

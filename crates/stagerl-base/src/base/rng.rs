@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::base::simd::multiversion;
+use crate::multiversion;
 
 /// xoshiro256++ with a Box-Muller normal sampler.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

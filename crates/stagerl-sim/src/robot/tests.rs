@@ -11,8 +11,8 @@ use super::*;
 use crate::base::rng::Rng;
 use crate::Error;
 
-/// The test arm of `tests/robot_test_arm.urdf` (tip `tool`).
-const TEST_ARM: &str = include_str!("../../tests/robot_test_arm.urdf");
+/// The test arm of `crates/stagerl/tests/robot_test_arm.urdf` (tip `tool`).
+const TEST_ARM: &str = include_str!("../../../stagerl/tests/robot_test_arm.urdf");
 
 fn test_arm() -> Chain {
     Chain::from_urdf_str(TEST_ARM, Some("tool")).unwrap()
@@ -389,7 +389,7 @@ fn try_fk_checks_length_and_finiteness() {
 
 #[test]
 fn load_reads_files_and_reports_io_errors() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/robot_test_arm.urdf");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../stagerl/tests/robot_test_arm.urdf");
     let c = Chain::load(path, Some("tool")).unwrap();
     assert_eq!(c.dof(), 4);
     assert_eq!(c.base_link(), "world");

@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use super::ops::{copy_row, grow};
 use super::Scalar;
-use crate::base::simd::multiversion;
+use stagerl_base::multiversion;
 
 /// How the raw network output `s` becomes the log standard deviation `l`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
