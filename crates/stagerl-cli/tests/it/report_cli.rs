@@ -178,3 +178,25 @@ fn report_on_trained_runs() {
     assert!(!empty.join("report").exists());
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// A committed report regenerates from the committed runs: `stagerl report` on
+/// `docs/results/quick/runs` writes the committed `table1.md` (but the line naming the version
+/// that wrote it), `claims.md` and `aggregates.md`, byte for byte.
+#[test]
+fn the_committed_quick_report_regenerates_from_the_committed_runs() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let study = root.join("docs/results/quick");
+    let out = crate::common::scratch("regenerate-quick");
+    ok(&stagerl(&["report", study.join("runs").to_str().unwrap(), "--out", out.to_str().unwrap()]));
+    let text = |p: &Path| std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    for name in ["claims.md", "aggregates.md", "table1.md"] {
+        let (ours, committed) = (text(&out.join(name)), text(&study.join(name)));
+        let keep = |t: &str| {
+            t.lines().filter(|l| !l.starts_with("This report: `")).map(str::to_owned).collect::<Vec<_>>()
+        };
+        if name != "aggregates.md" {
+            assert!(ours.contains("tuned regime"), "{name}: the regime the preset names");
+        }
+        assert_eq!(keep(&ours), keep(&committed), "{name} differs from the committed one");
+    }
+}
