@@ -133,11 +133,19 @@ pub fn build_learner(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u6
 
 /// [`build_learner`] of a section checked already (by [`crate::config::Config::resolve`]).
 pub(crate) fn learner_of(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Learner {
+    match off_policy_of(cfg, obs_dim, act_dim, seed) {
+        Some(agent) => Learner::OffPolicy(agent),
+        None => Learner::OnPolicy(Box::new(Ppo::new(cfg, obs_dim, act_dim, seed))),
+    }
+}
+
+/// The off-policy agent of a checked section; `None` for an on-policy algorithm.
+fn off_policy_of(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -> Option<Box<dyn OffPolicy>> {
     match cfg.algo {
-        Algo::Ppo => Learner::OnPolicy(Box::new(Ppo::new(cfg, obs_dim, act_dim, seed))),
-        Algo::Ddpg => Learner::OffPolicy(Box::new(ddpg::new(cfg, obs_dim, act_dim, seed))),
-        Algo::Td3 => Learner::OffPolicy(Box::new(Td3::new(cfg, obs_dim, act_dim, seed))),
-        Algo::Sac => Learner::OffPolicy(Box::new(Sac::new(cfg, obs_dim, act_dim, seed))),
+        Algo::Ddpg => Some(Box::new(ddpg::new(cfg, obs_dim, act_dim, seed))),
+        Algo::Td3 => Some(Box::new(Td3::new(cfg, obs_dim, act_dim, seed))),
+        Algo::Sac => Some(Box::new(Sac::new(cfg, obs_dim, act_dim, seed))),
+        Algo::Ppo => None,
     }
 }
 
@@ -154,12 +162,9 @@ pub fn build_off_policy(
     seed: u64,
 ) -> Result<Box<dyn OffPolicy>> {
     cfg.validate()?;
-    match learner_of(cfg, obs_dim, act_dim, seed) {
-        Learner::OffPolicy(agent) => Ok(agent),
-        Learner::OnPolicy(_) => {
-            Err(crate::Error::config("agent.algo", "ppo", "an off-policy algorithm here (ddpg, td3, sac)"))
-        }
-    }
+    off_policy_of(cfg, obs_dim, act_dim, seed).ok_or_else(|| {
+        crate::Error::config("agent.algo", cfg.algo, "an off-policy algorithm here (ddpg, td3, sac)")
+    })
 }
 
 /// Layer sizes `[input, hidden..., output]`.

@@ -13,7 +13,7 @@ use std::path::Path;
 use super::her::{HerState, Relabeller};
 use super::{Collector, Counters, EpisodeEnd};
 use crate::agent::replay::{Batch, ReplayBuffer};
-use crate::agent::{Agent, AgentConfig, HerConfig, OffPolicy, UpdateStats};
+use crate::agent::{Agent, AgentConfig, OffPolicy, UpdateStats};
 use crate::base::rng::Rng;
 use crate::config::Config;
 use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
@@ -74,8 +74,8 @@ pub(super) struct OffPolicyCollector {
     scratch: Scratch,
     buffer: ReplayBuffer,
     batch: Batch,
+    /// The `[agent]` section (`her`: hindsight relabelling's settings).
     cfg: AgentConfig,
-    her: Option<HerConfig>,
     relabeller: Relabeller,
     state: OffPolicyState,
 }
@@ -97,7 +97,6 @@ impl OffPolicyCollector {
             buffer: ReplayBuffer::new(cfg.agent.buffer_size, od, ad)?,
             batch: Batch::new(cfg.agent.batch_size, od, ad),
             cfg: cfg.agent.clone(),
-            her: cfg.agent.her,
             relabeller: Relabeller::default(),
             state: OffPolicyState {
                 in_episode: false,
@@ -162,7 +161,7 @@ impl OffPolicyCollector {
 
     /// With `agent.her`: store the relabelled transitions of the episode just ended.
     fn relabel_episode(&mut self) {
-        let (Some(cfg), Some(her)) = (self.her, self.state.her.as_mut()) else {
+        let (Some(cfg), Some(her)) = (self.cfg.her, self.state.her.as_mut()) else {
             return;
         };
         let buffer = &mut self.buffer;
@@ -219,12 +218,12 @@ impl Collector for OffPolicyCollector {
 
     fn restore(&mut self, ck: &Checkpoint, path: &Path) -> Result<()> {
         let state: OffPolicyState = ck.json(super::TRAIN_STATE)?;
-        if state.her.is_some() != self.her.is_some() {
+        if state.her.is_some() != self.cfg.her.is_some() {
             return Err(Error::InvalidInput(format!(
                 "{}: its training state {} hindsight relabelling, the run's config (agent.her) {}",
                 path.display(),
                 if state.her.is_some() { "has" } else { "lacks" },
-                if self.her.is_some() { "sets it" } else { "does not" }
+                if self.cfg.her.is_some() { "sets it" } else { "does not" }
             )));
         }
         let data: Vec<&[f32]> =
