@@ -4,11 +4,14 @@ use stagerl::report::{self, claims::Verdict, ReportOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
-#[command(after_help = "Example:\n  stagerl report runs/quick --out runs/quick/report")]
+#[command(
+    after_help = "Examples:\n  stagerl report runs/quick --out runs/quick/report\n  stagerl report docs/results/paper/runs.tar.xz --out /tmp/paper-report"
+)]
 pub struct Args {
-    /// Directory holding run directories (at depth 1 or 2; a run has config.toml and episodes.csv).
+    /// Directory holding run directories (at depth 1 or 2; a run has config.toml and episodes.csv),
+    /// or a study's runs archive (`runs.tar.xz`, as under docs/results/).
     dir: PathBuf,
-    /// Output directory (default: DIR/report).
+    /// Output directory (default: DIR/report; for an archive, `report` beside it).
     #[arg(long)]
     out: Option<PathBuf>,
     /// E_start: moving-average window, episodes.
@@ -33,7 +36,13 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let out = args.out.clone().unwrap_or_else(|| args.dir.join("report"));
+    let out = args.out.clone().unwrap_or_else(|| {
+        if report::archive::is_archive(&args.dir) && !args.dir.is_dir() {
+            args.dir.parent().unwrap_or(std::path::Path::new(".")).join("report")
+        } else {
+            args.dir.join("report")
+        }
+    });
     let opts = ReportOptions {
         out: out.clone(),
         criterion: ConvergenceCriterion {

@@ -179,24 +179,30 @@ fn report_on_trained_runs() {
     std::fs::remove_dir_all(&root).ok();
 }
 
-/// A committed report regenerates from the committed runs: `stagerl report` on
-/// `docs/results/quick/runs` writes the committed `table1.md` (but the line naming the version
-/// that wrote it), `claims.md` and `aggregates.md`, byte for byte.
+/// The committed reports regenerate from the committed runs: `stagerl report` on
+/// `docs/results/quick/runs` (a folder of runs) and on `docs/results/paper/runs.tar.xz` (a
+/// study's packed runs) writes the committed `table1.md` (but the line naming the version that
+/// wrote it), `claims.md` and `aggregates.md`, byte for byte.
 #[test]
-fn the_committed_quick_report_regenerates_from_the_committed_runs() {
+fn the_committed_reports_regenerate_from_the_committed_runs() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let study = root.join("docs/results/quick");
-    let out = crate::common::scratch("regenerate-quick");
-    ok(&stagerl(&["report", study.join("runs").to_str().unwrap(), "--out", out.to_str().unwrap()]));
-    let text = |p: &Path| std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-    for name in ["claims.md", "aggregates.md", "table1.md"] {
-        let (ours, committed) = (text(&out.join(name)), text(&study.join(name)));
-        let keep = |t: &str| {
-            t.lines().filter(|l| !l.starts_with("This report: `")).map(str::to_owned).collect::<Vec<_>>()
-        };
-        if name != "aggregates.md" {
-            assert!(ours.contains("tuned regime"), "{name}: the regime the preset names");
+    for (study, input, regime) in
+        [("quick", "runs", "tuned regime"), ("paper", "runs.tar.xz", "paper regime")]
+    {
+        let dir = root.join("docs/results").join(study);
+        let out = crate::common::scratch(&format!("regenerate-{study}"));
+        ok(&stagerl(&["report", dir.join(input).to_str().unwrap(), "--out", out.to_str().unwrap()]));
+        let text = |p: &Path| std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        for name in ["claims.md", "aggregates.md", "table1.md"] {
+            let (ours, committed) = (text(&out.join(name)), text(&dir.join(name)));
+            let keep = |t: &str| {
+                t.lines().filter(|l| !l.starts_with("This report: `")).map(str::to_owned).collect::<Vec<_>>()
+            };
+            if name != "aggregates.md" {
+                assert!(ours.contains(regime), "{study}/{name}: the regime the preset names");
+            }
+            assert_eq!(keep(&ours), keep(&committed), "{study}/{name} differs from the committed one");
         }
-        assert_eq!(keep(&ours), keep(&committed), "{name} differs from the committed one");
+        std::fs::remove_dir_all(&out).ok();
     }
 }

@@ -12,6 +12,7 @@
 //! [`generate`] does all of it and writes into one output directory.
 
 pub mod aggregate;
+pub mod archive;
 pub mod claims;
 pub mod metrics;
 pub mod paper;
@@ -306,9 +307,20 @@ pub fn pick_trajectory_runs<'a>(
 /// `table1.json`, `claims.md`, `figure7.{png,svg}`, `figure8.{png,svg}` and, when
 /// `opts.trajectories > 0` and a checkpoint exists, `trajectories.{png,svg,csv}` and
 /// `view-best.html`, `view-worst.html` (animated 3D views of those runs' plans).
+///
+/// `dir` may also be a study's `runs.tar.xz` ([`archive`]): it is unpacked into a temporary
+/// directory, reported on as the folder it holds, and removed.
 pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     let clock = crate::run::provenance::Clock::now();
     check_options(dir, opts)?;
+    if archive::is_archive(dir) && !dir.is_dir() {
+        let unpacked = archive::unpack(dir)?;
+        return generate_from(&unpacked.root, opts, clock);
+    }
+    generate_from(dir, opts, clock)
+}
+
+fn generate_from(dir: &Path, opts: &ReportOptions, clock: crate::run::provenance::Clock) -> Result<Report> {
     let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
     if groups.is_empty() {
         return Err(no_runs(dir, &report));
