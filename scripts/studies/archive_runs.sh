@@ -11,9 +11,12 @@
 # closing evaluation's record (eval-final-seed<S>.json) exists; runs still under way are left
 # out. Runs already in DEST are not copied again. So a long sweep goes on across machines:
 #
-#   scripts/studies/archive_runs.sh /work/runs/paper docs/results/paper/runs   # keep what finished
-#   scripts/studies/archive_runs.sh docs/results/paper/runs /work/runs/paper   # on a new machine
+#   scripts/studies/archive_runs.sh /work/runs/paper /work/keep/paper   # keep what finished
+#   scripts/studies/archive_runs.sh /work/keep/paper /work/runs/paper   # on a new machine
 #   stagerl reproduce --preset paper --out /work/runs/paper            # the rest
+#
+# What goes under docs/results/ is the archive scripts/studies/pack_runs.py makes of such a
+# folder (runs.tar.xz; docs/results/README.md, "How results are kept").
 set -euo pipefail
 if [ $# -ne 2 ]; then
     echo "usage: $0 SRC DEST" >&2
