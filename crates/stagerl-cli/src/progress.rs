@@ -55,13 +55,19 @@ pub struct Reporter<'a> {
 }
 
 impl<'a> Reporter<'a> {
-    pub fn new(episodes: u64, output: &'a RunOutput) -> Reporter<'a> {
+    /// A progress bar (on a terminal) or a line every 10 s, over the run's episodes or, under a
+    /// budget in environment steps, its environment steps.
+    pub fn new(train: &stagerl::config::TrainConfig, output: &'a RunOutput) -> Reporter<'a> {
+        let (len, unit) = match train.env_steps {
+            Some(n) => (n, "env steps"),
+            None => (train.episodes, "episodes"),
+        };
         let bar = std::io::stdout().is_terminal().then(|| {
-            let b = ProgressBar::new(episodes);
+            let b = ProgressBar::new(len);
             b.set_style(
-                ProgressStyle::with_template(
-                    "{bar:30} {pos}/{len} episodes {elapsed_precise} (eta {eta}) {msg}",
-                )
+                ProgressStyle::with_template(&format!(
+                    "{{bar:30}} {{pos}}/{{len}} {unit} {{elapsed_precise}} (eta {{eta}}) {{msg}}"
+                ))
                 .expect("valid template"),
             );
             b
@@ -93,18 +99,25 @@ impl<'a> Reporter<'a> {
         }
         match &self.bar {
             Some(b) => {
-                b.set_position(r.episode);
+                b.set_position(if p.env_steps.is_some() {
+                    r.env_steps.min(b.length().unwrap_or(0))
+                } else {
+                    r.episode
+                });
                 b.set_message(msg);
             }
             None => {
-                if self.last_log.elapsed() >= Duration::from_secs(10)
-                    || p.eval.is_some()
-                    || r.episode == p.episodes
-                {
-                    self.output.line(format_args!(
-                        "episode {}/{} env steps {} {:.0} s {msg}",
-                        r.episode, p.episodes, r.env_steps, r.wall_s
-                    ));
+                if self.last_log.elapsed() >= Duration::from_secs(10) || p.eval.is_some() || p.last {
+                    match p.env_steps {
+                        Some(n) => self.output.line(format_args!(
+                            "episode {} env steps {}/{n} {:.0} s {msg}",
+                            r.episode, r.env_steps, r.wall_s
+                        )),
+                        None => self.output.line(format_args!(
+                            "episode {}/{} env steps {} {:.0} s {msg}",
+                            r.episode, p.episodes, r.env_steps, r.wall_s
+                        )),
+                    }
                     self.last_log = Instant::now();
                 }
             }

@@ -30,8 +30,16 @@ pub struct Args {
     #[arg(long)]
     seed: Option<u64>,
     /// Training episodes (overrides train.episodes).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "env_steps")]
     episodes: Option<u64>,
+    /// Train until this many environment steps instead of an episode count (sets
+    /// train.env_steps): the run ends with the episode in which the N-th step falls.
+    #[arg(long, value_name = "N")]
+    env_steps: Option<u64>,
+    /// Evaluate every this many environment steps instead of every train.eval_every_episodes
+    /// (sets train.eval_every_env_steps).
+    #[arg(long, value_name = "N")]
+    eval_every_env_steps: Option<u64>,
     /// Run directory (default: runs/<algo>-<reward>-seed<seed>, with --her
     /// runs/<algo>-<reward>-her-<strategy>-seed<seed>).
     #[arg(long)]
@@ -44,7 +52,7 @@ pub struct Args {
     force: bool,
     /// Continue the run in this directory from its last checkpoint (with its own config); a
     /// trained run without its closing evaluation (killed during it) is evaluated.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "her", "seed", "episodes", "out", "config"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["algo", "reward", "her", "seed", "episodes", "env_steps", "eval_every_env_steps", "out", "config"])]
     resume: Option<PathBuf>,
     /// Trials of the closing evaluation (deterministic policy); 0 skips it.
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(0..=10_000_000))]
@@ -83,6 +91,12 @@ fn run_on_pool(args: Args) -> Result<()> {
     if let Some(e) = args.episodes {
         cfg.train.episodes = e;
     }
+    if let Some(n) = args.env_steps {
+        cfg.train.env_steps = Some(n);
+    }
+    if let Some(n) = args.eval_every_env_steps {
+        cfg.train.eval_every_env_steps = Some(n);
+    }
     // The config's one check, with the flags applied, and its resolution against the arm.
     let run = cfg.resolve()?;
     // Without --out, the first free runs/<algo>-<reward>-seed<N>[-k]: running the same command
@@ -114,18 +128,21 @@ fn run_on_pool(args: Args) -> Result<()> {
     dir.ensure_writable().with_context(|| format!("the run directory {} is not writable", out.display()))?;
 
     outln!(
-        "training {} with reward {} on `{}`, seed {}, {} episodes -> {}",
+        "training {} with reward {} on `{}`, seed {}, {} -> {}",
         cfg.agent.algo,
         cfg.reward.function,
         cfg.robot.urdf,
         cfg.train.seed,
-        cfg.train.episodes,
+        match cfg.train.env_steps {
+            Some(n) => format!("{n} environment steps"),
+            None => format!("{} episodes", cfg.train.episodes),
+        },
         out.display()
     )?;
     let (stop, signals) = stop_flags()?;
     let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };
-    let mut reporter = Reporter::new(cfg.train.episodes, &output);
+    let mut reporter = Reporter::new(&cfg.train, &output);
     let summary = finish(train::train_with(&run, &out, &opts, &mut |p| reporter.episode(p)), &out, &output)?;
     reporter.finish();
     print_summary(&summary, &output);
@@ -145,7 +162,7 @@ fn resume(dir: &std::path::Path, eval_trials: u32) -> Result<()> {
     let (stop, signals) = stop_flags()?;
     let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };
-    let mut reporter = Reporter::new(cfg.train.episodes, &output);
+    let mut reporter = Reporter::new(&cfg.train, &output);
     match finish(train::resume(dir, &opts, &mut |p| reporter.episode(p)), dir, &output)? {
         // Trained but never evaluated (killed during its closing evaluation, say): the
         // evaluation runs now.

@@ -305,3 +305,63 @@ fn threads_change_nothing_but_the_speed() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `--env-steps N` trains until N environment steps whatever the episode count (the run ends
+/// with the episode in which the N-th step falls), `--eval-every-env-steps K` evaluates after
+/// each episode that passes a multiple of K and after the last; bad values are refused naming
+/// the field, and `--episodes` with `--env-steps` is refused.
+#[test]
+fn an_env_step_budget_ends_the_run_by_environment_steps() {
+    let dir = crate::common::scratch("env-steps");
+    let out = dir.join("run");
+    let o = stagerl(
+        &[
+            "train",
+            "--algo",
+            "sac",
+            "--env-steps",
+            "1000",
+            "--eval-every-env-steps",
+            "400",
+            "--eval-trials",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("1000 environment steps"));
+    let col = |file: &str, name: &str| -> Vec<u64> {
+        let text = std::fs::read_to_string(out.join(file)).unwrap();
+        let mut lines = text.lines();
+        let i = lines.next().unwrap().split(',').position(|h| h == name).unwrap();
+        lines.map(|l| l.split(',').nth(i).unwrap().parse().unwrap()).collect()
+    };
+    let steps = col("episodes.csv", "env_steps");
+    let (last, before) = (steps[steps.len() - 1], steps[steps.len() - 2]);
+    assert!(before < 1000 && last >= 1000, "the run ends with the episode reaching 1000: {before}, {last}");
+    assert!(steps.len() >= 20, "at most 50 steps an episode: {} episodes", steps.len());
+    // One evaluation after each episode passing 400 and 800, and one after the last.
+    let first_past = |k: u64| *steps.iter().find(|&&s| s >= k).unwrap();
+    assert_eq!(col("eval.csv", "env_steps"), vec![first_past(400), first_past(800), last]);
+    let never = dir.join("never");
+    for (args, field) in [
+        (&["--env-steps", "0"][..], "train.env_steps"),
+        (&["--eval-every-env-steps", "0"][..], "train.eval_every_env_steps"),
+    ] {
+        let mut all = vec!["train", "--out", never.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let o = stagerl(&all, "");
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("`{field}` = 0 is invalid")), "{}", stderr(&o));
+    }
+    let o = stagerl(
+        &["train", "--episodes", "5", "--env-steps", "100", "--out", dir.join("never").to_str().unwrap()],
+        "",
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    assert!(!never.exists());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -23,6 +23,18 @@ fn sigkill_then_resume_with_her_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-her", &config);
 }
 
+/// The same under a budget in environment steps (14 000, 280 episodes or more), evaluated every
+/// 3500 environment steps: after the episodes that pass 3500, 7000 and 10 500, and the last.
+#[test]
+fn sigkill_then_resume_with_an_env_step_budget_gives_the_uninterrupted_run() {
+    let config = CONFIG.replace(
+        "episodes = 300\neval_every_episodes = 100\n",
+        "episodes = 50\nenv_steps = 14000\neval_every_env_steps = 3500\n",
+    );
+    assert!(config.contains("env_steps = 14000"));
+    sigkills_then_resume_expecting("resume-kill-env-steps", &config, 0, 4);
+}
+
 /// The same with PPO (small rollouts, so that kills land between updates and inside rollouts),
 /// with observation normalisation, whose running statistics must survive the kills too (the
 /// SIGTERM test runs PPO without it).
@@ -49,6 +61,12 @@ fn sigkill_then_resume_with_obstacles_in_the_way_gives_the_uninterrupted_run() {
 }
 
 fn sigkills_then_resume(name: &str, config: &str) {
+    sigkills_then_resume_expecting(name, config, 300, 3);
+}
+
+/// [`sigkills_then_resume`] of a run of `episodes` episodes (0: as many as the uninterrupted run
+/// has) and `evals` periodic evaluations.
+fn sigkills_then_resume_expecting(name: &str, config: &str, episodes: usize, evals: usize) {
     let root = scratch(name);
     let cfg = root.join("c.toml");
     std::fs::write(&cfg, config).unwrap();
@@ -94,7 +112,8 @@ fn sigkills_then_resume(name: &str, config: &str) {
     let out = run(&["train", "--resume", cut.to_str().unwrap(), "--eval-trials", "0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    assert_same_run(&full, &cut, 300, 3, "after SIGKILLs");
+    let episodes = if episodes > 0 { episodes } else { common::episodes_without_wall(&full).len() - 1 };
+    assert_same_run(&full, &cut, episodes, evals, "after SIGKILLs");
 
     // Resuming a finished run does nothing and says so (no closing evaluation asked for).
     let out = run(&["train", "--resume", cut.to_str().unwrap(), "--eval-trials", "0"]);

@@ -128,8 +128,9 @@ pub fn load_run(dir: &Path, root: &Path) -> Result<RunData> {
         let trials = read_trials_csv(&path).ok().filter(|t| !t.is_empty())?;
         Some(FinalEval { path, seed: f.seed, trials })
     });
-    let complete = episodes.len() as u64 >= config.train.episodes
-        && episodes.last().is_some_and(|r| r.episode >= config.train.episodes);
+    // The budget's last episode is in `episodes.csv` (and, under an episode budget, every one).
+    let complete = episodes.last().is_some_and(|r| config.train.is_last(r.episode, r.env_steps))
+        && (config.train.env_steps.is_some() || episodes.len() as u64 >= config.train.episodes);
     Ok(RunData {
         regime: super::reference::Regime::of_run(dir, root),
         dir: dir.to_path_buf(),

@@ -248,7 +248,13 @@ fn summarize_run(run: &RunData, criterion: &ConvergenceCriterion) -> RunSummary 
     let eval_file =
         run.final_eval.as_ref().and_then(|f| f.path.file_name()).map(|n| n.to_string_lossy().into_owned());
     if !run.complete {
-        notes.push(format!("incomplete: {} of {} episodes", run.episodes.len(), run.config.train.episodes));
+        notes.push(match run.config.train.env_steps {
+            Some(n) => format!(
+                "incomplete: {} of {n} environment steps",
+                run.episodes.last().map_or(0, |r| r.env_steps)
+            ),
+            None => format!("incomplete: {} of {} episodes", run.episodes.len(), run.config.train.episodes),
+        });
     }
     RunSummary {
         name: run.name.clone(),

@@ -62,8 +62,12 @@ pub struct Progress<'a> {
     pub stats: Option<UpdateStats>,
     /// The evaluation run at the end of this episode, if any.
     pub eval: Option<&'a EvalSummary>,
-    /// Total episodes of the run.
+    /// Total episodes of the run (under an episode budget).
     pub episodes: u64,
+    /// The run's budget in environment steps, when it has one (`train.env_steps`).
+    pub env_steps: Option<u64>,
+    /// This episode is the run's last.
+    pub last: bool,
 }
 
 /// How a run ended.
@@ -151,6 +155,10 @@ struct LoopState {
     /// A stop came during the periodic evaluation of episode `episode`: it runs first.
     #[serde(default)]
     eval_due: bool,
+    /// Environment steps at the end of the last episode (where an evaluation every so many
+    /// environment steps counts from).
+    #[serde(default)]
+    last_episode_env_steps: u64,
 }
 
 /// How an episode ended, as its `episodes.csv` row needs it.
@@ -233,6 +241,7 @@ impl Trainer {
                 finished: false,
                 best_eval: None,
                 eval_due: false,
+                last_episode_env_steps: 0,
             },
             eval_csv: format!("{}\n", EvalPoint::HEADER),
         })
@@ -348,23 +357,33 @@ impl Trainer {
         if let Err(e) = self.periodic_eval(&mut logs.tb, opts.stop) {
             return Err(self.stopped(e, wall()));
         }
-        while self.state.n.episode < episodes {
+        let train = self.cfg.train.clone();
+        while !train.is_last(self.state.n.episode, self.state.last_episode_env_steps) {
             let next = self.collector.next_episode(&mut self.state.n, &mut last_stats, &stop_requested)?;
             let Some(end) = next else {
                 return Err(self.interrupted(wall()));
             };
             let record = self.end_episode(&end, wall(), &mut logs, last_stats.as_ref())?;
-            self.state.eval_due = self.cfg.train.is_eval_point(record.episode);
+            let before = std::mem::replace(&mut self.state.last_episode_env_steps, record.env_steps);
+            self.state.eval_due = train.is_eval_point(record.episode, before, record.env_steps);
+            let last = train.is_last(record.episode, record.env_steps);
             let eval = match self.periodic_eval(&mut logs.tb, opts.stop) {
                 Ok(eval) => eval,
                 Err(e) => return Err(self.stopped(e, record.wall_s)),
             };
             self.checkpoint(&record, &mut logs.tb)?;
-            on_episode(&Progress { record: &record, stats: last_stats, eval: eval.as_ref(), episodes });
+            on_episode(&Progress {
+                record: &record,
+                stats: last_stats,
+                eval: eval.as_ref(),
+                episodes,
+                env_steps: train.env_steps,
+                last,
+            });
             if record.episode % 50 == 0 {
                 logs.tb.flush()?;
             }
-            if stop_requested() && record.episode < episodes {
+            if stop_requested() && !last {
                 return Err(self.interrupted(record.wall_s));
             }
         }
@@ -502,7 +521,7 @@ impl Trainer {
     /// with the final agent): the full state to `latest.safetensors`, after the event log is
     /// flushed (what the checkpoint has seen is on disk, for the rewind of a resume).
     fn checkpoint(&mut self, record: &EpisodeRecord, tb: &mut EventWriter) -> Result<()> {
-        if self.cfg.train.is_checkpoint_point(record.episode) {
+        if self.cfg.train.is_checkpoint_point(record.episode, record.env_steps) {
             self.state.wall_s = record.wall_s;
             tb.flush()?;
             self.save_latest()?;

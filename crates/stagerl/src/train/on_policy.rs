@@ -56,7 +56,8 @@ pub(super) struct OnPolicyCollector {
     ended: VecDeque<EpisodeEnd>,
     gamma: f64,
     anneal_lr: bool,
-    episodes: u64,
+    /// The run's schedule (PPO's learning rate anneals over its progress).
+    schedule: crate::config::TrainConfig,
     // Scratch.
     actions: Vec<f32>,
     logp: Vec<f32>,
@@ -86,7 +87,7 @@ impl OnPolicyCollector {
             ended: VecDeque::new(),
             gamma: cfg.agent.gamma,
             anneal_lr: p.anneal_lr,
-            episodes: cfg.train.episodes,
+            schedule: cfg.train.clone(),
             actions: vec![0.0; n * ad],
             logp: vec![0.0; n],
             values: vec![0.0; n],
@@ -141,7 +142,7 @@ impl OnPolicyCollector {
             let obs = ppo.normalized(self.vec.observations(), n, false, &mut self.obs_buf);
             ppo.values(obs, n, &mut self.values);
             if self.anneal_lr {
-                ppo.set_lr_fraction((1.0 - st.episode as f64 / self.episodes.max(1) as f64).max(0.0));
+                ppo.set_lr_fraction(1.0 - self.schedule.progress(st.episode, st.env_steps));
             }
             let stats = ppo.update(&mut self.rollout, &self.values);
             self.rollout.t = 0;

@@ -44,6 +44,8 @@ her = { strategy = "future", k = 4 }
 norm_obs = { clip = 10.0 }
 [train]
 obstacles_in_path = 0.5
+env_steps = 30000
+eval_every_env_steps = 1000
 "#;
 
 /// Every `section.field` path of a JSON value (list items as their section).
