@@ -12,18 +12,20 @@ Importing the package registers the Gymnasium environment ``stagerl/Reach-v0``::
 Modules: :mod:`stagerl.envs` (the environment), :mod:`stagerl.vector` (the native batch of
 environments), :mod:`stagerl.rewards` (the rewards over numpy
 arrays), :mod:`stagerl.policies` (trained policies: :class:`Policy`, :func:`plan`),
-:mod:`stagerl.kinematics` (batched forward kinematics and Jacobians of URDF chains).
+:mod:`stagerl.kinematics` (batched forward kinematics and Jacobians of URDF chains),
+:mod:`stagerl.training` (the Rust trainer: :func:`train`, :class:`Run`).
 Units: metres, radians, seconds; quaternions are (x, y, z, w).
 """
 
 from . import _core
-from . import envs, kinematics, policies, rewards, vector
+from . import envs, kinematics, policies, rewards, training, vector
 from .envs import ReachEnv, register_envs
 from .kinematics import Chain
 from .policies import Policy, plan
+from .training import Run, train
 from .vector import ReachVectorEnv
 
 __version__ = _core.__version__
-__all__ = ["ReachEnv", "ReachVectorEnv", "Chain", "Policy", "plan", "policies", "envs", "kinematics", "rewards", "vector", "register_envs", "__version__"]
+__all__ = ["ReachEnv", "ReachVectorEnv", "Chain", "Policy", "plan", "train", "Run", "training", "policies", "envs", "kinematics", "rewards", "vector", "register_envs", "__version__"]
 
 register_envs()

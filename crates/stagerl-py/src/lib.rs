@@ -18,6 +18,7 @@ mod env;
 mod kin;
 mod policy;
 mod reward;
+mod train;
 mod vec;
 
 /// The Python exception for a library error.
@@ -78,6 +79,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<vec::VecCore>()?;
     m.add_class::<policy::PolicyCore>()?;
     m.add_function(wrap_pyfunction!(policy::plan, m)?)?;
+    m.add_function(wrap_pyfunction!(train::train, m)?)?;
     m.add_function(wrap_pyfunction!(reward::compute, m)?)?;
     m.add_function(wrap_pyfunction!(reward::keys, m)?)?;
     Ok(())

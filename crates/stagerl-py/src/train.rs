@@ -1,0 +1,263 @@
+//! `stagerl.train`: the run `stagerl train` makes (the same config resolution, run directory
+//! lock, run files and closing evaluation), with the GIL released while it trains, a callback at
+//! every periodic evaluation (and every N episodes when asked), and Ctrl-C honoured within about
+//! a second: the run is saved as SIGINT saves it, then `KeyboardInterrupt` is raised.
+
+use pyo3::exceptions::PyKeyboardInterrupt;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use stagerl::config::Config;
+use stagerl::run::dir::RunDir;
+use stagerl::train as trainer;
+use stagerl::train::{final_eval, Progress, Resumed, TrainOptions};
+
+use crate::{bad_arg, guard, to_py};
+
+/// How often the training thread looks for Ctrl-C (it takes the GIL to ask Python).
+const SIGNAL_POLL: Duration = Duration::from_millis(100);
+
+/// The config of a run: `json` (a dict in the TOML file's shape), else the file `path`, else
+/// the defaults; then the keyword arguments, as the CLI's flags are applied.
+#[allow(clippy::too_many_arguments)]
+fn config(
+    json: Option<&str>,
+    path: Option<&str>,
+    algo: Option<&str>,
+    reward: Option<&str>,
+    seed: Option<u64>,
+    episodes: Option<u64>,
+    env_steps: Option<u64>,
+    eval_every_episodes: Option<u64>,
+) -> PyResult<Config> {
+    let mut cfg = match (json, path) {
+        (Some(j), _) => {
+            // A dict in the TOML file's shape, given as JSON: written as TOML and read as a file
+            // is, so that its checks and messages are the CLI's.
+            let value: serde_json::Value = serde_json::from_str(j)
+                .map_err(|e| bad_arg("config", "a dict", &format!("JSON-serialisable: {e}")))?;
+            let text = toml::to_string(&value).map_err(|e| {
+                bad_arg(
+                    "config",
+                    "a dict",
+                    &format!("the shape of a config file (tables of values, no None): {e}"),
+                )
+            })?;
+            Config::from_toml_str(&text, Path::new("config (dict)")).map_err(to_py)?
+        }
+        (None, Some(p)) => Config::load(Path::new(p)).map_err(to_py)?,
+        (None, None) => Config::default(),
+    };
+    if let Some(a) = algo {
+        cfg.agent.algo = a.parse().map_err(to_py)?;
+    }
+    if let Some(r) = reward {
+        cfg.reward.function = r.parse().map_err(to_py)?;
+    }
+    if let Some(s) = seed {
+        cfg.train.seed = s;
+    }
+    if episodes.is_some() && env_steps.is_some() {
+        return Err(bad_arg("episodes", episodes.unwrap_or(0), "not with env_steps: a run has one budget"));
+    }
+    if let Some(e) = episodes {
+        cfg.train.episodes = e;
+    }
+    if let Some(n) = env_steps {
+        cfg.train.env_steps = Some(n);
+    }
+    if let Some(e) = eval_every_episodes {
+        cfg.train.eval_every_episodes = e;
+    }
+    Ok(cfg)
+}
+
+/// What the callback is given: the episode's counters, the training success and reward over
+/// the last 100 episodes, and the periodic evaluation's figures when one ran.
+fn report<'py>(
+    py: Python<'py>,
+    p: &Progress<'_>,
+    recent: &VecDeque<(f64, bool)>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let r = p.record;
+    d.set_item("episode", r.episode)?;
+    d.set_item("env_steps", r.env_steps)?;
+    d.set_item("wall_s", r.wall_s)?;
+    d.set_item("episode_reward", r.reward)?;
+    let n = recent.len().max(1) as f64;
+    d.set_item("train_success_rate", recent.iter().filter(|x| x.1).count() as f64 / n)?;
+    d.set_item("train_mean_reward", recent.iter().map(|x| x.0).sum::<f64>() / n)?;
+    d.set_item("last", p.last)?;
+    match p.eval {
+        Some(e) => {
+            d.set_item("eval_success_rate", e.success_rate)?;
+            d.set_item("eval_mean_reward", e.mean_reward)?;
+            d.set_item("eval_mean_steps", e.mean_steps)?;
+            d.set_item("eval_median_final_distance_m", e.median_final_distance_m)?;
+        }
+        None => {
+            for k in
+                ["eval_success_rate", "eval_mean_reward", "eval_mean_steps", "eval_median_final_distance_m"]
+            {
+                d.set_item(k, py.None())?;
+            }
+        }
+    }
+    Ok(d)
+}
+
+/// Train (or resume) the run in `out`; returns `(run directory, how it ended)`: "finished",
+/// "already finished" or "stopped by the callback".
+#[pyfunction]
+#[pyo3(signature = (out, json=None, path=None, algo=None, reward=None, seed=None, episodes=None, env_steps=None, eval_every_episodes=None, closing_trials=500, threads=1, resume=false, callback=None, callback_every_episodes=0))]
+#[allow(clippy::too_many_arguments)]
+pub fn train(
+    py: Python<'_>,
+    out: PathBuf,
+    json: Option<&str>,
+    path: Option<&str>,
+    algo: Option<&str>,
+    reward: Option<&str>,
+    seed: Option<u64>,
+    episodes: Option<u64>,
+    env_steps: Option<u64>,
+    eval_every_episodes: Option<u64>,
+    closing_trials: u32,
+    threads: u32,
+    resume: bool,
+    callback: Option<Py<PyAny>>,
+    callback_every_episodes: u64,
+) -> PyResult<(String, String)> {
+    if !(1..=64).contains(&threads) {
+        return Err(bad_arg("threads", threads, "an integer from 1 to 64"));
+    }
+    if closing_trials > stagerl::config::MAX_EVAL_TRIALS {
+        return Err(bad_arg(
+            "eval_trials",
+            closing_trials,
+            &format!("0 to {}", stagerl::config::MAX_EVAL_TRIALS),
+        ));
+    }
+    let dir = RunDir::new(&out);
+    let cfg = if resume {
+        if json.is_some() || path.is_some() || algo.is_some() || reward.is_some() || seed.is_some() {
+            return Err(bad_arg(
+                "resume",
+                "True",
+                "without config or settings: a resumed run keeps its own config",
+            ));
+        }
+        dir.load_config().map_err(to_py)?
+    } else {
+        config(json, path, algo, reward, seed, episodes, env_steps, eval_every_episodes)?
+    };
+    let run = if resume { None } else { Some(cfg.resolve().map_err(to_py)?) };
+    if !resume && dir.holds_run() {
+        stagerl::run::lock::DirLock::check_free(&out).map_err(to_py)?;
+        return Err(bad_arg(
+            "out",
+            out.display(),
+            "a directory without a run (its config.toml exists): choose another, or pass resume=True to continue it",
+        ));
+    }
+    let pool = stagerl::base::par::Pool::new(threads as usize).map_err(to_py)?;
+    // Why the loop was asked to stop: Ctrl-C (or another signal Python raised), the callback
+    // raised, or it returned False.
+    let flag = AtomicBool::new(false);
+    let mut signal: Option<PyErr> = None;
+    let mut callback_error: Option<PyErr> = None;
+    let mut by_callback = false;
+    let mut recent: VecDeque<(f64, bool)> = VecDeque::with_capacity(101);
+    let mut last_poll = Instant::now();
+    let every = callback_every_episodes;
+    let outcome = py.detach(|| {
+        guard("train", || {
+            let _lock = stagerl::run::lock::DirLock::run(&out).map_err(to_py)?;
+            if !resume && dir.holds_run() {
+                return Err(bad_arg(
+                    "out",
+                    out.display(),
+                    "a directory without a run (another process started one)",
+                ));
+            }
+            let opts = TrainOptions { stop: Some(&flag) };
+            let mut on_episode = |p: &Progress<'_>| {
+                recent.push_back((p.record.reward, p.record.success));
+                if recent.len() > 100 {
+                    recent.pop_front();
+                }
+                let due = p.eval.is_some() || (every > 0 && p.record.episode.is_multiple_of(every));
+                if !due && last_poll.elapsed() < SIGNAL_POLL {
+                    return;
+                }
+                last_poll = Instant::now();
+                Python::attach(|py| {
+                    if let Err(e) = py.check_signals() {
+                        signal = Some(e);
+                        flag.store(true, Ordering::SeqCst);
+                        return;
+                    }
+                    let Some(cb) = callback.as_ref().filter(|_| due) else { return };
+                    let answer = report(py, p, &recent).and_then(|d| cb.call1(py, (d,)));
+                    match answer {
+                        Ok(v) if v.bind(py).is(pyo3::types::PyBool::new(py, false)) => {
+                            by_callback = true;
+                            flag.store(true, Ordering::SeqCst);
+                        }
+                        Ok(_) => {}
+                        Err(e) => {
+                            callback_error = Some(e);
+                            flag.store(true, Ordering::SeqCst);
+                        }
+                    }
+                });
+            };
+            if run.is_some() {
+                dir.ensure_writable().map_err(to_py)?;
+            }
+            let trained = stagerl::base::par::install(Some(&pool), || match &run {
+                Some(run) => trainer::train_with(run, &out, &opts, &mut on_episode).map(|_| "finished"),
+                None => trainer::resume(&out, &opts, &mut on_episode).map(|r| match r {
+                    Resumed::Finished(_) => "finished",
+                    Resumed::AlreadyFinished(_) => "already finished",
+                }),
+            });
+            match trained {
+                Err(stagerl::Error::Interrupted { .. }) | Err(stagerl::Error::Stopped { .. }) => {
+                    Ok("stopped".to_string())
+                }
+                Err(e) => Err(to_py(e)),
+                Ok(how) => {
+                    let unevaluated = final_eval::recorded(&out, trainer::eval::DEFAULT_EVAL_SEED).is_none();
+                    if closing_trials > 0 && (how == "finished" || unevaluated) {
+                        let stop = AtomicBool::new(false);
+                        let seed = trainer::eval::DEFAULT_EVAL_SEED;
+                        final_eval::run(&out, &cfg, closing_trials, seed, Some(&stop)).map_err(to_py)?;
+                    }
+                    Ok(how.to_string())
+                }
+            }
+        })
+    })?;
+    if let Some(e) = callback_error {
+        return Err(e);
+    }
+    if let Some(e) = signal {
+        return Err(e);
+    }
+    if outcome == "stopped" {
+        if by_callback {
+            return Ok((out.display().to_string(), "stopped by the callback".into()));
+        }
+        return Err(PyKeyboardInterrupt::new_err(format!(
+            "training stopped; the run is saved in {}: continue with stagerl.train(out=..., resume=True)",
+            out.display()
+        )));
+    }
+    Ok((out.display().to_string(), outcome))
+}

@@ -1,0 +1,154 @@
+"""stagerl.train: the CLI's run from Python (same bits), the GIL released while it trains, the
+callback's reports and stop, Ctrl-C, and bad settings."""
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import stagerl
+
+TINY = {
+    "agent": {"hidden": [16, 16], "batch_size": 32, "learning_starts": 200},
+    "train": {"eval_every_episodes": 20, "eval_trials": 5, "checkpoint_every_episodes": 20},
+}
+
+
+def rows_without_wall(directory):
+    with open(os.path.join(directory, "episodes.csv"), encoding="utf-8") as f:
+        return [line.rsplit(",", 1)[0] for line in f.read().splitlines()]
+
+
+@pytest.mark.parametrize("algo", ["sac", "ppo"])
+def test_the_same_run_as_the_cli(tmp_path, stagerl_bin, algo):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(
+        '[agent]\nhidden = [16, 16]\nbatch_size = 32\nlearning_starts = 200\n'
+        '[train]\neval_every_episodes = 20\neval_trials = 5\ncheckpoint_every_episodes = 20\n'
+    )
+    cli = tmp_path / "cli"
+    subprocess.run(
+        [stagerl_bin, "train", "--config", str(cfg), "--algo", algo, "--seed", "4", "--episodes", "60",
+         "--eval-trials", "20", "--out", str(cli)],
+        check=True, capture_output=True,
+    )
+    run = stagerl.train(TINY, out=tmp_path / "py", algo=algo, seed=4, episodes=60, eval_trials=20)
+    assert isinstance(run, stagerl.Run) and run.dir == str(tmp_path / "py")
+    assert rows_without_wall(cli) == rows_without_wall(run.dir)
+    assert (cli / "eval.csv").read_text() == open(os.path.join(run.dir, "eval.csv")).read()
+    assert (cli / "eval-final-seed0.csv").read_text() == open(os.path.join(run.dir, "eval-final-seed0.csv")).read()
+    assert (cli / "config.toml").read_text() == open(os.path.join(run.dir, "config.toml")).read()
+    # The same from the config file's path.
+    again = stagerl.train(cfg, out=tmp_path / "path", algo=algo, seed=4, episodes=60, eval_trials=0)
+    assert rows_without_wall(again.dir) == rows_without_wall(cli)
+    assert run.config["agent"]["algo"] == algo and run.config["train"]["episodes"] == 60
+    ep = run.episodes
+    assert list(ep["episode"]) == list(range(1, 61)) and ep["reward"].dtype == np.float64
+    assert list(run.evaluations["episode"]) == [20, 40, 60]
+    p = run.policy()
+    assert p.checkpoint.endswith("best.safetensors") and p(np.zeros(p.obs_dim)).shape == (p.act_dim,)
+    assert run.policy("final").checkpoint.endswith("final.safetensors")
+
+
+def test_the_gil_is_released_while_training(tmp_path):
+    done = threading.Event()
+    result = {}
+
+    def work():
+        result["run"] = stagerl.train(TINY, out=tmp_path / "run", episodes=400, eval_trials=0)
+        done.set()
+
+    t = threading.Thread(target=work)
+    t.start()
+    ticks, ticks_while_running = 0, 0
+    while not done.is_set():
+        ticks += 1
+        if (tmp_path / "run" / "episodes.csv").exists():
+            ticks_while_running += 1
+        time.sleep(0.0005)
+    t.join()
+    assert len(result["run"].episodes["episode"]) == 400
+    # This thread ran on throughout: hundreds of turns while episodes were being written.
+    assert ticks_while_running > 100, (ticks, ticks_while_running)
+
+
+def test_the_callback_reports_and_its_false_stops_and_saves_the_run(tmp_path):
+    reports = []
+
+    def stop_at_the_second_evaluation(r):
+        reports.append(r)
+        return not (r["eval_success_rate"] is not None and r["episode"] == 40)
+
+    run = stagerl.train(TINY, out=tmp_path / "cut", episodes=100, eval_trials=0,
+                        callback=stop_at_the_second_evaluation, callback_every_episodes=10)
+    assert [r["episode"] for r in reports] == [10, 20, 30, 40]
+    assert [r["eval_success_rate"] is None for r in reports] == [True, False, True, False]
+    first = reports[1]
+    for key in ["env_steps", "wall_s", "train_success_rate", "train_mean_reward", "eval_mean_reward"]:
+        assert isinstance(first[key], float if key != "env_steps" else int), key
+    assert 0.0 <= first["eval_success_rate"] <= 1.0 and first["env_steps"] > 0
+    assert len(run.episodes["episode"]) == 40
+    # Resumed, the run ends as an uninterrupted one.
+    resumed = stagerl.train(out=tmp_path / "cut", resume=True, eval_trials=0)
+    whole = stagerl.train(TINY, out=tmp_path / "whole", episodes=100, eval_trials=0)
+    assert rows_without_wall(resumed.dir) == rows_without_wall(whole.dir)
+
+
+def test_an_exception_in_the_callback_stops_the_run_and_propagates(tmp_path):
+    def boom(r):
+        raise RuntimeError("from the callback")
+
+    with pytest.raises(RuntimeError, match="from the callback"):
+        stagerl.train(TINY, out=tmp_path / "run", episodes=100, eval_trials=0, callback=boom)
+    assert os.path.isfile(tmp_path / "run" / "checkpoints" / "latest.safetensors")
+
+
+def test_ctrl_c_saves_the_run_and_raises_keyboard_interrupt(tmp_path):
+    out = tmp_path / "run"
+    script = (
+        "import stagerl\n"
+        f"stagerl.train({TINY!r}, out={str(out)!r}, episodes=100000, eval_trials=0)\n"
+    )
+    child = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if (out / "episodes.csv").exists() and len((out / "episodes.csv").read_text().splitlines()) > 50:
+            break
+        time.sleep(0.01)
+    sent = time.monotonic()
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=30)
+    assert time.monotonic() - sent < 5
+    assert child.returncode != 0 and "KeyboardInterrupt" in err, err
+    assert os.path.isfile(out / "checkpoints" / "latest.safetensors")
+    saved = len((out / "episodes.csv").read_text().splitlines()) - 1
+    assert 50 <= saved < 100000
+
+
+def test_bad_settings_raise_value_errors_with_the_cli_messages(tmp_path):
+    cases = [
+        (dict(config={"agent": {"algo": "nope"}}), "nope"),
+        (dict(episodes=0), "`train.episodes` = 0"),
+        (dict(env_steps=0), "`train.env_steps` = 0"),
+        (dict(episodes=5, env_steps=100), "one budget"),
+        (dict(threads=0), "`threads` = 0"),
+        (dict(config={"agent": {"no_such_field": 1}}), "no_such_field"),
+        (dict(config={"train": {"episodes": None}}), "config"),
+        (dict(seed=-1), "`seed` = -1"),
+        (dict(callback=5), "`callback`"),
+    ]
+    for kwargs, want in cases:
+        with pytest.raises(ValueError, match=None) as e:
+            stagerl.train(out=tmp_path / "never", **kwargs)
+        assert want in str(e.value), (kwargs, str(e.value))
+    assert not (tmp_path / "never" / "config.toml").exists()
+    stagerl.train(TINY, out=tmp_path / "once", episodes=5, eval_trials=0)
+    with pytest.raises(ValueError, match="already|holds a run|without a run"):
+        stagerl.train(TINY, out=tmp_path / "once", episodes=5)
+    with pytest.raises(FileNotFoundError):
+        stagerl.Run.load(tmp_path / "nothing")
