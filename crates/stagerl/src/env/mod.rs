@@ -220,7 +220,7 @@ pub fn check_task_for_arm(chain: &Chain, task: &ResolvedTask) -> Result<()> {
             "\"terminate\"",
             format!(
                 "\"record\" for this arm: no link of `{}` to `{}` has a collision shape (box, \
-                 sphere or cylinder), so no contact can end an episode",
+                 sphere, cylinder or loaded mesh), so no contact can end an episode",
                 chain.base_link(),
                 chain.tip_link()
             ),
