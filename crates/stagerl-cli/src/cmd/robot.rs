@@ -50,8 +50,8 @@ pub fn run(args: Args) -> Result<()> {
             format!("# Written by `stagerl robot` for {urdf}.\n[robot]\nurdf = {}\n", toml_str(&urdf));
         text.push_str(&format!("tip = {}\n", toml_str(chain.tip_link())));
         if !args.robot.package_paths.is_empty() {
-            let paths: Vec<String> =
-                args.robot.package_paths.iter().map(|p| toml_str(&p.display().to_string())).collect();
+            let abs = |p: &PathBuf| p.canonicalize().unwrap_or_else(|_| p.clone()).display().to_string();
+            let paths: Vec<String> = args.robot.package_paths.iter().map(|p| toml_str(&abs(p))).collect();
             text.push_str(&format!("package_paths = [{}]\n", paths.join(", ")));
         }
         text.push_str(&format!(
@@ -112,7 +112,13 @@ fn print_chain(chain: &Chain, collider: &ArmCollider) -> Result<()> {
         .self_pairs()
         .map(|(a, b)| (chain.collision_shapes()[a].link.clone(), chain.collision_shapes()[b].link.clone()))
         .collect();
-    pairs.dedup();
+    let mut unique: Vec<(String, String)> = Vec::new();
+    for p in pairs.drain(..) {
+        if !unique.contains(&p) {
+            unique.push(p);
+        }
+    }
+    let pairs = unique;
     outln!(
         "self-collision pairs (links two or more joints apart): {}",
         if pairs.is_empty() {
@@ -130,7 +136,9 @@ fn clear(chain: &Chain, c: &mut ArmCollider, q: &[f64]) -> bool {
 }
 
 /// The middle of each joint's range (0 for a continuous joint) if it is clear of contacts and
-/// the tip is above the lowest target height, else the clear drawn pose nearest to it.
+/// the tip is above the lowest target height, else, of poses drawn within the limits that are,
+/// the one farthest from contact (the largest clearance; the tip's height on an arm without
+/// collision shapes).
 fn suggest_home(chain: &Chain, c: &mut ArmCollider) -> Vec<f64> {
     let (lo, hi) = (chain.lower_limits(), chain.upper_limits());
     let mid: Vec<f64> =
@@ -141,6 +149,7 @@ fn suggest_home(chain: &Chain, c: &mut ArmCollider) -> Vec<f64> {
     }
     let mut rng = Rng::new(1);
     let mut best: Option<(f64, Vec<f64>)> = None;
+    let mut scratch = Vec::new();
     for _ in 0..DRAWS {
         let q: Vec<f64> = (0..chain.dof())
             .map(|i| {
@@ -152,13 +161,13 @@ fn suggest_home(chain: &Chain, c: &mut ArmCollider) -> Vec<f64> {
             })
             .collect();
         if ok(c, &q) {
-            let d: f64 = q.iter().zip(&mid).map(|(a, b)| (a - b).powi(2)).sum();
-            if best.as_ref().is_none_or(|(bd, _)| d < *bd) {
-                best = Some((d, q));
+            let room = c.contacts(chain, &q, &mut scratch).unwrap_or(chain.fk(&q).position.z);
+            if best.as_ref().is_none_or(|(b, _)| room > *b) {
+                best = Some((room, q));
             }
         }
     }
-    best.map_or(mid, |(_, q)| q)
+    best.map_or(mid, |(_, q)| q.iter().map(|x| (x * 1e4).round() / 1e4).collect())
 }
 
 /// A target range about `home`: half of each joint's room to its nearer limit (1 rad for a

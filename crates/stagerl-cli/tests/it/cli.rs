@@ -165,6 +165,116 @@ fn fk_collisions_reports_contacts_and_clearance_of_mesh_links() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `stagerl robot` on a three-joint arm of mesh links prints the chain, the shapes per link with
+/// their files and the self-collision pairs, and `--config-out` writes a config that trains.
+#[test]
+fn robot_prints_the_arm_and_writes_a_config_that_trains() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-robot-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("robot/meshes")).unwrap();
+    std::fs::create_dir_all(dir.join("pkgs/parts")).unwrap();
+    std::fs::write(dir.join("robot/meshes/base.obj"), cube_obj(0.2)).unwrap();
+    std::fs::write(dir.join("pkgs/parts/small.obj"), cube_obj(0.1)).unwrap();
+    let path = dir.join("robot/arm.urdf");
+    let link = |name: &str| {
+        format!(
+            r#"<link name="{name}"><collision><origin xyz="0.15 0 0"/><geometry><mesh filename="package://parts/small.obj" scale="3 1 1"/></geometry></collision></link>"#
+        )
+    };
+    let urdf = format!(
+        r#"<robot name="arm">
+  <link name="base"><collision><geometry><mesh filename="meshes/base.obj"/></geometry></collision></link>
+  <link name="l1"/>{}{}<link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><axis xyz="0 1 0"/><limit lower="-2" upper="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0.3 0 0"/><axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5" velocity="1"/></joint>
+  <joint name="jt" type="fixed"><parent link="l3"/><child link="tip"/><origin xyz="0.3 0 0"/></joint>
+</robot>"#,
+        link("l2"),
+        link("l3")
+    );
+    std::fs::write(&path, urdf).unwrap();
+    let (cfg, pkgs) = (dir.join("arm.toml"), dir.join("pkgs"));
+    let args = ["robot", "--robot", path.to_str().unwrap(), "--package-path", pkgs.to_str().unwrap()];
+    let out = stagerl(&[&args[..], &["--config-out", cfg.to_str().unwrap()]].concat(), "");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{}", stderr(&out));
+    for want in [
+        "chain: `base` -> `tip`, 3 actuated joints",
+        "joint `j2` revolute: [-2, 1] rad, speed 1 rad/s",
+        "link `base`: 1 shape(s): convex (8 hull vertices) from `meshes/base.obj`",
+        "link `l3`: 1 shape(s): convex (8 hull vertices) from `package://parts/small.obj`",
+        "self-collision pairs (links two or more joints apart): base-l2, base-l3",
+        "home_pose_rad = [0.0, -0.5, 0.0]",
+    ] {
+        assert!(text.contains(want), "{want:?} not in:\n{text}");
+    }
+    let written = std::fs::read_to_string(&cfg).unwrap();
+    assert!(written.contains("[task]") && written.contains("package_paths"), "{written}");
+    let run = dir.join("run");
+    let out = stagerl(
+        &[
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--episodes",
+            "2",
+            "--eval-trials",
+            "2",
+            "--out",
+            run.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("warning"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A run on an arm without any collision shape says so before it starts.
+#[test]
+fn train_warns_when_the_arm_has_no_collision_shape() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-bare-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("bare.urdf"),
+        r#"<robot name="bare"><link name="a"/><link name="b"/><link name="c"/>
+  <joint name="j1" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="b"/><child link="c"/><origin xyz="0.3 0 0"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" velocity="1"/></joint>
+</robot>"#,
+    )
+    .unwrap();
+    let cfg = dir.join("bare.toml");
+    let urdf = dir.join("bare.urdf").display().to_string();
+    let toml = format!(
+        "[robot]\nurdf = {urdf:?}\n[task]\nhome_pose_rad = [0.0, 0.0]\ntarget_joint_range_rad = [1.0, 0.5]\n"
+    );
+    std::fs::write(&cfg, toml).unwrap();
+    let run = dir.join("run");
+    let out = stagerl(
+        &[
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--eval-trials",
+            "1",
+            "--out",
+            run.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("no link of `a` to `c` has a collision shape") && err.contains("NOT checked"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn fk_malformed_lines_report_their_number() {
     let cases = [
