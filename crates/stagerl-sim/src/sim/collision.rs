@@ -110,10 +110,16 @@ fn lowest_z(s: &Shape, m: &[f64; 12]) -> f64 {
         Shape::Capsule { radius_m, half_length_m } => z0 - half_length_m * zz.abs() - radius_m,
         Shape::Sphere { radius_m } => z0 - radius_m,
         Shape::Cuboid { half_extents_m: [x, y, z] } => z0 - x * zx.abs() - y * zy.abs() - z * zz.abs(),
-        Shape::Convex(ref part) => {
-            z0 + part.points_m.iter().map(|p| zx * p[0] + zy * p[1] + zz * p[2]).fold(f64::INFINITY, f64::min)
-        }
+        Shape::Convex(ref part) => convex_lowest_z(part, m),
     }
+}
+
+/// [`lowest_z`] of a mesh part: its lowest hull vertex (out of line: the primitives' path stays
+/// as small as it was).
+#[inline(never)]
+fn convex_lowest_z(part: &ConvexPart, m: &[f64; 12]) -> f64 {
+    let (zx, zy, zz, z0) = (m[8], m[9], m[10], m[11]);
+    z0 + part.points_m.iter().map(|p| zx * p[0] + zy * p[1] + zz * p[2]).fold(f64::INFINITY, f64::min)
 }
 
 /// Whether two posed shapes overlap (parry supports every pair of our primitives).
@@ -374,6 +380,8 @@ impl ArmCollider {
 
     /// Whether arm shapes `a` and `b` overlap: bounding spheres first, then the exact test
     /// (segments for capsules and spheres, parry for anything with a box).
+    // Inlined into `check` as it was when `check` was its only caller (a step's hot loop).
+    #[inline(always)]
     fn overlap_arm(&self, a: usize, b: usize) -> bool {
         let (ga, gb) = (&self.geo[a], &self.geo[b]);
         if !ga.bounds_overlap(gb) {
@@ -404,6 +412,7 @@ struct Geo {
 }
 
 impl Geo {
+    #[inline(always)]
     fn of(s: &Shape, m: &[f64; 12]) -> Geo {
         let c = [m[3], m[7], m[11]];
         match *s {
@@ -424,15 +433,18 @@ impl Geo {
             Shape::Cuboid { half_extents_m: [x, y, z] } => {
                 Geo { round: false, centre: c, bound: (x * x + y * y + z * z).sqrt(), ..Geo::default() }
             }
-            Shape::Convex(ref part) => {
-                let l = part.centre_m;
-                let centre = [0, 1, 2]
-                    .map(|r| m[4 * r] * l[0] + m[4 * r + 1] * l[1] + m[4 * r + 2] * l[2] + m[4 * r + 3]);
-                Geo { round: false, centre, bound: part.radius_m, ..Geo::default() }
-            }
+            Shape::Convex(ref part) => Geo::of_convex(part, m),
         }
     }
 
+    /// [`Geo::of`] a mesh part: its bounding sphere placed (out of line, as [`convex_lowest_z`]).
+    #[inline(never)]
+    fn of_convex(part: &ConvexPart, m: &[f64; 12]) -> Geo {
+        let l = part.centre_m;
+        let centre =
+            [0, 1, 2].map(|r| m[4 * r] * l[0] + m[4 * r + 1] * l[1] + m[4 * r + 2] * l[2] + m[4 * r + 3]);
+        Geo { round: false, centre, bound: part.radius_m, ..Geo::default() }
+    }
     fn bounds_overlap(&self, o: &Geo) -> bool {
         let d = [self.centre[0] - o.centre[0], self.centre[1] - o.centre[1], self.centre[2] - o.centre[2]];
         d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= (self.bound + o.bound).powi(2)
