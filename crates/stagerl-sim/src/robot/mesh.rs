@@ -439,16 +439,16 @@ pub(crate) fn parse_obj(bytes: &[u8], lim: &Limits) -> Result<Parts, Why> {
                 }
                 verts.push(parse_xyz(&mut words, i)?);
             }
-            Some("o" | "g") => {
-                if parts.last().is_some_and(|p| !p.is_empty()) {
-                    if parts.len() >= lim.parts {
-                        return Err(too_many("parts (objects or groups with faces)", lim.parts));
-                    }
-                    parts.push(Vec::new());
+            // A new object or group starts a part (unless the last one has no faces yet).
+            Some("o" | "g") if parts.last().is_some_and(|p| !p.is_empty()) => {
+                if parts.len() >= lim.parts {
+                    return Err(too_many("parts (objects or groups with faces)", lim.parts));
                 }
+                parts.push(Vec::new());
             }
             Some("f") => {
-                let part = parts.last_mut().expect("there is always a part");
+                // `parts` starts with one part and only grows.
+                let Some(part) = parts.last_mut() else { continue };
                 for w in words {
                     corners += 1;
                     if corners > 3 * lim.triangles {
