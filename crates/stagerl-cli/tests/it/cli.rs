@@ -272,6 +272,11 @@ fn train_warns_when_the_arm_has_no_collision_shape() {
         err.contains("no link of `a` to `c` has a collision shape") && err.contains("NOT checked"),
         "{err}"
     );
+    // Episodes and the evaluation record no collision count: not a 0.
+    let episodes = std::fs::read_to_string(run.join("episodes.csv")).unwrap();
+    let row: Vec<&str> = episodes.lines().nth(1).unwrap().split(',').collect();
+    assert_eq!(row[6], "", "{episodes}");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("collisions not checked"), "{out:?}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

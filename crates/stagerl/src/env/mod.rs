@@ -523,6 +523,12 @@ impl ReachEnv {
     pub fn is_done(&self) -> bool {
         self.done
     }
+    /// Whether contacts are looked for at all: the arm has collision shapes. When not,
+    /// [`ReachEnv::collision_steps`] is 0 without meaning, and episodes and evaluations record
+    /// no collision count ("not checked").
+    pub fn collisions_checked(&self) -> bool {
+        !self.chain.collision_shapes().is_empty()
+    }
     /// The arm.
     pub fn chain(&self) -> &Arc<Chain> {
         &self.chain
