@@ -145,8 +145,21 @@ fn fk_collisions_reports_contacts_and_clearance_of_mesh_links() {
     // Without --collisions the lines are as before.
     let out = stagerl(&args[..5], "{\"joints\":[0, 0]}\n");
     assert!(lines(&out)[0].get("contacts").is_none() && lines(&out)[0].get("clearance_m").is_none());
+    // ROS_PACKAGE_PATH is searched too.
+    let out = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+        .args(["fk", "--robot", robot, "--collisions"])
+        .env("ROS_PACKAGE_PATH", format!("/no/such/dir:{}", pkgs.display()))
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
     // Without the package path the mesh is not found: an error naming the link and the file.
-    let out = stagerl(&["fk", "--robot", robot], "");
+    let out = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+        .args(["fk", "--robot", robot])
+        .env_remove("ROS_PACKAGE_PATH")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
     let err = stderr(&out);
     assert!(
         !out.status.success() && err.contains("`lifted`") && err.contains("package://parts/small.obj"),

@@ -17,7 +17,7 @@
 //! absolute path elsewhere, `..` out of them, a symbolic link out of them) is refused.
 //!
 //! Bounds: [`MAX_MESH_BYTES`] per file, [`MAX_MESH_TRIANGLES`] and [`MAX_MESH_VERTICES`] per
-//! file, [`MAX_MESH_PARTS`] per file, [`MAX_MESH_FILES`] per URDF.
+//! file, [`MAX_MESH_PARTS`] per file, [`MAX_MESH_FILES`] and [`MAX_MESH_TOTAL_BYTES`] per URDF.
 
 use std::path::{Component, Path, PathBuf};
 use std::sync::Arc;
@@ -36,6 +36,8 @@ pub const MAX_MESH_VERTICES: usize = 3_000_000;
 pub const MAX_MESH_PARTS: usize = 1024;
 /// The most mesh files (`<collision>` meshes) a URDF's chain may name.
 pub const MAX_MESH_FILES: usize = 1024;
+/// The most bytes of mesh files a URDF's chain may have read, all files together (256 MiB).
+pub const MAX_MESH_TOTAL_BYTES: u64 = 256 << 20;
 
 /// The bounds a mesh file is read under (the constants above; smaller in tests).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -202,6 +204,8 @@ pub(crate) struct MeshSource<'a> {
     pub dir: PathBuf,
     pub options: &'a MeshOptions,
     pub limits: Limits,
+    /// Bytes of mesh files read so far (bounded by [`MAX_MESH_TOTAL_BYTES`]).
+    pub read: std::cell::Cell<u64>,
 }
 
 /// A reason a mesh could not be used (the caller names the link and the file).
@@ -300,7 +304,18 @@ impl MeshSource<'_> {
     /// The parts of the mesh file `filename` names (resolved, read, parsed, bounded).
     pub fn load(&self, filename: &str) -> Result<Parts, Why> {
         let path = self.resolve(filename)?;
-        read_mesh(&path, &self.limits)
+        let left = MAX_MESH_TOTAL_BYTES.saturating_sub(self.read.get());
+        let size = std::fs::metadata(&path).map_err(|e| format!("{}: {e}", path.display()))?.len();
+        if size > left && size <= self.limits.bytes {
+            return Err(format!(
+                "{}: {size} bytes, more than the {left} left of the {MAX_MESH_TOTAL_BYTES} bytes all mesh files \
+                 of a chain may have",
+                path.display()
+            ));
+        }
+        let parts = read_mesh(&path, &self.limits)?;
+        self.read.set(self.read.get() + size);
+        Ok(parts)
     }
 }
 
@@ -333,15 +348,14 @@ pub(crate) fn read_mesh(path: &Path, lim: &Limits) -> Result<Parts, Why> {
             ))
         }
     };
-    let size = std::fs::metadata(path).map_err(|e| format!("{}: {e}", path.display()))?.len();
-    if size > lim.bytes {
-        return Err(format!(
-            "{}: {size} bytes, more than the {} a mesh file may have",
-            path.display(),
-            lim.bytes
-        ));
+    // Read at most one byte more than allowed (the file may grow after a size check).
+    let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, lim.bytes + 1), &mut bytes)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    if bytes.len() as u64 > lim.bytes {
+        return Err(format!("{}: more than the {} bytes a mesh file may have", path.display(), lim.bytes));
     }
-    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let parts = match kind {
         Kind::Stl => parse_stl(&bytes, lim),
         Kind::Obj => parse_obj(&bytes, lim),

@@ -308,7 +308,12 @@ impl Chain {
         let xml = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let canon = path.canonicalize().map_err(|e| Error::io(path, e))?;
         let dir = canon.parent().map_or_else(|| PathBuf::from("/"), Path::to_path_buf);
-        let source = mesh::MeshSource { dir, options: meshes, limits: mesh::Limits::DEFAULT };
+        let source = mesh::MeshSource {
+            dir,
+            options: meshes,
+            limits: mesh::Limits::DEFAULT,
+            read: Default::default(),
+        };
         let compiled = urdf::compile_str(&xml, tip, Some(&source));
         compiled.and_then(|c| Chain::compiled(&xml, c)).map_err(|e| match e {
             Error::Urdf(m) => Error::Urdf(format!("{}: {m}", path.display())),

@@ -223,14 +223,19 @@ fn size_and_count_bounds_are_enforced() {
     write(&d.join("a.stl"), &ascii_stl(&tris));
     write(&d.join("two.obj"), &obj_cubes(&[([0.0; 3], 1.0), ([3.0, 0.0, 0.0], 1.0)]));
     let opts = MeshOptions::default();
-    let src = |limits| MeshSource { dir: d.clone(), options: &opts, limits };
+    let src = |limits| MeshSource { dir: d.clone(), options: &opts, limits, read: Default::default() };
     let small = |f: fn(&mut Limits)| {
         let mut l = Limits::DEFAULT;
         f(&mut l);
         l
     };
     let e = src(small(|l| l.bytes = 100)).load("c.stl").unwrap_err();
-    assert!(e.contains("bytes") && e.contains("c.stl"), "{e}");
+    assert!(e.contains("more than the 100 bytes") && e.contains("c.stl"), "{e}");
+    // All files of a chain together are bounded too.
+    let full = src(Limits::DEFAULT);
+    full.read.set(MAX_MESH_TOTAL_BYTES - 100);
+    let e = full.load("c.stl").unwrap_err();
+    assert!(e.contains("left of the") && e.contains("c.stl"), "{e}");
     let e = src(small(|l| l.triangles = 11)).load("c.stl").unwrap_err();
     assert!(e.contains("more than 11 triangles"), "{e}");
     let e = src(small(|l| l.triangles = 11)).load("a.stl").unwrap_err();
@@ -266,7 +271,12 @@ fn package_urls_resolve_through_each_rule() {
     let at = |opts: &MeshOptions, dir: &Path| {
         let path = dir.join("r.urdf");
         write(&path, urdf.as_bytes());
-        let src = MeshSource { dir: dir.to_path_buf(), options: opts, limits: Limits::DEFAULT };
+        let src = MeshSource {
+            dir: dir.to_path_buf(),
+            options: opts,
+            limits: Limits::DEFAULT,
+            read: Default::default(),
+        };
         (src.resolve(url), Chain::from_urdf_file_with(&path, None, opts).map(|c| found(&c)))
     };
     let elsewhere = d.join("elsewhere");
