@@ -296,7 +296,7 @@ impl ArmCollider {
         self.place(chain, q);
         if self.checks.floor {
             for (k, s) in self.shapes.iter().enumerate() {
-                if s.segment >= 0 && lowest_z(&s.shape, &self.world[k]) < 0.0 {
+                if s.segment >= 0 && self.below_floor(k) {
                     return Some(Contact::Floor { shape: s.index });
                 }
             }
@@ -315,6 +315,19 @@ impl ArmCollider {
             }
         }
         None
+    }
+
+    /// Whether placed shape `k` reaches below z = 0: a mesh part only when its bounding sphere
+    /// does (a scan of its hull's vertices otherwise), a primitive in closed form.
+    #[inline(always)]
+    fn below_floor(&self, k: usize) -> bool {
+        match &self.shapes[k].shape {
+            Shape::Convex(_) => {
+                let g = &self.geo[k];
+                g.centre[2] - g.bound < 0.0 && lowest_z(&self.shapes[k].shape, &self.world[k]) < 0.0
+            }
+            s => lowest_z(s, &self.world[k]) < 0.0,
+        }
     }
 
     /// Every contact of the arm at joint values `q` (one per joint) into `out` (cleared first):
