@@ -51,6 +51,10 @@ enum Command {
     /// one value per joint of --robot, 6 for the default UR5), one line of every term out per
     /// input.
     Reward(cmd::reward::Args),
+    /// What stagerl sees in a URDF: the chain, its joints and limits, the collision shapes per
+    /// link, the self-collision pairs; a suggested home pose and target range (with
+    /// --config-out, a config that trains on the arm).
+    Robot(cmd::robot::Args),
     /// Table 1, the paper's claims, Figures 7 and 8 and trajectories from finished run directories.
     Report(cmd::report::Args),
     /// Benchmarks.
@@ -77,6 +81,7 @@ fn main() -> ExitCode {
         Command::View(a) => cmd::view::run(a),
         Command::Fk(a) => cmd::fk::run(a),
         Command::Reward(a) => cmd::reward::run(a),
+        Command::Robot(a) => cmd::robot::run(a),
         Command::Report(a) => cmd::report::run(a),
         Command::Bench(b) => cmd::bench::run(b),
         Command::Config(a) => cmd::config::run(a),

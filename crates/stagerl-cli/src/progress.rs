@@ -34,13 +34,15 @@ pub fn summary_line(s: &EvalSummary, json: bool) -> String {
         .to_string()
     } else {
         format!(
-            "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m, collisions in {} of the trials",
+            "evaluation: success {:.1} % of {} trials, mean episode reward {:.3}, mean steps (successful) {}, median final distance {:.4} m, {}",
             100.0 * s.success_rate,
             s.trials,
             s.mean_reward,
             s.mean_steps.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into()),
             s.median_final_distance_m,
-            s.collision_rate.map_or_else(|| "-".into(), |c| format!("{:.1} %", 100.0 * c))
+            // None: the arm has no collision shape (or the trials predate contact recording).
+            s.collision_rate
+                .map_or_else(|| "collisions not checked".into(), |c| format!("collisions in {:.1} % of the trials", 100.0 * c))
         )
     }
 }

@@ -1,11 +1,19 @@
-use anyhow::Result;
+use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
+use stagerl::robot::Chain;
+use stagerl::sim::collision::{ArmCollider, Checks, Contact};
 
 #[derive(clap::Args)]
 #[command(after_help = "Example:\n  echo '{\"joints\":[0,-1.57,1.57,-1.57,-1.57,0]}' | stagerl fk")]
 pub struct Args {
     #[command(flatten)]
     robot: super::RobotArgs,
+    /// Also check the pose for contacts with the floor (z = 0) and between links no joint
+    /// connects: each line gets `"contacts"` (`{"with":"floor","link":..}`,
+    /// `{"with":"self","links":[..,..]}`) and `"clearance_m"`, the smallest signed distance
+    /// over the checked pairs (negative: a penetration's depth).
+    #[arg(long)]
+    collisions: bool,
 }
 
 #[derive(Deserialize)]
@@ -18,15 +26,76 @@ struct Input {
 struct Output {
     position: [f64; 3],
     quaternion: [f64; 4],
+    #[serde(flatten)]
+    collisions: Option<Collisions>,
+}
+
+#[derive(Serialize)]
+struct Collisions {
+    contacts: Vec<ContactOut>,
+    /// Metres; `None` (null) when no pair was checked.
+    clearance_m: Option<f64>,
+}
+
+#[derive(Serialize, PartialEq)]
+#[serde(tag = "with", rename_all = "snake_case")]
+enum ContactOut {
+    Floor {
+        link: String,
+    },
+    #[serde(rename = "self")]
+    SelfCollision {
+        links: [String; 2],
+    },
+}
+
+/// The contacts of the arm at `q`, one per link (floor) or pair of links (self).
+fn collisions(
+    chain: &Chain,
+    collider: &mut ArmCollider,
+    q: &[f64],
+    scratch: &mut Vec<Contact>,
+) -> Collisions {
+    let clearance_m = collider.contacts(chain, q, scratch);
+    let link = |k: usize| chain.collision_shapes()[k].link.clone();
+    let mut contacts: Vec<ContactOut> = Vec::new();
+    for c in scratch.iter() {
+        let out = match *c {
+            Contact::Floor { shape } => ContactOut::Floor { link: link(shape) },
+            Contact::SelfCollision { shape_a, shape_b } => {
+                ContactOut::SelfCollision { links: [link(shape_a), link(shape_b)] }
+            }
+            // No obstacles here.
+            Contact::Obstacle { .. } => continue,
+        };
+        if !contacts.contains(&out) {
+            contacts.push(out);
+        }
+    }
+    Collisions { contacts, clearance_m }
 }
 
 pub fn run(args: Args) -> Result<()> {
     let chain = args.robot.load()?;
+    let mut collider = None;
+    if args.collisions {
+        if chain.collision_shapes().is_empty() {
+            bail!(
+                "robot `{}` has no collision shapes on the chain `{}` -> `{}`: --collisions has nothing to check",
+                args.robot.robot,
+                chain.base_link(),
+                chain.tip_link()
+            );
+        }
+        collider = Some(ArmCollider::new(&chain, Checks { floor: true, self_collision: true }));
+    }
+    let mut scratch = Vec::new();
     let stdin = std::io::stdin().lock();
     let stdout = crate::out::stdout()?;
     crate::jsonl::process(stdin, stdout, |input: Input| {
         let pose = chain.try_fk(&input.joints)?;
-        Ok(Output { position: pose.position.into(), quaternion: pose.quaternion_xyzw() })
+        let collisions = collider.as_mut().map(|c| collisions(&chain, c, &input.joints, &mut scratch));
+        Ok(Output { position: pose.position.into(), quaternion: pose.quaternion_xyzw(), collisions })
     })
 }
 

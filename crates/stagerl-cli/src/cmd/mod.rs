@@ -8,6 +8,7 @@ pub mod plan;
 pub mod report;
 pub mod reproduce;
 pub mod reward;
+pub mod robot;
 pub mod train;
 pub mod view;
 
@@ -24,13 +25,46 @@ pub struct RobotArgs {
     /// Tip link of the URDF (default: its only leaf link).
     #[arg(long)]
     pub tip: Option<String>,
+    /// A folder holding ROS package folders, where `package://` mesh paths are looked for
+    /// before `ROS_PACKAGE_PATH` and the URDF's folder (repeatable); mesh files are read only
+    /// below these folders and the URDF's.
+    #[arg(long = "package-path", value_name = "DIR")]
+    pub package_paths: Vec<std::path::PathBuf>,
 }
 
 impl RobotArgs {
-    /// Load the chain.
+    /// Load the chain (collision meshes too: one that cannot be read is an error).
     pub fn load(&self) -> Result<stagerl::robot::Chain> {
-        stagerl::robot::Chain::load(&self.robot, self.tip.as_deref())
+        let meshes =
+            stagerl::robot::MeshOptions { package_paths: self.package_paths.clone(), ..Default::default() }
+                .with_ros_package_path();
+        stagerl::robot::Chain::load_with(&self.robot, self.tip.as_deref(), &meshes)
             .with_context(|| format!("loading robot `{}`", self.robot))
+    }
+}
+
+/// What a run on `chain` should be told about its collision geometry before it starts: no
+/// collision shape at all (contacts are then not checked: no rate of collisions means
+/// anything), or meshes left out by `robot.missing_collision = "ignore"`; `None` otherwise.
+pub fn collision_notice(chain: &stagerl::robot::Chain) -> Option<String> {
+    let unloaded = chain.unloaded_collision();
+    let left_out = unloaded
+        .iter()
+        .map(|u| format!("link `{}`: `{}` ({})", u.link, u.file, u.reason))
+        .collect::<Vec<_>>()
+        .join("; ");
+    if chain.collision_shapes().is_empty() {
+        let why =
+            if unloaded.is_empty() { String::new() } else { format!(" (meshes not loaded: {left_out})") };
+        Some(format!(
+            "warning: no link of `{}` to `{}` has a collision shape{why}: contacts with the floor,              the arm itself and obstacles are NOT checked, and collision rates are not measured",
+            chain.base_link(),
+            chain.tip_link()
+        ))
+    } else if !unloaded.is_empty() {
+        Some(format!("warning: collision meshes left out (robot.missing_collision = \"ignore\"): {left_out}"))
+    } else {
+        None
     }
 }
 

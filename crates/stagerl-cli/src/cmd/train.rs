@@ -139,6 +139,9 @@ fn run_on_pool(args: Args) -> Result<()> {
         },
         out.display()
     )?;
+    if let Some(notice) = super::collision_notice(run.chain()) {
+        errln!("{notice}")?;
+    }
     let (stop, signals) = stop_flags()?;
     let output = RunOutput::new(Arc::clone(&stop));
     let opts = TrainOptions { stop: Some(&stop) };

@@ -86,6 +86,213 @@ fn fk_accepts_a_urdf_path_and_tip() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The axis-aligned cube of side `side` centred at the origin, as an OBJ file.
+fn cube_obj(side: f64) -> String {
+    let h = side / 2.0;
+    let mut obj = String::from("o cube\n");
+    for i in 0..8 {
+        let p = [0, 1, 2].map(|k| if i >> k & 1 == 1 { h } else { -h });
+        obj.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+    }
+    for f in ["1 2 4 3", "5 7 8 6", "1 5 6 2", "3 4 8 7", "1 3 7 5", "2 6 8 4"] {
+        obj.push_str(&format!("f {f}\n"));
+    }
+    obj
+}
+
+/// `fk --collisions` on an arm of mesh links: a 0.1 m cube lifted along z (prismatic joint
+/// `lift`, origin 0.5 m up) above a 0.2 m cube at the base. The gap between them is
+/// `0.35 + lift` m, the lifted cube's bottom is `0.45 + lift` m above the floor.
+#[test]
+fn fk_collisions_reports_contacts_and_clearance_of_mesh_links() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-fk-mesh-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("robot/meshes")).unwrap();
+    std::fs::create_dir_all(dir.join("pkgs/parts")).unwrap();
+    std::fs::write(dir.join("robot/meshes/base.obj"), cube_obj(0.2)).unwrap();
+    std::fs::write(dir.join("pkgs/parts/small.obj"), cube_obj(0.1)).unwrap();
+    let path = dir.join("robot/lift.urdf");
+    std::fs::write(
+        &path,
+        r#"<robot name="lift">
+  <link name="base"><collision><geometry><mesh filename="meshes/base.obj"/></geometry></collision></link>
+  <link name="turn"/>
+  <link name="lifted"><collision><geometry><mesh filename="package://parts/small.obj"/></geometry></collision></link>
+  <joint name="turn" type="revolute"><parent link="base"/><child link="turn"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" velocity="1"/></joint>
+  <joint name="lift" type="prismatic"><parent link="turn"/><child link="lifted"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 0 1"/><limit lower="-0.6" upper="0.2" velocity="1"/></joint>
+</robot>"#,
+    )
+    .unwrap();
+    let (robot, pkgs) = (path.to_str().unwrap(), dir.join("pkgs"));
+    let args = ["fk", "--robot", robot, "--package-path", pkgs.to_str().unwrap(), "--collisions"];
+    let out = stagerl(&args, "{\"joints\":[0.3, 0]}\n{\"joints\":[1, -0.4]}\n{\"joints\":[0, -0.47]}\n");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v = lines(&out);
+    assert_eq!(v.len(), 3);
+    let clearance: Vec<f64> = v.iter().map(|l| f(&l["clearance_m"])).collect();
+    for (c, want) in clearance.iter().zip([0.35, -0.05, -0.12]) {
+        assert!((c - want).abs() < 1e-4, "{clearance:?}");
+    }
+    assert_eq!(v[0]["contacts"], serde_json::json!([]));
+    assert_eq!(v[1]["contacts"], serde_json::json!([{"with": "self", "links": ["base", "lifted"]}]));
+    assert_eq!(
+        v[2]["contacts"],
+        serde_json::json!([{"with": "floor", "link": "lifted"}, {"with": "self", "links": ["base", "lifted"]}])
+    );
+    assert!((f(&v[1]["position"][2]) - 0.1).abs() < 1e-12);
+    // Without --collisions the lines are as before.
+    let out = stagerl(&args[..5], "{\"joints\":[0, 0]}\n");
+    assert!(lines(&out)[0].get("contacts").is_none() && lines(&out)[0].get("clearance_m").is_none());
+    // ROS_PACKAGE_PATH is searched too.
+    let out = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+        .args(["fk", "--robot", robot, "--collisions"])
+        .env("ROS_PACKAGE_PATH", format!("/no/such/dir:{}", pkgs.display()))
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    // Without the package path the mesh is not found: an error naming the link and the file.
+    let out = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+        .args(["fk", "--robot", robot])
+        .env_remove("ROS_PACKAGE_PATH")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert!(
+        !out.status.success() && err.contains("`lifted`") && err.contains("package://parts/small.obj"),
+        "{err}"
+    );
+    // An arm without collision shapes has nothing to check.
+    std::fs::write(
+        &path,
+        r#"<robot name="bare"><link name="a"/><link name="b"/>
+  <joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" velocity="1"/></joint></robot>"#,
+    )
+    .unwrap();
+    let out = stagerl(&["fk", "--robot", robot, "--collisions"], "");
+    assert!(!out.status.success() && stderr(&out).contains("no collision shapes"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `stagerl robot` on a three-joint arm of mesh links prints the chain, the shapes per link with
+/// their files and the self-collision pairs, and `--config-out` writes a config that trains.
+#[test]
+fn robot_prints_the_arm_and_writes_a_config_that_trains() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-robot-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("robot/meshes")).unwrap();
+    std::fs::create_dir_all(dir.join("pkgs/parts")).unwrap();
+    std::fs::write(dir.join("robot/meshes/base.obj"), cube_obj(0.2)).unwrap();
+    std::fs::write(dir.join("pkgs/parts/small.obj"), cube_obj(0.1)).unwrap();
+    let path = dir.join("robot/arm.urdf");
+    let link = |name: &str| {
+        format!(
+            r#"<link name="{name}"><collision><origin xyz="0.15 0 0"/><geometry><mesh filename="package://parts/small.obj" scale="3 1 1"/></geometry></collision></link>"#
+        )
+    };
+    let urdf = format!(
+        r#"<robot name="arm">
+  <link name="base"><collision><geometry><mesh filename="meshes/base.obj"/></geometry></collision></link>
+  <link name="l1"/>{}{}<link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.2"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><axis xyz="0 1 0"/><limit lower="-2" upper="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="0.3 0 0"/><axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5" velocity="1"/></joint>
+  <joint name="jt" type="fixed"><parent link="l3"/><child link="tip"/><origin xyz="0.3 0 0"/></joint>
+</robot>"#,
+        link("l2"),
+        link("l3")
+    );
+    std::fs::write(&path, urdf).unwrap();
+    let (cfg, pkgs) = (dir.join("arm.toml"), dir.join("pkgs"));
+    let args = ["robot", "--robot", path.to_str().unwrap(), "--package-path", pkgs.to_str().unwrap()];
+    let out = stagerl(&[&args[..], &["--config-out", cfg.to_str().unwrap()]].concat(), "");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{}", stderr(&out));
+    for want in [
+        "chain: `base` -> `tip`, 3 actuated joints",
+        "joint `j2` revolute: [-2, 1] rad, speed 1 rad/s",
+        "link `base`: 1 shape(s): convex (8 hull vertices) from `meshes/base.obj`",
+        "link `l3`: 1 shape(s): convex (8 hull vertices) from `package://parts/small.obj`",
+        "self-collision pairs (links two or more joints apart): base-l2, base-l3",
+        "home_pose_rad = [0.0, -0.5, 0.0]",
+    ] {
+        assert!(text.contains(want), "{want:?} not in:\n{text}");
+    }
+    let written = std::fs::read_to_string(&cfg).unwrap();
+    assert!(written.contains("[task]") && written.contains("package_paths"), "{written}");
+    let run = dir.join("run");
+    let out = stagerl(
+        &[
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--episodes",
+            "2",
+            "--eval-trials",
+            "2",
+            "--out",
+            run.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("warning"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A run on an arm without any collision shape says so before it starts.
+#[test]
+fn train_warns_when_the_arm_has_no_collision_shape() {
+    let dir = std::env::temp_dir().join(format!("stagerl-cli-bare-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("bare.urdf"),
+        r#"<robot name="bare"><link name="a"/><link name="b"/><link name="c"/>
+  <joint name="j1" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="b"/><child link="c"/><origin xyz="0.3 0 0"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" velocity="1"/></joint>
+</robot>"#,
+    )
+    .unwrap();
+    let cfg = dir.join("bare.toml");
+    let urdf = dir.join("bare.urdf").display().to_string();
+    let toml = format!(
+        "[robot]\nurdf = {urdf:?}\n[task]\nhome_pose_rad = [0.0, 0.0]\ntarget_joint_range_rad = [1.0, 0.5]\n"
+    );
+    std::fs::write(&cfg, toml).unwrap();
+    let run = dir.join("run");
+    let out = stagerl(
+        &[
+            "train",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--eval-trials",
+            "1",
+            "--out",
+            run.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("no link of `a` to `c` has a collision shape") && err.contains("NOT checked"),
+        "{err}"
+    );
+    // Episodes and the evaluation record no collision count: not a 0.
+    let episodes = std::fs::read_to_string(run.join("episodes.csv")).unwrap();
+    let row: Vec<&str> = episodes.lines().nth(1).unwrap().split(',').collect();
+    assert_eq!(row[6], "", "{episodes}");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("collisions not checked"), "{out:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn fk_malformed_lines_report_their_number() {
     let cases = [

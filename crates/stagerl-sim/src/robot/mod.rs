@@ -10,7 +10,8 @@
 //! (velocity limits). Poses are expressed in the root (base) link's frame.
 
 use nalgebra::{UnitQuaternion, Vector3};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
@@ -24,25 +25,49 @@ pub struct RobotConfig {
     pub urdf: String,
     /// Tip link of the chain; unset takes the URDF's only leaf link.
     pub tip: Option<String>,
+    /// Folders holding ROS package folders: where `package://PKG/...` mesh paths are looked for
+    /// first (then `ROS_PACKAGE_PATH`, then the URDF's folder and its parents). Mesh files are
+    /// read only below these folders and the URDF's own.
+    pub package_paths: Vec<PathBuf>,
+    /// A link whose collision mesh cannot be found or read: `"error"` stops with a message
+    /// naming the link and the file, `"ignore"` goes on without that geometry.
+    pub missing_collision: MissingCollision,
 }
 
 impl Default for RobotConfig {
     fn default() -> Self {
-        RobotConfig { urdf: "ur5".into(), tip: None }
+        RobotConfig {
+            urdf: "ur5".into(),
+            tip: None,
+            package_paths: Vec::new(),
+            missing_collision: MissingCollision::Error,
+        }
     }
 }
 
 impl RobotConfig {
-    /// Load the configured arm.
+    /// Load the configured arm (meshes as [`RobotConfig::mesh_options`] says).
     pub fn load(&self) -> Result<Chain> {
-        Chain::load(&self.urdf, self.tip.as_deref())
+        Chain::load_with(&self.urdf, self.tip.as_deref(), &self.mesh_options())
+    }
+
+    /// Where meshes are looked for: `package_paths`, then `ROS_PACKAGE_PATH`'s folders.
+    pub fn mesh_options(&self) -> MeshOptions {
+        MeshOptions {
+            package_paths: self.package_paths.clone(),
+            ros_package_path: Vec::new(),
+            missing: self.missing_collision,
+        }
+        .with_ros_package_path()
     }
 }
 
 mod kin;
+pub mod mesh;
 #[cfg(test)]
 mod tests;
 mod urdf;
+pub use mesh::{ConvexPart, MeshOptions, MissingCollision};
 pub use urdf::{MAX_LENGTH_M, MAX_URDF_BYTES, MAX_XML_DEPTH};
 
 /// The bundled UR5 URDF (see `assets/robots/ur5.urdf`).
@@ -102,9 +127,9 @@ pub struct JointInfo {
     pub effort: f64,
 }
 
-/// A collision primitive, in metres (the URDF's `<collision>` geometry; a cylinder is taken as
-/// the capsule of its radius and length).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// A collision shape, in metres (the URDF's `<collision>` geometry; a cylinder is taken as
+/// the capsule of its radius and length, a mesh as the convex hulls of its parts).
+#[derive(Clone, Debug, PartialEq)]
 pub enum Shape {
     /// The points within `radius_m` of the segment from `-half_length_m` to `+half_length_m`
     /// along the local z axis.
@@ -119,6 +144,31 @@ pub enum Shape {
     Cuboid {
         half_extents_m: [f64; 3],
     },
+    /// One convex part of a collision mesh (see [`mesh`]).
+    Convex(Arc<ConvexPart>),
+}
+
+impl Shape {
+    /// Its kind in a word: `capsule`, `sphere`, `box`, `convex`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Shape::Capsule { .. } => "capsule",
+            Shape::Sphere { .. } => "sphere",
+            Shape::Cuboid { .. } => "box",
+            Shape::Convex(_) => "convex",
+        }
+    }
+}
+
+/// A collision mesh the chain goes on without (`robot.missing_collision = "ignore"`, or a URDF
+/// given as text).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct UnloadedMesh {
+    pub link: String,
+    /// The file as the URDF names it.
+    pub file: String,
+    /// Why it was not loaded.
+    pub reason: String,
 }
 
 /// One collision shape of a link on the chain, placed in its segment's frame.
@@ -131,6 +181,8 @@ pub struct LinkShape {
     pub segment: Option<usize>,
     /// Its pose in that frame: a row-major 3 x 4 transform (rotation, translation in metres).
     pub pose: [f64; 12],
+    /// Its pose in its link's frame (the `<collision>` element's origin), the same form.
+    pub link_pose: [f64; 12],
     pub shape: Shape,
 }
 
@@ -145,7 +197,7 @@ pub struct Chain {
     tip_link: String,
     kin: kin::Kinematics,
     shapes: Vec<LinkShape>,
-    mesh_links: Vec<String>,
+    unloaded: Vec<UnloadedMesh>,
     /// The URDF text it was compiled from (the dynamic simulation loads it again).
     urdf: std::sync::Arc<str>,
 }
@@ -157,14 +209,20 @@ impl Chain {
     }
 
     /// `"ur5"` or `"panda"` for a bundled arm, otherwise a path to a URDF file. `tip` as in
-    /// [`Chain::from_urdf_str`].
+    /// [`Chain::from_urdf_str`]; meshes found through `ROS_PACKAGE_PATH` and the URDF's folder
+    /// ([`Chain::load_with`] for more).
     pub fn load(robot: &str, tip: Option<&str>) -> Result<Chain> {
+        Chain::load_with(robot, tip, &MeshOptions::default().with_ros_package_path())
+    }
+
+    /// [`Chain::load`] with collision meshes read as `meshes` says.
+    pub fn load_with(robot: &str, tip: Option<&str>, meshes: &MeshOptions) -> Result<Chain> {
         if robot == "ur5" {
             Chain::from_urdf_str(UR5_URDF, tip)
         } else if robot == "panda" {
             Chain::from_urdf_str(PANDA_URDF, tip)
         } else {
-            Chain::from_urdf_file(Path::new(robot), tip)
+            Chain::from_urdf_file_with(Path::new(robot), tip, meshes)
         }
     }
 
@@ -179,8 +237,14 @@ impl Chain {
     /// effort limit (0 or none reads as unlimited, [`JointInfo::effort`]), a non-finite origin
     /// or axis, an origin or prismatic limit beyond [`MAX_LENGTH_M`], a zero axis, a chain
     /// with no actuated joint, or joints forming a cycle anywhere in the document.
+    ///
+    /// A document has no folder to read meshes from: its collision meshes are not loaded
+    /// ([`Chain::unloaded_collision`]); [`Chain::from_urdf_file`] reads them.
     pub fn from_urdf_str(xml: &str, tip: Option<&str>) -> Result<Chain> {
-        let c = urdf::compile_str(xml, tip)?;
+        Chain::compiled(xml, urdf::compile_str(xml, tip, None)?)
+    }
+
+    fn compiled(xml: &str, c: urdf::Compiled) -> Result<Chain> {
         Ok(Chain {
             lower: c.joints.iter().map(|j| j.lower).collect(),
             upper: c.joints.iter().map(|j| j.upper).collect(),
@@ -190,7 +254,7 @@ impl Chain {
             tip_link: c.tip_link,
             kin: c.kin,
             shapes: c.shapes,
-            mesh_links: c.mesh_links,
+            unloaded: c.unloaded,
             urdf: xml.into(),
         })
     }
@@ -205,9 +269,16 @@ impl Chain {
         &self.shapes
     }
 
-    /// The links on the chain whose collision geometry is a mesh, which is not used.
-    pub fn mesh_collision_links(&self) -> &[String] {
-        &self.mesh_links
+    /// The links on the chain with a collision mesh that was not loaded, once each, root to tip.
+    pub fn mesh_collision_links(&self) -> Vec<String> {
+        let mut links: Vec<String> = self.unloaded.iter().map(|u| u.link.clone()).collect();
+        links.dedup();
+        links
+    }
+
+    /// The collision meshes of the chain's links that were not loaded, and why.
+    pub fn unloaded_collision(&self) -> &[UnloadedMesh] {
+        &self.unloaded
     }
 
     /// The frame each actuated joint moves, after its motion, for joint values `q` (one per
@@ -217,9 +288,15 @@ impl Chain {
         self.kin.segment_frames(q, out)
     }
 
-    /// Read and parse a URDF file (see [`Chain::from_urdf_str`]); [`Error::Io`] if it cannot be
-    /// read, URDF errors prefixed with the path.
+    /// Read and parse a URDF file (see [`Chain::from_urdf_str`]) and its collision meshes
+    /// (found through `ROS_PACKAGE_PATH` and the URDF's folder; a mesh that cannot be read is an
+    /// error); [`Error::Io`] if it cannot be read, URDF errors prefixed with the path.
     pub fn from_urdf_file(path: &Path, tip: Option<&str>) -> Result<Chain> {
+        Chain::from_urdf_file_with(path, tip, &MeshOptions::default().with_ros_package_path())
+    }
+
+    /// [`Chain::from_urdf_file`] with collision meshes read as `meshes` says (see [`mesh`]).
+    pub fn from_urdf_file_with(path: &Path, tip: Option<&str>, meshes: &MeshOptions) -> Result<Chain> {
         let size = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
         if size > urdf::MAX_URDF_BYTES {
             return Err(Error::Urdf(format!(
@@ -229,7 +306,16 @@ impl Chain {
             )));
         }
         let xml = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        Chain::from_urdf_str(&xml, tip).map_err(|e| match e {
+        let canon = path.canonicalize().map_err(|e| Error::io(path, e))?;
+        let dir = canon.parent().map_or_else(|| PathBuf::from("/"), Path::to_path_buf);
+        let source = mesh::MeshSource {
+            dir,
+            options: meshes,
+            limits: mesh::Limits::DEFAULT,
+            read: Default::default(),
+        };
+        let compiled = urdf::compile_str(&xml, tip, Some(&source));
+        compiled.and_then(|c| Chain::compiled(&xml, c)).map_err(|e| match e {
             Error::Urdf(m) => Error::Urdf(format!("{}: {m}", path.display())),
             e => e,
         })

@@ -5,7 +5,8 @@ use std::collections::{HashMap, HashSet};
 use urdf_rs::JointType;
 
 use super::kin::{self, Kinematics, Step, Tf};
-use super::{JointInfo, JointKind, LinkShape, Shape};
+use super::mesh::{self, MeshSource, MissingCollision};
+use super::{JointInfo, JointKind, LinkShape, Shape, UnloadedMesh};
 use crate::{Error, Result};
 
 /// A URDF compiled into a serial chain from its root link to a tip link.
@@ -15,7 +16,7 @@ pub(crate) struct Compiled {
     pub tip_link: String,
     pub kin: Kinematics,
     pub shapes: Vec<LinkShape>,
-    pub mesh_links: Vec<String>,
+    pub unloaded: Vec<UnloadedMesh>,
 }
 
 /// The largest length (metres) a URDF may hold in a joint origin or a prismatic joint's limits:
@@ -195,16 +196,21 @@ fn checked_limits(j: &urdf_rs::Joint, kind: JointKind) -> Result<(f64, f64, f64)
     }
 }
 
-/// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf).
-pub(crate) fn compile_str(xml: &str, tip: Option<&str>) -> Result<Compiled> {
+/// Parse a URDF document and compile the chain from its root to `tip` (`None`: the only leaf);
+/// collision meshes are read from `meshes` (`None`: not read, listed as unloaded).
+pub(crate) fn compile_str(xml: &str, tip: Option<&str>, meshes: Option<&MeshSource>) -> Result<Compiled> {
     check_xml_depth(xml)?;
     let robot = urdf_rs::read_from_string(xml)
         .map_err(|e| urdf_err(format!("cannot parse the URDF document: {e}")))?;
-    compile(&robot, tip)
+    compile(&robot, tip, meshes)
 }
 
 /// Compile a parsed URDF into the chain from its root link to `tip`.
-pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compiled> {
+pub(crate) fn compile(
+    robot: &urdf_rs::Robot,
+    tip: Option<&str>,
+    meshes: Option<&MeshSource>,
+) -> Result<Compiled> {
     if robot.links.is_empty() {
         return Err(urdf_err(format!("robot `{}` has no links", robot.name)));
     }
@@ -214,7 +220,7 @@ pub(crate) fn compile(robot: &urdf_rs::Robot, tip: Option<&str>) -> Result<Compi
     let path = tree.path(root, tip)?;
     // A cycle elsewhere in the document (beside the chain) is refused too.
     check_no_cycle(robot, &tree.parent_joint, root)?;
-    fold_chain(robot, &path, root, tip)
+    fold_chain(robot, &path, root, tip, meshes)
 }
 
 /// The links and joints of a URDF, checked to form a tree.
@@ -400,13 +406,19 @@ fn actuated(j: &urdf_rs::Joint, root: &str, tip: &str) -> Result<Option<Actuated
 /// (the root's frame before the first actuated joint; after actuated joint `i`, its moving
 /// z-aligned frame, in which the child link's frame is the transpose of the axis-alignment
 /// basis): the constant folded into the kinematics, and where the link's shapes sit.
-fn fold_chain(robot: &urdf_rs::Robot, path: &[&urdf_rs::Joint], root: &str, tip: &str) -> Result<Compiled> {
+fn fold_chain(
+    robot: &urdf_rs::Robot,
+    path: &[&urdf_rs::Joint],
+    root: &str,
+    tip: &str,
+    meshes: Option<&MeshSource>,
+) -> Result<Compiled> {
     let mut joints = Vec::new();
     let mut steps = Vec::new();
     let mut base: Option<Tf> = None;
     let mut pending: Tf = kin::IDENTITY;
-    let (mut shapes, mut mesh_links) = (Vec::new(), Vec::new());
-    add_link_shapes(robot, root, None, &pending, &mut shapes, &mut mesh_links)?;
+    let mut out = Shapes { meshes, shapes: Vec::new(), unloaded: Vec::new(), files: 0 };
+    out.add_link(robot, root, None, &pending)?;
     for j in path {
         let (xyz, rpy) = checked_origin(j)?;
         pending = kin::mul(&pending, &kin::origin(xyz, rpy));
@@ -422,7 +434,7 @@ fn fold_chain(robot: &urdf_rs::Robot, path: &[&urdf_rs::Joint], root: &str, tip:
             pending = kin::rotation_transpose(&a);
         }
         let segment = steps.len().checked_sub(1);
-        add_link_shapes(robot, &j.child.link, segment, &pending, &mut shapes, &mut mesh_links)?;
+        out.add_link(robot, &j.child.link, segment, &pending)?;
     }
     let Some(base) = base else {
         return Err(urdf_err(format!(
@@ -432,60 +444,103 @@ fn fold_chain(robot: &urdf_rs::Robot, path: &[&urdf_rs::Joint], root: &str, tip:
     if let Some(last) = steps.last_mut() {
         last.after = pending;
     }
-    mesh_links.dedup();
-
     Ok(Compiled {
         joints,
         base_link: root.to_string(),
         tip_link: tip.to_string(),
         kin: Kinematics::new(&base, &steps),
-        shapes,
-        mesh_links,
+        shapes: out.shapes,
+        unloaded: out.unloaded,
     })
 }
 
-/// The collision shapes (`<collision>` elements) of link `name`, placed at `frame` (the link's
-/// frame in its segment's: see [`super::LinkShape`]) into `out`; a link with a mesh goes into
-/// `mesh_links` (meshes are not used).
-fn add_link_shapes(
-    robot: &urdf_rs::Robot,
-    name: &str,
-    segment: Option<usize>,
-    frame: &Tf,
-    out: &mut Vec<LinkShape>,
-    mesh_links: &mut Vec<String>,
-) -> Result<()> {
-    let link = robot.links.iter().find(|l| l.name == name);
-    for c in link.map(|l| l.collision.as_slice()).unwrap_or_default() {
-        let Some(shape) = shape_of(name, &c.geometry)? else {
-            mesh_links.push(name.to_string());
-            continue;
-        };
-        let (xyz, rpy) = (c.origin.xyz.0, c.origin.rpy.0);
-        if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite() || v.abs() > MAX_LENGTH_M) {
-            return Err(urdf_err(format!(
-                "link `{name}`: a collision origin xyz = {xyz:?}, rpy = {rpy:?} is not finite or beyond +-{MAX_LENGTH_M:e}"
-            )));
-        }
-        out.push(LinkShape {
-            link: name.to_string(),
-            segment,
-            pose: kin::mul(frame, &kin::origin(xyz, rpy)),
-            shape,
-        });
-    }
-    Ok(())
+/// The collision shapes of the chain's links as they are gathered.
+struct Shapes<'m, 's> {
+    meshes: Option<&'m MeshSource<'s>>,
+    shapes: Vec<LinkShape>,
+    unloaded: Vec<UnloadedMesh>,
+    /// Mesh files read so far.
+    files: usize,
 }
 
-/// A URDF geometry as a collision primitive; `None` for a mesh (not used).
-fn shape_of(link: &str, g: &urdf_rs::Geometry) -> Result<Option<Shape>> {
+impl Shapes<'_, '_> {
+    /// The collision shapes (`<collision>` elements) of link `name`, placed at `frame` (the
+    /// link's frame in its segment's: see [`super::LinkShape`]); a mesh becomes its convex
+    /// parts, or, when it cannot be read, an error (or an entry of `unloaded`, as
+    /// `robot.missing_collision` says; always when there is no `MeshSource`).
+    fn add_link(
+        &mut self,
+        robot: &urdf_rs::Robot,
+        name: &str,
+        segment: Option<usize>,
+        frame: &Tf,
+    ) -> Result<()> {
+        let link = robot.links.iter().find(|l| l.name == name);
+        for c in link.map(|l| l.collision.as_slice()).unwrap_or_default() {
+            let (xyz, rpy) = (c.origin.xyz.0, c.origin.rpy.0);
+            if xyz.iter().chain(rpy.iter()).any(|v| !v.is_finite() || v.abs() > MAX_LENGTH_M) {
+                return Err(urdf_err(format!(
+                    "link `{name}`: a collision origin xyz = {xyz:?}, rpy = {rpy:?} is not finite or beyond +-{MAX_LENGTH_M:e}"
+                )));
+            }
+            let link_pose = kin::origin(xyz, rpy);
+            let pose = kin::mul(frame, &link_pose);
+            let shapes = match &c.geometry {
+                urdf_rs::Geometry::Mesh { filename, scale } => {
+                    let scale = scale.map_or([1.0; 3], |s| s.0);
+                    match self.mesh_shapes(name, filename, scale)? {
+                        Some(s) => s,
+                        None => continue,
+                    }
+                }
+                g => vec![shape_of(name, g)?],
+            };
+            for shape in shapes {
+                self.shapes.push(LinkShape { link: name.to_string(), segment, pose, link_pose, shape });
+            }
+        }
+        Ok(())
+    }
+
+    /// The convex parts of mesh `filename` of link `link`; `None` when it is not loaded and that
+    /// is allowed (recorded in `unloaded`).
+    fn mesh_shapes(&mut self, link: &str, filename: &str, scale: [f64; 3]) -> Result<Option<Vec<Shape>>> {
+        let Some(src) = self.meshes else {
+            let why = "the URDF was given as text, with no folder to read meshes from".to_string();
+            self.unloaded.push(UnloadedMesh { link: link.into(), file: filename.into(), reason: why });
+            return Ok(None);
+        };
+        self.files += 1;
+        if self.files > mesh::MAX_MESH_FILES {
+            return Err(urdf_err(format!(
+                "link `{link}`: more than {} collision mesh files on the chain",
+                mesh::MAX_MESH_FILES
+            )));
+        }
+        let loaded = src.load(filename).and_then(|parts| mesh::convex_parts(filename, &parts, scale));
+        match loaded {
+            Ok(parts) => Ok(Some(parts.into_iter().map(Shape::Convex).collect())),
+            Err(why) if src.options.missing == MissingCollision::Ignore => {
+                self.unloaded.push(UnloadedMesh { link: link.into(), file: filename.into(), reason: why });
+                Ok(None)
+            }
+            Err(why) => Err(urdf_err(format!(
+                "link `{link}`: collision mesh `{filename}` cannot be used: {why} \
+                 (robot.missing_collision = \"ignore\" goes on without it)"
+            ))),
+        }
+    }
+}
+
+/// A URDF geometry other than a mesh as a collision primitive.
+fn shape_of(link: &str, g: &urdf_rs::Geometry) -> Result<Shape> {
     let ok = |v: f64| v.is_finite() && v > 0.0 && v <= MAX_LENGTH_M;
     let bad = |what: &str| {
         urdf_err(format!(
             "link `{link}`: collision {what} must be finite, > 0 and at most {MAX_LENGTH_M:e} m"
         ))
     };
-    Ok(Some(match g {
+    Ok(match g {
         // A cylinder is taken as the capsule of its radius and length (caps added: a little
         // conservative at the ends).
         urdf_rs::Geometry::Cylinder { radius, length } | urdf_rs::Geometry::Capsule { radius, length } => {
@@ -506,6 +561,9 @@ fn shape_of(link: &str, g: &urdf_rs::Geometry) -> Result<Option<Shape>> {
             }
             Shape::Cuboid { half_extents_m: [size.0[0] / 2.0, size.0[1] / 2.0, size.0[2] / 2.0] }
         }
-        urdf_rs::Geometry::Mesh { .. } => return Ok(None),
-    }))
+        // Read by `Shapes::mesh_shapes`, never passed here.
+        urdf_rs::Geometry::Mesh { .. } => {
+            return Err(urdf_err(format!("link `{link}`: a mesh is not a primitive")))
+        }
+    })
 }

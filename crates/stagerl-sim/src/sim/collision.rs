@@ -10,13 +10,15 @@
 //! rigidly joined, and consecutive segments meet at a joint, where the shapes of real arms
 //! touch. The root's shapes are not tested against the floor (the arm stands on it).
 
+use std::sync::Arc;
+
 use parry3d::math::{Pose3, Rot3, Vec3};
 use parry3d::query::intersection_test;
 use parry3d::shape::{Ball, Capsule, Cuboid, Shape as ParryShape};
 use serde::{Deserialize, Serialize};
 
 use super::scene::Obstacle;
-use crate::robot::{Chain, Shape};
+use crate::robot::{Chain, ConvexPart, Shape};
 
 /// What the arm touched first in a check; `shape`s are indices into
 /// [`Chain::collision_shapes`] (see [`Contact::describe`] for the links' names).
@@ -61,6 +63,8 @@ enum Prim {
     Capsule(Capsule),
     Ball(Ball),
     Cuboid(Cuboid),
+    /// A mesh part's hull, shared.
+    Convex(Arc<ConvexPart>),
 }
 
 impl Prim {
@@ -73,6 +77,7 @@ impl Prim {
             Shape::Cuboid { half_extents_m: [x, y, z] } => {
                 Prim::Cuboid(Cuboid::new(Vec3::new(x as f32, y as f32, z as f32)))
             }
+            Shape::Convex(ref part) => Prim::Convex(part.clone()),
         }
     }
 
@@ -81,6 +86,7 @@ impl Prim {
             Prim::Capsule(c) => c,
             Prim::Ball(b) => b,
             Prim::Cuboid(c) => c,
+            Prim::Convex(p) => p.hull(),
         }
     }
 }
@@ -104,7 +110,16 @@ fn lowest_z(s: &Shape, m: &[f64; 12]) -> f64 {
         Shape::Capsule { radius_m, half_length_m } => z0 - half_length_m * zz.abs() - radius_m,
         Shape::Sphere { radius_m } => z0 - radius_m,
         Shape::Cuboid { half_extents_m: [x, y, z] } => z0 - x * zx.abs() - y * zy.abs() - z * zz.abs(),
+        Shape::Convex(ref part) => convex_lowest_z(part, m),
     }
+}
+
+/// [`lowest_z`] of a mesh part: its lowest hull vertex (out of line: the primitives' path stays
+/// as small as it was).
+#[inline(never)]
+fn convex_lowest_z(part: &ConvexPart, m: &[f64; 12]) -> f64 {
+    let (zx, zy, zz, z0) = (m[8], m[9], m[10], m[11]);
+    z0 + part.points_m.iter().map(|p| zx * p[0] + zy * p[1] + zz * p[2]).fold(f64::INFINITY, f64::min)
 }
 
 /// Whether two posed shapes overlap (parry supports every pair of our primitives).
@@ -112,7 +127,17 @@ fn overlap(p1: &Pose3, s1: &dyn ParryShape, p2: &Pose3, s2: &dyn ParryShape) -> 
     intersection_test(p1, s1, p2, s2).is_ok_and(|i| i.intersecting)
 }
 
-fn pose3(m: &[f64; 12]) -> Pose3 {
+/// The distance between two posed shapes (metres, f32 precision), negative by the penetration
+/// depth when they overlap; `NaN` for a pair parry does not support (none of ours).
+fn signed_distance(p1: &Pose3, s1: &dyn ParryShape, p2: &Pose3, s2: &dyn ParryShape) -> f64 {
+    match parry3d::query::contact(p1, s1, p2, s2, 0.0) {
+        Ok(Some(c)) if c.dist <= 0.0 => c.dist as f64,
+        Ok(_) => parry3d::query::distance(p1, s1, p2, s2).map_or(f64::NAN, |d| d.distance as f64),
+        Err(_) => f64::NAN,
+    }
+}
+
+pub(crate) fn pose3(m: &[f64; 12]) -> Pose3 {
     let r = parry3d::math::Mat3::from_cols(
         Vec3::new(m[0] as f32, m[4] as f32, m[8] as f32),
         Vec3::new(m[1] as f32, m[5] as f32, m[9] as f32),
@@ -171,7 +196,7 @@ impl ArmCollider {
                 index,
                 segment: s.segment.map_or(-1, |i| i as i64),
                 local: s.pose,
-                shape: s.shape,
+                shape: s.shape.clone(),
                 parry: Prim::of(&s.shape),
             })
             .collect();
@@ -193,6 +218,12 @@ impl ArmCollider {
             world: vec![[0.0; 12]; n],
             geo: vec![Geo::default(); n],
         }
+    }
+
+    /// The pairs of shapes (indices into [`Chain::collision_shapes`]) the self-collision check
+    /// tests: those of links two or more actuated joints apart.
+    pub fn self_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.pairs.iter().map(|&(a, b)| (self.shapes[a].index, self.shapes[b].index))
     }
 
     /// Shapes of the arm (0: nothing to collide).
@@ -265,7 +296,7 @@ impl ArmCollider {
         self.place(chain, q);
         if self.checks.floor {
             for (k, s) in self.shapes.iter().enumerate() {
-                if s.segment >= 0 && lowest_z(&s.shape, &self.world[k]) < 0.0 {
+                if s.segment >= 0 && self.below_floor(k) {
                     return Some(Contact::Floor { shape: s.index });
                 }
             }
@@ -286,8 +317,84 @@ impl ArmCollider {
         None
     }
 
+    /// Whether placed shape `k` reaches below z = 0: a mesh part only when its bounding sphere
+    /// does (a scan of its hull's vertices otherwise), a primitive in closed form.
+    #[inline(always)]
+    fn below_floor(&self, k: usize) -> bool {
+        match &self.shapes[k].shape {
+            Shape::Convex(_) => {
+                let g = &self.geo[k];
+                g.centre[2] - g.bound < 0.0 && lowest_z(&self.shapes[k].shape, &self.world[k]) < 0.0
+            }
+            s => lowest_z(s, &self.world[k]) < 0.0,
+        }
+    }
+
+    /// Every contact of the arm at joint values `q` (one per joint) into `out` (cleared first):
+    /// each moving shape below the floor, each pair of shapes that overlap, each shape in an
+    /// obstacle, as the checks say; and the clearance: the smallest signed distance (metres,
+    /// negative: the depth of a penetration) over what was checked (a moving shape's lowest
+    /// point above the floor, the self pairs, shape and obstacle), `None` if nothing was.
+    /// For tools and tests (it allocates for the contacts found); a step uses [`ArmCollider::check`].
+    pub fn contacts(&mut self, chain: &Chain, q: &[f64], out: &mut Vec<Contact>) -> Option<f64> {
+        out.clear();
+        if self.shapes.is_empty() {
+            return None;
+        }
+        self.place(chain, q);
+        let mut clearance: Option<f64> = None;
+        let mut seen = |d: f64| clearance = Some(clearance.map_or(d, |c: f64| c.min(d)));
+        if self.checks.floor {
+            for (k, s) in self.shapes.iter().enumerate().filter(|(_, s)| s.segment >= 0) {
+                let z = lowest_z(&s.shape, &self.world[k]);
+                seen(z);
+                if z < 0.0 {
+                    out.push(Contact::Floor { shape: s.index });
+                }
+            }
+        }
+        if self.checks.self_collision {
+            for &(a, b) in &self.pairs {
+                let d = self.distance_arm(a, b);
+                seen(d);
+                if self.overlap_arm(a, b) {
+                    out.push(Contact::SelfCollision {
+                        shape_a: self.shapes[a].index,
+                        shape_b: self.shapes[b].index,
+                    });
+                }
+            }
+        }
+        for (i, (pose, prim, _)) in self.obstacles.iter().enumerate() {
+            for (k, s) in self.shapes.iter().enumerate() {
+                let p = pose3(&self.world[k]);
+                seen(signed_distance(&p, s.parry.shape(), pose, prim.shape()));
+                if overlap(&p, s.parry.shape(), pose, prim.shape()) {
+                    out.push(Contact::Obstacle { shape: s.index, obstacle: i });
+                }
+            }
+        }
+        clearance
+    }
+
+    /// The signed distance between placed arm shapes `a` and `b` (metres; negative: depth).
+    fn distance_arm(&self, a: usize, b: usize) -> f64 {
+        let (ga, gb) = (&self.geo[a], &self.geo[b]);
+        if ga.round && gb.round {
+            return segment_segment_distance2(ga.a, ga.b, gb.a, gb.b).sqrt() - ga.radius - gb.radius;
+        }
+        signed_distance(
+            &pose3(&self.world[a]),
+            self.shapes[a].parry.shape(),
+            &pose3(&self.world[b]),
+            self.shapes[b].parry.shape(),
+        )
+    }
+
     /// Whether arm shapes `a` and `b` overlap: bounding spheres first, then the exact test
     /// (segments for capsules and spheres, parry for anything with a box).
+    // Inlined into `check` as it was when `check` was its only caller (a step's hot loop).
+    #[inline(always)]
     fn overlap_arm(&self, a: usize, b: usize) -> bool {
         let (ga, gb) = (&self.geo[a], &self.geo[b]);
         if !ga.bounds_overlap(gb) {
@@ -318,6 +425,7 @@ struct Geo {
 }
 
 impl Geo {
+    #[inline(always)]
     fn of(s: &Shape, m: &[f64; 12]) -> Geo {
         let c = [m[3], m[7], m[11]];
         match *s {
@@ -338,9 +446,18 @@ impl Geo {
             Shape::Cuboid { half_extents_m: [x, y, z] } => {
                 Geo { round: false, centre: c, bound: (x * x + y * y + z * z).sqrt(), ..Geo::default() }
             }
+            Shape::Convex(ref part) => Geo::of_convex(part, m),
         }
     }
 
+    /// [`Geo::of`] a mesh part: its bounding sphere placed (out of line, as [`convex_lowest_z`]).
+    #[inline(never)]
+    fn of_convex(part: &ConvexPart, m: &[f64; 12]) -> Geo {
+        let l = part.centre_m;
+        let centre =
+            [0, 1, 2].map(|r| m[4 * r] * l[0] + m[4 * r + 1] * l[1] + m[4 * r + 2] * l[2] + m[4 * r + 3]);
+        Geo { round: false, centre, bound: part.radius_m, ..Geo::default() }
+    }
     fn bounds_overlap(&self, o: &Geo) -> bool {
         let d = [self.centre[0] - o.centre[0], self.centre[1] - o.centre[1], self.centre[2] - o.centre[2]];
         d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= (self.bound + o.bound).powi(2)
@@ -400,4 +517,4 @@ pub(crate) fn segment_segment_distance2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3]
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

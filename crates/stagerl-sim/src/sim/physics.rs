@@ -35,7 +35,7 @@ use std::path::Path;
 use rapier3d::prelude::*;
 use rapier3d_urdf::{urdf_rs, UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot};
 
-use crate::robot::{Chain, JointKind};
+use crate::robot::{Chain, JointKind, Shape};
 use crate::sim::scene::{Obstacle, ObstacleShape};
 use crate::{Error, Result};
 
@@ -279,8 +279,10 @@ impl DynamicArm {
                 .active_hooks(ActiveHooks::FILTER_CONTACT_PAIRS),
             ..UrdfLoaderOptions::default()
         };
+        let blueprint = options.collider_blueprint.clone();
         let (mut robot, urdf) = UrdfRobot::from_str(urdf_xml, options, Path::new("."))
             .map_err(|e| Error::Urdf(format!("the rapier URDF loader failed: {e}")))?;
+        add_mesh_colliders(&mut robot, &urdf, chain, &blueprint);
         check_inertials(&urdf, chain)?;
         let joint_ids = loader_joints(&robot, &urdf, chain)?;
         for (k, &ji) in joint_ids.iter().enumerate() {
@@ -544,6 +546,9 @@ impl FarPairs {
                 Some(Bound::Capsule { a: Vector::ZERO, b: Vector::ZERO, radius: b.radius })
             } else if let Some(b) = shape.as_cuboid() {
                 Some(Bound::Capsule { a: Vector::ZERO, b: Vector::ZERO, radius: b.half_extents.length() })
+            } else if let Some(p) = shape.as_convex_polyhedron() {
+                let s = p.local_bounding_sphere();
+                Some(Bound::Capsule { a: s.center, b: s.center, radius: s.radius })
             } else {
                 shape.as_halfspace().map(|hs| Bound::HalfSpace { normal: hs.normal })
             };
@@ -633,6 +638,28 @@ fn params(dt_s: f64) -> IntegrationParameters {
         // prediction distance, as before.
         max_ccd_substeps: 0,
         ..IntegrationParameters::default()
+    }
+}
+
+/// The chain's mesh parts (which the loader, built without its mesh features, leaves out) as
+/// convex colliders of their links, made from `blueprint` as the loader makes the others.
+fn add_mesh_colliders(
+    robot: &mut UrdfRobot,
+    urdf: &urdf_rs::Robot,
+    chain: &Chain,
+    blueprint: &ColliderBuilder,
+) {
+    for s in chain.collision_shapes() {
+        let Shape::Convex(part) = &s.shape else { continue };
+        let link = robot
+            .links
+            .iter_mut()
+            .find(|l| urdf.links.get(l.urdf_link_index).is_some_and(|u| u.name == s.link));
+        let Some(link) = link else { continue };
+        let mut builder = blueprint.clone();
+        builder.shape = SharedShape::new(part.hull().clone());
+        let collider = builder.position(crate::sim::collision::pose3(&s.link_pose)).build();
+        link.colliders.push(rapier3d_urdf::UrdfCollider { collider, visual: None });
     }
 }
 

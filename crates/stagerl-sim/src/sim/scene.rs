@@ -145,6 +145,8 @@ impl Obstacle {
             Shape::Sphere { radius_m } => [radius_m; 3],
             Shape::Cuboid { half_extents_m } => half_extents_m,
             Shape::Capsule { radius_m, half_length_m } => [radius_m, radius_m, half_length_m + radius_m],
+            // Obstacles are spheres and boxes; a mesh part's bounding sphere otherwise.
+            Shape::Convex(part) => [part.radius_m; 3],
         }
     }
 

@@ -220,7 +220,7 @@ pub fn check_task_for_arm(chain: &Chain, task: &ResolvedTask) -> Result<()> {
             "\"terminate\"",
             format!(
                 "\"record\" for this arm: no link of `{}` to `{}` has a collision shape (box, \
-                 sphere or cylinder), so no contact can end an episode",
+                 sphere, cylinder or loaded mesh), so no contact can end an episode",
                 chain.base_link(),
                 chain.tip_link()
             ),
@@ -522,6 +522,12 @@ impl ReachEnv {
     /// The episode has ended.
     pub fn is_done(&self) -> bool {
         self.done
+    }
+    /// Whether contacts are looked for at all: the arm has collision shapes. When not,
+    /// [`ReachEnv::collision_steps`] is 0 without meaning, and episodes and evaluations record
+    /// no collision count ("not checked").
+    pub fn collisions_checked(&self) -> bool {
+        !self.chain.collision_shapes().is_empty()
     }
     /// The arm.
     pub fn chain(&self) -> &Arc<Chain> {

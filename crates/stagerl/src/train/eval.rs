@@ -179,7 +179,7 @@ fn run_trials(
             start_distance_m: start,
             final_distance_m: env.distance(),
             target: [target.x, target.y, target.z],
-            collision_steps: Some(env.collision_steps()),
+            collision_steps: env.collisions_checked().then(|| env.collision_steps()),
         });
     }
     Ok(records)

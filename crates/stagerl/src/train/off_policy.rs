@@ -198,7 +198,7 @@ impl Collector for OffPolicyCollector {
             steps: self.env.steps(),
             success: last.reached,
             final_distance_m: f64::from_bits(last.final_distance_m_bits),
-            collision_steps: Some(self.env.collision_steps()),
+            collision_steps: self.env.collisions_checked().then(|| self.env.collision_steps()),
         }))
     }
 

@@ -53,6 +53,8 @@ pub(super) struct OnPolicyCollector {
     episode_reward: Vec<f64>,
     episode_steps: Vec<u32>,
     episode_collisions: Vec<u32>,
+    /// The arm has collision shapes: contacts are counted (else episodes record none).
+    collisions_checked: bool,
     ended: VecDeque<EpisodeEnd>,
     gamma: f64,
     anneal_lr: bool,
@@ -84,6 +86,7 @@ impl OnPolicyCollector {
             episode_reward: vec![0.0; n],
             episode_steps: vec![0; n],
             episode_collisions: vec![0; n],
+            collisions_checked: !run.chain().collision_shapes().is_empty(),
             ended: VecDeque::new(),
             gamma: cfg.agent.gamma,
             anneal_lr: p.anneal_lr,
@@ -129,7 +132,7 @@ impl OnPolicyCollector {
                     steps: self.episode_steps[i],
                     success: self.vec.last_steps()[i].reached(),
                     final_distance_m: self.vec.last_steps()[i].terms.distance,
-                    collision_steps: Some(self.episode_collisions[i]),
+                    collision_steps: self.collisions_checked.then_some(self.episode_collisions[i]),
                 });
                 self.episode_reward[i] = 0.0;
                 self.episode_steps[i] = 0;

@@ -162,3 +162,135 @@ fn segment_distance_closed_form_matches_the_search() {
         assert!(got <= want + 1e-12 && want - got < 1.5e-2, "case {case}: {got} vs {want}");
     }
 }
+
+/// A fresh temporary folder holding `cube.obj`, the axis-aligned cube of side `side` centred at
+/// the origin; the folder's path.
+pub(crate) fn cube_dir(name: &str, side: f64) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("stagerl-collision-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let h = side / 2.0;
+    let mut obj = String::new();
+    for i in 0..8 {
+        let p = [0, 1, 2].map(|k| if i >> k & 1 == 1 { h } else { -h });
+        obj.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+    }
+    for f in [[1, 2, 4, 3], [5, 7, 8, 6], [1, 5, 6, 2], [3, 4, 8, 7], [1, 3, 7, 5], [2, 6, 8, 4]] {
+        obj.push_str(&format!("f {} {} {} {}\n", f[0], f[1], f[2], f[3]));
+    }
+    std::fs::write(d.join(format!("cube{side}.obj")), obj).unwrap();
+    d
+}
+
+/// One revolute joint about y at height 0.3 m; its link is a 0.1 m cube mesh whose centre is
+/// 0.3 m out along the link's x axis.
+pub(crate) fn swing_arm(name: &str) -> Chain {
+    let d = cube_dir(name, 0.1);
+    let urdf = r#"<robot name="swing">
+  <link name="base"/>
+  <link name="arm">
+    <inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0.3 0 0"/><geometry><mesh filename="cube0.1.obj"/></geometry></collision>
+  </link>
+  <joint name="swing" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 0.3"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3" velocity="2" effort="50"/></joint>
+</robot>"#;
+    std::fs::write(d.join("swing.urdf"), urdf).unwrap();
+    Chain::from_urdf_file(&d.join("swing.urdf"), None).unwrap()
+}
+
+/// A mesh cube swung about y: it touches the floor exactly when its lowest corner, in closed
+/// form `0.3 - 0.3 sin(t) - 0.05 (|cos t| + |sin t|)`, is below z = 0; the clearance is that
+/// height (outside a 1 mm band: parry is f32).
+#[test]
+fn a_mesh_link_meets_the_floor_where_its_lowest_corner_does() {
+    let chain = swing_arm("floor");
+    assert!(matches!(chain.collision_shapes()[0].shape, Shape::Convex(_)));
+    let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
+    let (mut hits, mut clear, mut all) = (0, 0, Vec::new());
+    for i in 0..=600 {
+        let t = -3.0 + 6.0 * i as f64 / 600.0;
+        let lowest = 0.3 - 0.3 * t.sin() - 0.05 * (t.cos().abs() + t.sin().abs());
+        let clearance = c.contacts(&chain, &[t], &mut all).unwrap();
+        // The hull's vertices are f32.
+        assert!((clearance - lowest).abs() < 1e-6, "t = {t}: {clearance} vs {lowest}");
+        if lowest.abs() < 1e-3 {
+            continue;
+        }
+        let got = c.check(&chain, &[t]);
+        assert_eq!(got.is_some(), lowest < 0.0, "t = {t}: {got:?}, lowest corner at {lowest} m");
+        assert_eq!(all.len(), usize::from(lowest < 0.0));
+        if lowest < 0.0 {
+            assert_eq!(got, Some(Contact::Floor { shape: 0 }));
+            hits += 1;
+        } else {
+            clear += 1;
+        }
+    }
+    assert!(hits > 50 && clear > 50, "{hits} {clear}");
+}
+
+/// A 0.1 m mesh cube on a prismatic joint along z above a 0.2 m mesh cube at the base: the
+/// links overlap exactly when the gap `0.35 + d` (d the joint's value) is negative, the floor
+/// is touched when `0.45 + d` is; the clearance is `0.35 + d` (the penetration depth when
+/// negative), whatever the turn of the first joint about z.
+#[test]
+fn mesh_links_collide_with_each_other_as_the_gap_between_them_says() {
+    let d = cube_dir("self", 0.2);
+    let small = cube_dir("self-small", 0.1);
+    std::fs::copy(small.join("cube0.1.obj"), d.join("cube0.1.obj")).unwrap();
+    let urdf = r#"<robot name="lift">
+  <link name="base"><collision><geometry><mesh filename="cube0.2.obj"/></geometry></collision></link>
+  <link name="turn"/>
+  <link name="lift"><collision><geometry><mesh filename="package://parts/cube0.1.obj"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="turn"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" velocity="1"/></joint>
+  <joint name="j2" type="prismatic"><parent link="turn"/><child link="lift"/><origin xyz="0 0 0.5"/>
+    <axis xyz="0 0 1"/><limit lower="-0.6" upper="0.2" velocity="1"/></joint>
+</robot>"#;
+    std::fs::write(d.join("lift.urdf"), urdf).unwrap();
+    // `package://parts/...` through robot.package_paths: a folder holding the folder `parts`.
+    std::fs::create_dir_all(d.join("pkgs/parts")).unwrap();
+    std::fs::copy(small.join("cube0.1.obj"), d.join("pkgs/parts/cube0.1.obj")).unwrap();
+    let opts = crate::robot::MeshOptions { package_paths: vec![d.join("pkgs")], ..Default::default() };
+    let chain = Chain::from_urdf_file_with(&d.join("lift.urdf"), None, &opts).unwrap();
+    assert_eq!(chain.collision_shapes().len(), 2);
+    let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
+    let mut rng = Rng::new(3);
+    let mut all = Vec::new();
+    let (mut overlapping, mut apart) = (0, 0);
+    for i in 0..=340 {
+        let lift = -0.48 + 0.68 * i as f64 / 340.0;
+        let q = [rng.uniform_range(-3.0, 3.0), lift];
+        let gap = 0.35 + lift;
+        let clearance = c.contacts(&chain, &q, &mut all).unwrap();
+        assert!((clearance - gap).abs() < 2e-5, "{q:?}: clearance {clearance}, gap {gap}");
+        if gap.abs() < 1e-3 || (0.45 + lift).abs() < 1e-3 {
+            continue;
+        }
+        let expected_self = gap < 0.0;
+        let on_floor = 0.45 + lift < 0.0;
+        assert_eq!(
+            all.contains(&Contact::SelfCollision { shape_a: 0, shape_b: 1 }),
+            expected_self,
+            "{q:?}: {all:?}"
+        );
+        assert_eq!(all.contains(&Contact::Floor { shape: 1 }), on_floor, "{q:?}: {all:?}");
+        assert_eq!(all.len(), usize::from(expected_self) + usize::from(on_floor));
+        let first = c.check(&chain, &q);
+        match (on_floor, expected_self) {
+            (true, _) => assert_eq!(first, Some(Contact::Floor { shape: 1 })),
+            (false, true) => assert_eq!(first, Some(Contact::SelfCollision { shape_a: 0, shape_b: 1 })),
+            (false, false) => assert_eq!(first, None),
+        }
+        if expected_self {
+            overlapping += 1;
+        } else {
+            apart += 1;
+        }
+    }
+    assert!(overlapping > 20 && apart > 20, "{overlapping} {apart}");
+    // The root's shapes are not tested against the floor; with no checks there is no clearance.
+    let mut none = ArmCollider::new(&chain, Checks { floor: false, self_collision: false });
+    assert_eq!(none.contacts(&chain, &[0.0, 0.0], &mut all), None);
+}

@@ -437,3 +437,39 @@ fn timing() {
     }
     eprintln!("building the world: {:.2} us (thread CPU time)", (thread_cpu_s() - t0) * 1e3);
 }
+
+/// A mesh link is a convex collider of its link: swung down at 1 rad/s onto the floor, the 0.1 m
+/// cube of `swing_arm` stops where its lowest corner meets the floor (the angle t* of
+/// `0.3 - 0.3 sin t - 0.05 (cos t + sin t) = 0`, about 0.871 rad); without the floor it swings on.
+#[test]
+fn a_mesh_link_is_stopped_by_the_floor() {
+    let chain = crate::sim::collision::tests::swing_arm("dynamic");
+    let t_star = {
+        let f = |t: f64| 0.3 - 0.3 * t.sin() - 0.05 * (t.cos() + t.sin());
+        let (mut lo, mut hi) = (0.0, 1.5);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if f(mid) > 0.0 {
+                lo = mid
+            } else {
+                hi = mid
+            }
+        }
+        lo
+    };
+    assert!((t_star - 0.871).abs() < 0.002, "{t_star}");
+    for floor in [true, false] {
+        let mut arm = DynamicArm::new(chain.urdf_source(), &chain, 0.01, &[], floor).unwrap();
+        let convex =
+            arm.world.colliders.iter().filter(|(_, c)| c.shape().as_convex_polyhedron().is_some()).count();
+        assert_eq!(convex, 1);
+        let traj = run(&mut arm, &[0.0], &[1.0], 150);
+        let end = traj.last().unwrap()[0];
+        if floor {
+            assert!((end - t_star).abs() < 0.02, "stopped at {end}, the floor is met at {t_star}");
+            assert!(arm.in_contact());
+        } else {
+            assert!(end > 1.4, "{end}");
+        }
+    }
+}
