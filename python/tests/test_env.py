@@ -248,3 +248,23 @@ def test_bad_actions():
     with pytest.raises(ValueError, match=r"action\[2\]"):
         env.step(np.array([0, 0, np.nan, 0, 0, 0], np.float32))
     assert env.step(np.zeros(6))[3] is False  # float64 actions are converted
+
+
+def test_the_module_prefixed_id_makes_the_env_in_a_forkserver_worker():
+    import multiprocessing
+
+    from env_worker import make_in_child  # a module that does not import stagerl
+
+    ctx = multiprocessing.get_context("forkserver")
+    results = {}
+    for env_id in ["stagerl:stagerl/Reach-v0", "stagerl/Reach-v0"]:
+        q = ctx.Queue()
+        p = ctx.Process(target=make_in_child, args=(env_id, q))
+        p.start()
+        results[env_id] = q.get(timeout=120)
+        p.join(timeout=60)
+    assert results["stagerl:stagerl/Reach-v0"][0] == "ok", results
+    assert results["stagerl:stagerl/Reach-v0"][1] == (stagerl.ReachEnv().observation_space.shape[0],)
+    # Without the module prefix a fresh interpreter has not registered the id (Gymnasium 1.x loads
+    # no plugins): docs/python.md says to use the prefixed id with SubprocVecEnv and other pools.
+    assert results["stagerl/Reach-v0"][0] == "error" and "stagerl" in results["stagerl/Reach-v0"][1], results

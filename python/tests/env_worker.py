@@ -1,0 +1,13 @@
+"""A worker for test_env's process-pool test: it imports Gymnasium only, never stagerl, as a
+forkserver or spawn worker of Stable-Baselines3's SubprocVecEnv does."""
+
+
+def make_in_child(env_id, queue):
+    try:
+        import gymnasium as gym
+
+        env = gym.make(env_id)
+        obs, _ = env.reset(seed=0)
+        queue.put(("ok", obs.shape))
+    except Exception as e:  # the plain id is unknown in a fresh interpreter
+        queue.put(("error", f"{type(e).__name__}: {e}"))
