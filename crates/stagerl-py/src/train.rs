@@ -111,6 +111,53 @@ fn report<'py>(
     Ok(d)
 }
 
+/// What the training thread keeps between episodes to report and to stop: the last 100
+/// episodes, when it last looked for Ctrl-C, and why it asked the loop to stop (Ctrl-C or
+/// another signal Python raised, the callback raised, or it returned False).
+struct Watch {
+    callback: Option<Py<PyAny>>,
+    every: u64,
+    flag: AtomicBool,
+    recent: VecDeque<(f64, bool)>,
+    last_poll: Instant,
+    signal: Option<PyErr>,
+    callback_error: Option<PyErr>,
+    by_callback: bool,
+}
+
+impl Watch {
+    fn on_episode(&mut self, p: &Progress<'_>) {
+        self.recent.push_back((p.record.reward, p.record.success));
+        if self.recent.len() > 100 {
+            self.recent.pop_front();
+        }
+        let due = p.eval.is_some() || (self.every > 0 && p.record.episode.is_multiple_of(self.every));
+        if !due && self.last_poll.elapsed() < SIGNAL_POLL {
+            return;
+        }
+        self.last_poll = Instant::now();
+        Python::attach(|py| {
+            if let Err(e) = py.check_signals() {
+                self.signal = Some(e);
+                self.flag.store(true, Ordering::SeqCst);
+                return;
+            }
+            let Some(cb) = self.callback.as_ref().filter(|_| due) else { return };
+            match report(py, p, &self.recent).and_then(|d| cb.call1(py, (d,))) {
+                Ok(v) if v.bind(py).is(pyo3::types::PyBool::new(py, false)) => {
+                    self.by_callback = true;
+                    self.flag.store(true, Ordering::SeqCst);
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    self.callback_error = Some(e);
+                    self.flag.store(true, Ordering::SeqCst);
+                }
+            }
+        });
+    }
+}
+
 /// Train (or resume) the run in `out`; returns `(run directory, how it ended)`: "finished",
 /// "already finished" or "stopped by the callback".
 #[pyfunction]
@@ -137,127 +184,88 @@ pub fn train(
         return Err(bad_arg("threads", threads, "an integer from 1 to 64"));
     }
     if closing_trials > stagerl::config::MAX_EVAL_TRIALS {
-        return Err(bad_arg(
-            "eval_trials",
-            closing_trials,
-            &format!("0 to {}", stagerl::config::MAX_EVAL_TRIALS),
-        ));
+        let allowed = format!("0 to {}", stagerl::config::MAX_EVAL_TRIALS);
+        return Err(bad_arg("eval_trials", closing_trials, &allowed));
     }
     let dir = RunDir::new(&out);
     let cfg = if resume {
         if json.is_some() || path.is_some() || algo.is_some() || reward.is_some() || seed.is_some() {
-            return Err(bad_arg(
-                "resume",
-                "True",
-                "without config or settings: a resumed run keeps its own config",
-            ));
+            let allowed = "without config or settings: a resumed run keeps its own config";
+            return Err(bad_arg("resume", "True", allowed));
         }
         dir.load_config().map_err(to_py)?
     } else {
         config(json, path, algo, reward, seed, episodes, env_steps, eval_every_episodes)?
     };
     let run = if resume { None } else { Some(cfg.resolve().map_err(to_py)?) };
+    let taken = "a directory without a run (its config.toml exists): choose another, or pass resume=True to continue it";
     if !resume && dir.holds_run() {
         stagerl::run::lock::DirLock::check_free(&out).map_err(to_py)?;
-        return Err(bad_arg(
-            "out",
-            out.display(),
-            "a directory without a run (its config.toml exists): choose another, or pass resume=True to continue it",
-        ));
+        return Err(bad_arg("out", out.display(), taken));
     }
     let pool = stagerl::base::par::Pool::new(threads as usize).map_err(to_py)?;
-    // Why the loop was asked to stop: Ctrl-C (or another signal Python raised), the callback
-    // raised, or it returned False.
-    let flag = AtomicBool::new(false);
-    let mut signal: Option<PyErr> = None;
-    let mut callback_error: Option<PyErr> = None;
-    let mut by_callback = false;
-    let mut recent: VecDeque<(f64, bool)> = VecDeque::with_capacity(101);
-    let mut last_poll = Instant::now();
-    let every = callback_every_episodes;
+    let mut watch = Watch {
+        callback,
+        every: callback_every_episodes,
+        flag: AtomicBool::new(false),
+        recent: VecDeque::with_capacity(101),
+        last_poll: Instant::now(),
+        signal: None,
+        callback_error: None,
+        by_callback: false,
+    };
     let outcome = py.detach(|| {
         guard("train", || {
             let _lock = stagerl::run::lock::DirLock::run(&out).map_err(to_py)?;
             if !resume && dir.holds_run() {
-                return Err(bad_arg(
-                    "out",
-                    out.display(),
-                    "a directory without a run (another process started one)",
-                ));
+                return Err(bad_arg("out", out.display(), taken));
             }
-            let opts = TrainOptions { stop: Some(&flag) };
-            let mut on_episode = |p: &Progress<'_>| {
-                recent.push_back((p.record.reward, p.record.success));
-                if recent.len() > 100 {
-                    recent.pop_front();
-                }
-                let due = p.eval.is_some() || (every > 0 && p.record.episode.is_multiple_of(every));
-                if !due && last_poll.elapsed() < SIGNAL_POLL {
-                    return;
-                }
-                last_poll = Instant::now();
-                Python::attach(|py| {
-                    if let Err(e) = py.check_signals() {
-                        signal = Some(e);
-                        flag.store(true, Ordering::SeqCst);
-                        return;
-                    }
-                    let Some(cb) = callback.as_ref().filter(|_| due) else { return };
-                    let answer = report(py, p, &recent).and_then(|d| cb.call1(py, (d,)));
-                    match answer {
-                        Ok(v) if v.bind(py).is(pyo3::types::PyBool::new(py, false)) => {
-                            by_callback = true;
-                            flag.store(true, Ordering::SeqCst);
-                        }
-                        Ok(_) => {}
-                        Err(e) => {
-                            callback_error = Some(e);
-                            flag.store(true, Ordering::SeqCst);
-                        }
-                    }
-                });
-            };
             if run.is_some() {
                 dir.ensure_writable().map_err(to_py)?;
             }
-            let trained = stagerl::base::par::install(Some(&pool), || match &run {
-                Some(run) => trainer::train_with(run, &out, &opts, &mut on_episode).map(|_| "finished"),
-                None => trainer::resume(&out, &opts, &mut on_episode).map(|r| match r {
-                    Resumed::Finished(_) => "finished",
-                    Resumed::AlreadyFinished(_) => "already finished",
-                }),
-            });
-            match trained {
-                Err(stagerl::Error::Interrupted { .. }) | Err(stagerl::Error::Stopped { .. }) => {
-                    Ok("stopped".to_string())
-                }
-                Err(e) => Err(to_py(e)),
-                Ok(how) => {
-                    let unevaluated = final_eval::recorded(&out, trainer::eval::DEFAULT_EVAL_SEED).is_none();
-                    if closing_trials > 0 && (how == "finished" || unevaluated) {
-                        let stop = AtomicBool::new(false);
-                        let seed = trainer::eval::DEFAULT_EVAL_SEED;
-                        final_eval::run(&out, &cfg, closing_trials, seed, Some(&stop)).map_err(to_py)?;
+            let flag = AtomicBool::new(false);
+            let trained = {
+                let opts = TrainOptions { stop: Some(&flag) };
+                let mut on_episode = |p: &Progress<'_>| {
+                    watch.on_episode(p);
+                    if watch.flag.load(Ordering::SeqCst) {
+                        flag.store(true, Ordering::SeqCst);
                     }
-                    Ok(how.to_string())
-                }
+                };
+                stagerl::base::par::install(Some(&pool), || match &run {
+                    Some(run) => trainer::train_with(run, &out, &opts, &mut on_episode).map(|_| "finished"),
+                    None => trainer::resume(&out, &opts, &mut on_episode).map(|r| match r {
+                        Resumed::Finished(_) => "finished",
+                        Resumed::AlreadyFinished(_) => "already finished",
+                    }),
+                })
+            };
+            match trained {
+                Err(stagerl::Error::Interrupted { .. } | stagerl::Error::Stopped { .. }) => Ok("stopped"),
+                Err(e) => Err(to_py(e)),
+                Ok(how) => closing_evaluation(&out, &cfg, closing_trials, how),
             }
         })
     })?;
-    if let Some(e) = callback_error {
+    if let Some(e) = watch.callback_error.take().or(watch.signal.take()) {
         return Err(e);
     }
-    if let Some(e) = signal {
-        return Err(e);
-    }
-    if outcome == "stopped" {
-        if by_callback {
-            return Ok((out.display().to_string(), "stopped by the callback".into()));
-        }
-        return Err(PyKeyboardInterrupt::new_err(format!(
+    match outcome {
+        "stopped" if watch.by_callback => Ok((out.display().to_string(), "stopped by the callback".into())),
+        "stopped" => Err(PyKeyboardInterrupt::new_err(format!(
             "training stopped; the run is saved in {}: continue with stagerl.train(out=..., resume=True)",
             out.display()
-        )));
+        ))),
+        how => Ok((out.display().to_string(), how.into())),
     }
-    Ok((out.display().to_string(), outcome))
+}
+
+/// The CLI's closing evaluation of a run that finished now (or before, without one).
+fn closing_evaluation(out: &Path, cfg: &Config, trials: u32, how: &'static str) -> PyResult<&'static str> {
+    let seed = trainer::eval::DEFAULT_EVAL_SEED;
+    if trials > 0 && (how == "finished" || final_eval::recorded(out, seed).is_none()) {
+        let stop = AtomicBool::new(false);
+        final_eval::run(out, cfg, trials, seed, Some(&stop)).map_err(to_py)?;
+    }
+    Ok(how)
 }
