@@ -13,6 +13,7 @@ mod report_cli;
 mod reproduce;
 mod resume;
 mod sigterm_resume;
+mod special_files;
 mod stale_results;
 mod stops;
 mod tensorboard_resume;

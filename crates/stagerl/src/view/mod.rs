@@ -40,10 +40,29 @@ pub struct ViewTrajectory {
     pub reached: bool,
     pub steps: u32,
     pub final_distance: f64,
-    /// Per row of the plan, the arm's skeleton: the joint-frame origins then the tip (metres).
+    /// Rows of the plan per frame: 1, or more for a plan of over [`MAX_FRAMES`] rows, of which
+    /// every `stride`-th row is kept (and the last).
+    pub stride: usize,
+    /// Per kept row of the plan, the arm's skeleton: the joint-frame origins then the tip (metres).
     pub frames: Vec<Vec<[f64; 3]>>,
-    /// Distance to the target per row, metres.
+    /// Distance to the target per kept row, metres.
     pub distance: Vec<f64>,
+}
+
+/// Most frames a trajectory of a view keeps (a longer plan is shown every `stride`-th row): what
+/// a view holds stays bounded whatever `--max-steps` a plan ran with (500 trajectories of 8
+/// joint frames: about 100 MB at most, where every row of 500 plans of 10^6 steps would be
+/// hundreds of GB).
+pub const MAX_FRAMES: usize = 1000;
+
+/// The rows of a plan of `rows` rows a view keeps: every `stride`-th, and the last.
+fn kept_rows(rows: usize) -> (usize, Vec<usize>) {
+    let stride = rows.div_ceil(MAX_FRAMES).max(1);
+    let mut kept: Vec<usize> = (0..rows).step_by(stride).collect();
+    if rows > 0 && kept.last() != Some(&(rows - 1)) {
+        kept.push(rows - 1);
+    }
+    (stride, kept)
 }
 
 /// What a view shows (serialised into the page).
@@ -95,15 +114,20 @@ impl View {
                 "a view holds at most {MAX_TRAJECTORIES} trajectories; `{label}` would be one more"
             )));
         }
-        let frames = plan.q.chunks_exact(plan.dof).map(|q| chain.joint_origins(q)).collect::<Result<_>>()?;
+        let (stride, kept) = kept_rows(plan.rows());
+        let frames = kept
+            .iter()
+            .map(|&k| chain.joint_origins(&plan.q[k * plan.dof..(k + 1) * plan.dof]))
+            .collect::<Result<_>>()?;
         self.trajectories.push(ViewTrajectory {
             label: label.into(),
             target,
             reached: plan.summary.reached,
             steps: plan.summary.steps,
             final_distance: plan.summary.final_distance,
+            stride,
             frames,
-            distance: plan.distance.clone(),
+            distance: kept.iter().map(|&k| plan.distance[k]).collect(),
         });
         Ok(())
     }
