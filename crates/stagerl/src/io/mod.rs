@@ -146,6 +146,27 @@ pub fn read_regular(path: &Path, max_bytes: u64, what: &str) -> Result<Vec<u8>> 
     Ok(bytes)
 }
 
+/// An error unless `path` (symbolic links followed) is a regular file or does not exist: a
+/// FIFO, a device (`/dev/full`, `/dev/stdout`), a socket or a directory is no place for
+/// [`write_new`]'s output. Looks at the type only (never opens `path`): call it before the work
+/// whose output goes there.
+pub fn check_output_kind(path: &Path) -> Result<()> {
+    match fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(Error::io(path, e)),
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(m) if m.is_dir() => {
+            Err(Error::InvalidInput(format!("{} is a directory, not a file", path.display())))
+        }
+        Ok(m) => Err(Error::InvalidInput(format!(
+            "{} is {}, not a regular file: the output is written to a file beside it and renamed \
+             over it; give the path of a regular file (then copy it where it should go)",
+            path.display(),
+            file_kind(&m)
+        ))),
+    }
+}
+
 /// Write `bytes` to `path` atomically ([`write_atomic`]) unless `path` already holds them; a
 /// file with other contents is replaced only with `force` (never silently).
 ///
@@ -155,20 +176,12 @@ pub fn read_regular(path: &Path, max_bytes: u64, what: &str) -> Result<Vec<u8>> 
 /// file is compared only when it has the very size of `bytes`. Temporary files that killed
 /// writers of `path` left beside it ([`remove_dead_temps`]) are removed first.
 pub fn write_new(path: &Path, bytes: &[u8], force: bool) -> Result<Written> {
+    check_output_kind(path)?;
     let written = match fs::metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Written::New,
         Err(e) => return Err(Error::io(path, e)),
-        Ok(m) if m.is_dir() => {
-            return Err(Error::InvalidInput(format!("{} is a directory, not a file", path.display())))
-        }
-        Ok(m) if !m.is_file() => {
-            return Err(Error::InvalidInput(format!(
-                "{} is {}, not a regular file: the output is written to a file beside it and renamed \
-                 over it; give the path of a regular file (then copy it where it should go)",
-                path.display(),
-                file_kind(&m)
-            )))
-        }
+        // Replaced by a FIFO or a device since the check: refused as it was.
+        Ok(m) if !m.is_file() => return check_output_kind(path).map(|()| Written::New),
         Ok(m)
             if m.len() == bytes.len() as u64
                 && read_regular(path, m.len(), "output").is_ok_and(|old| old == bytes) =>
@@ -313,6 +326,25 @@ mod tests {
         assert_eq!(fs::read(&p).unwrap(), b"two");
         let e = write_new(&dir, b"x", true).unwrap_err().to_string();
         assert!(e.contains("is a directory"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn devices_are_neither_read_nor_written() {
+        let e = read_regular(Path::new("/dev/zero"), 1 << 20, "checkpoint").unwrap_err().to_string();
+        assert!(e.contains("/dev/zero is a character device; a checkpoint must be a regular file"), "{e}");
+        for out in ["/dev/full", "/dev/null"] {
+            let e = write_new(Path::new(out), b"x", true).unwrap_err().to_string();
+            assert!(e.contains(&format!("{out} is a character device, not a regular file")), "{e}");
+        }
+        let dir = std::env::temp_dir().join(format!("stagerl-io-kind-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let big = dir.join("big.safetensors");
+        fs::write(&big, vec![0u8; 100]).unwrap();
+        let e = read_regular(&big, 99, "checkpoint").unwrap_err().to_string();
+        assert!(e.contains("holds 100 bytes, more than the 99 bytes"), "{e}");
+        assert_eq!(read_regular(&big, 100, "checkpoint").unwrap().len(), 100);
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -211,9 +211,14 @@ fn is_run_file_name(name: &str) -> bool {
 /// An error if writing the output `out` would replace a file of a run that only the run's own
 /// writer may write, whatever `--force` says: its config, its metrics, its evaluations, anything
 /// in its `checkpoints/` or `tb/`; or one of `inputs` (the checkpoint a command reads). Paths are
-/// compared resolved ([`resolve_path`]): a symbolic link or `..` does not get round it. `flag`
-/// names the output in the message (`--out`).
+/// compared resolved ([`resolve_path`]): a symbolic link or `..` does not get round it. And an
+/// error if `out` is not a regular file ([`crate::io::check_output_kind`]). `flag` names the
+/// output in the message (`--out`).
 pub fn check_output_path(out: &Path, flag: &str, inputs: &[&Path]) -> Result<()> {
+    crate::io::check_output_kind(out).map_err(|e| match e {
+        Error::InvalidInput(m) => Error::InvalidInput(format!("{flag} {m}")),
+        other => other,
+    })?;
     let resolved = resolve_path(out);
     for input in inputs {
         if resolve_path(input) == resolved {

@@ -242,20 +242,32 @@ fn observation_spec(env: &ReachEnv) -> ObservationSpec {
 
 /// The leaves of two JSON values that differ, by path (`observation.obs_delta_scale`); numbers
 /// equal to 1e-12 relative count as equal (a JSON round trip of an f64 may move its last bit).
-fn json_differences(a: &serde_json::Value, b: &serde_json::Value, path: &str, out: &mut Vec<String>) {
+///
+/// With `a_keys_only`, only the fields `a` has are compared (`a` is a spec written by an older
+/// version, which did not have the newer fields).
+fn json_differences(
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+    path: &str,
+    a_keys_only: bool,
+    out: &mut Vec<String>,
+) {
     use serde_json::Value;
     let join = |k: &str| if path.is_empty() { k.to_string() } else { format!("{path}.{k}") };
     match (a, b) {
         (Value::Object(x), Value::Object(y)) => {
-            let keys: std::collections::BTreeSet<&String> = x.keys().chain(y.keys()).collect();
+            let keys: std::collections::BTreeSet<&String> = match a_keys_only {
+                true => x.keys().collect(),
+                false => x.keys().chain(y.keys()).collect(),
+            };
             for k in keys {
                 let (va, vb) = (x.get(k).unwrap_or(&Value::Null), y.get(k).unwrap_or(&Value::Null));
-                json_differences(va, vb, &join(k), out);
+                json_differences(va, vb, &join(k), a_keys_only, out);
             }
         }
         (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
             for (i, (va, vb)) in x.iter().zip(y).enumerate() {
-                json_differences(va, vb, &format!("{path}[{i}]"), out);
+                json_differences(va, vb, &format!("{path}[{i}]"), a_keys_only, out);
             }
         }
         (Value::Number(x), Value::Number(y)) => {
@@ -293,7 +305,7 @@ pub fn config_differences(stored_toml: &str, cfg: &Config) -> Vec<(String, Strin
     let parse = |t: &str| toml::from_str::<toml::Table>(t).ok().and_then(|t| serde_json::to_value(t).ok());
     let (Some(a), Some(b)) = (parse(stored_toml), parse(&cfg.to_toml_string())) else { return Vec::new() };
     let mut paths = Vec::new();
-    json_differences(&a, &b, "", &mut paths);
+    json_differences(&a, &b, "", false, &mut paths);
     paths.into_iter().map(|p| (json_at(&a, &p), json_at(&b, &p), p)).map(|(x, y, p)| (p, x, y)).collect()
 }
 
@@ -313,8 +325,14 @@ pub fn check_same_policy(
 ) -> crate::Result<()> {
     let Ok(current_json) = serde_json::to_value(current) else { return Ok(()) };
     let mut paths = Vec::new();
-    json_differences(stored, &current_json, "", &mut paths);
-    paths.retain(|p| p != "robot" && p != "format_version");
+    json_differences(stored, &current_json, "", true, &mut paths);
+    // Not compared: the robot file's path (a run may be moved), the format's version and the
+    // rules and entries in words (`rule_text`, a layout entry's `value`), which versions reword.
+    paths.retain(|p| {
+        p != "robot" && p != "format_version" && !p.ends_with("rule_text") && !p.ends_with(".value")
+    });
+    // The plainest field first: a value of the spec's own before its layout's entries.
+    paths.sort_by_key(|p| (p.contains("layout"), p.clone()));
     let Some(first) = paths.first() else { return Ok(()) };
     let fields: Vec<String> = stored_config
         .map(|t| config_differences(t, cfg))

@@ -278,6 +278,41 @@ mod tests {
     }
 
     #[test]
+    fn a_long_plan_is_kept_as_at_most_max_frames_frames() {
+        let cfg = Config::default();
+        let mut planner = Planner::jacobian(&cfg, None).unwrap();
+        let target = [0.4, 0.2, 0.3];
+        let short = planner.plan(&target, None).unwrap();
+        // A plan of 100 001 rows (the short one's rows over and over), 100 000 steps.
+        let rows = 100_001;
+        let mut long = short.clone();
+        let (dof, n) = (short.dof, short.rows());
+        long.q = (0..rows).flat_map(|k| short.q[(k % n) * dof..(k % n + 1) * dof].to_vec()).collect();
+        long.joint_vel = long.q.clone();
+        long.distance = (0..rows).map(|k| k as f64).collect();
+        long.reward = vec![0.0; rows];
+        long.ee_pos = (0..rows).map(|k| short.ee_pos[k % n]).collect();
+        long.ee_quat = (0..rows).map(|k| short.ee_quat[k % n]).collect();
+        long.summary.steps = (rows - 1) as u32;
+        assert_eq!(long.rows(), rows);
+        let chain = planner.env().chain().clone();
+        let mut view = View::for_planner("long", &planner);
+        view.push(&chain, "long", target, &long).unwrap();
+        view.push(&chain, "short", target, &short).unwrap();
+        let t = &view.trajectories[0];
+        assert_eq!(t.stride, 101, "100 001 rows in frames of 101 rows");
+        assert!(t.frames.len() <= MAX_FRAMES + 1 && t.frames.len() == t.distance.len(), "{}", t.frames.len());
+        // Every 101st row, then the last.
+        assert_eq!(&t.distance[..3], [0.0, 101.0, 202.0]);
+        assert_eq!(*t.distance.last().unwrap(), 100_000.0);
+        // A short plan keeps every row.
+        let s = &view.trajectories[1];
+        assert_eq!((s.stride, s.frames.len()), (1, short.rows()));
+        let html = view.to_html().unwrap();
+        assert!(html.len() < 1 << 20, "{} bytes", html.len());
+    }
+
+    #[test]
     fn requests_are_read_with_their_line_numbers() {
         let text = "{\"target\":[0.4,0.2,0.3]}\n\n  \n{\"target\":[0.1,0.2,0.3],\"start\":[0,0,0,0,0,0]}\n";
         let r = parse_requests(text, "p.jsonl").unwrap();
