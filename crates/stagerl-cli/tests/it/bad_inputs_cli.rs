@@ -188,7 +188,7 @@ const REWARD_LINES: &[Case] = &[
     Case { args: &["plan", "--run", "$RUN", "--target", "0.4,0.2,0.3", "--view", "$RUN/tb/v.html", "--force"], stdin: "", expect: &["in `tb/`"] },
     Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/copy.safetensors", "--out", "$DIR/copy.safetensors", "--force"], stdin: "", expect: &["is the file this command reads"] },
     // A checkpoint under a config that changes its policy's inputs or outputs.
-    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/runs/scale1/checkpoints/final.safetensors"], stdin: "", expect: &["observation.obs_delta_scale` = 1.0", "gives 10.0", "`task.obs_delta_scale` = 1.0 in the checkpoint's config, 10.0 here", "refused"] },
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/runs/scale1/checkpoints/final.safetensors"], stdin: "", expect: &["trained with `observation.obs_delta_scale` = 1.0, used with 10.0 (config: `task.obs_delta_scale` = 1.0 there, 10.0 here)", "refused"] },
     Case { args: &["plan", "--run", "$RUN", "--checkpoint", "$DIR/runs/scale1/checkpoints/final.safetensors", "--target", "0.4,0.2,0.3"], stdin: "", expect: &["obs_delta_scale", "refused"] },
     Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/runs/scale1/checkpoints/final.safetensors", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["obs_delta_scale", "refused"] },
     Case { args: &["eval", "--run", "$DIR/runs/edited"], stdin: "", expect: &["task.obs_delta_scale", "refused"] },

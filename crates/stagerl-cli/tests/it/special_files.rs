@@ -123,8 +123,8 @@ fn the_temporary_files_of_a_killed_export_are_removed_by_the_next_one() {
     for p in [&stale, &of_live, &of_other, &not_a_pid] {
         std::fs::write(p, b"half an ONNX model").unwrap();
     }
-    // A symbolic link with a stale name is not followed nor removed.
-    let link = dir.join(format!("policy.onnx.tmp-{}", dead + 1));
+    // A symbolic link with a stale name (a pid no process has) is not followed nor removed.
+    let link = dir.join("policy.onnx.tmp-999999999");
     std::os::unix::fs::symlink(&of_other, &link).unwrap();
     let out = finish(
         spawn(bin().args(["export", "--run", run.to_str().unwrap(), "--out", model.to_str().unwrap()])),

@@ -25,7 +25,14 @@ fn temp_path(path: &Path) -> PathBuf {
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = temp_path(path);
     let result = (|| {
-        let mut f = File::create(&tmp)?;
+        // A file of that name is a dead writer's of the same pid (or a symbolic link someone
+        // put there): removed, never written through.
+        if let Err(e) = fs::remove_file(&tmp) {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                return Err(e);
+            }
+        }
+        let mut f = fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
         drop(f);
@@ -326,6 +333,21 @@ mod tests {
         assert_eq!(fs::read(&p).unwrap(), b"two");
         let e = write_new(&dir, b"x", true).unwrap_err().to_string();
         assert!(e.contains("is a directory"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_link_at_the_temporary_path_is_not_written_through() {
+        let dir = std::env::temp_dir().join(format!("stagerl-io-link-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let (p, victim) = (dir.join("model.onnx"), dir.join("victim"));
+        fs::write(&victim, b"keep me").unwrap();
+        std::os::unix::fs::symlink(&victim, temp_path(&p)).unwrap();
+        write_atomic(&p, b"model").unwrap();
+        assert_eq!(fs::read(&victim).unwrap(), b"keep me");
+        assert_eq!(fs::read(&p).unwrap(), b"model");
+        assert!(!fs::symlink_metadata(&p).unwrap().file_type().is_symlink());
         fs::remove_dir_all(&dir).unwrap();
     }
 

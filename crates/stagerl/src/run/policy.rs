@@ -338,26 +338,21 @@ pub fn check_same_policy(
         .map(|t| config_differences(t, cfg))
         .unwrap_or_default()
         .into_iter()
-        .map(|(field, was, is)| format!("`{field}` = {was} in the checkpoint's config, {is} here"))
+        .map(|(field, was, is)| format!("`{field}` = {was} there, {is} here"))
         .collect();
     let fields = match fields.len() {
         0 => String::new(),
         n => format!(
-            "; the config fields that differ: {}{}",
-            fields.iter().take(8).cloned().collect::<Vec<_>>().join(", "),
-            if n > 8 { format!(" and {} more", n - 8) } else { String::new() }
+            " (config: {}{})",
+            fields.iter().take(3).cloned().collect::<Vec<_>>().join(", "),
+            if n > 3 { format!(" and {} more", n - 3) } else { String::new() }
         ),
     };
     Err(crate::Error::InvalidInput(format!(
-        "{}: the checkpoint's policy was trained with `{first}` = {}, the config it is used with \
-         gives {}{}{fields}: its inputs or outputs would mean something else; refused (use it \
-         with the config it was trained with)",
+        "{}: trained with `{first}` = {}, used with {}{fields}: the policy's inputs or outputs \
+         would mean something else; refused",
         origin.display(),
         json_at(stored, first),
         json_at(&current_json, first),
-        match paths.len() {
-            1 => String::new(),
-            n => format!(" ({} policy fields differ)", n),
-        },
     )))
 }

@@ -522,4 +522,3 @@ fn read_preset(path: &Path) -> Result<String> {
 
 #[cfg(test)]
 mod tests;
-
