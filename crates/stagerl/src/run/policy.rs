@@ -244,7 +244,8 @@ fn observation_spec(env: &ReachEnv) -> ObservationSpec {
 /// equal to 1e-12 relative count as equal (a JSON round trip of an f64 may move its last bit).
 ///
 /// With `a_keys_only`, only the fields `a` has are compared (`a` is a spec written by an older
-/// version, which did not have the newer fields).
+/// version, which did not have the newer fields), and an array of `a` with the first as many
+/// values of `b`'s.
 fn json_differences(
     a: &serde_json::Value,
     b: &serde_json::Value,
@@ -265,7 +266,9 @@ fn json_differences(
                 json_differences(va, vb, &join(k), a_keys_only, out);
             }
         }
-        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
+        // An older spec's layout lists fewer entries (format 3 added the obstacle slots' to a
+        // layout whose `dim` already counted them): its entries against the first ones.
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() || (a_keys_only && x.len() < y.len()) => {
             for (i, (va, vb)) in x.iter().zip(y).enumerate() {
                 json_differences(va, vb, &format!("{path}[{i}]"), a_keys_only, out);
             }
