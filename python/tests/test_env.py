@@ -266,7 +266,7 @@ def test_bad_actions():
         ([1e308, 0.0, 0.3], r"out of reach"),
         ([0.4, 0.2, -0.05], r"below the floor"),
         ([float("nan"), 0.2, 0.3], r"not finite"),
-        ([0.4, 0.2], r"target has 2 values, expected 3"),
+        ([0.4, 0.2], r"`target` = \[0.4, 0.2\] is invalid: 3 values x, y, z in metres"),
     ],
 )
 def test_reset_targets_are_checked_as_stagerl_plan_checks_them(target, match):

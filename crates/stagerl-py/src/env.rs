@@ -159,6 +159,9 @@ impl ReachCore {
         target: Vec<f64>,
         start: Option<Vec<f64>>,
     ) -> PyResult<(Obs<'py>, f64)> {
+        if target.len() != 3 {
+            return Err(bad_arg("target", format!("{target:?}"), "3 values x, y, z in metres"));
+        }
         // The check of `stagerl plan`: finite, above the floor, within the arm's reach.
         let t = self.env.check_target(&target).map_err(to_py)?;
         let start = start.unwrap_or_else(|| self.env.task().home_pose.clone());
