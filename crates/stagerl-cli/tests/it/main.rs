@@ -6,6 +6,7 @@ mod cli;
 mod common;
 mod concurrency;
 mod corrupt_checkpoint;
+mod edited_config;
 mod export_cli;
 mod output_errors;
 mod plan_cli;

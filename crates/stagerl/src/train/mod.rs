@@ -104,12 +104,29 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
 /// [`load_agent`] for a resolved config, with an environment for it; the checkpoint's policy
 /// must be the one the config describes ([`check_policy`]).
 fn load_resolved(run: &Resolved, path: &Path) -> Result<(ReachEnv, Box<dyn Agent>)> {
+    load_resolved_noting(run, path).map(|(env, agent, _)| (env, agent))
+}
+
+/// A config field that differs between the config a checkpoint was trained with and the one it
+/// is used with: the field (`reward.function`), its value there and here.
+pub type ConfigChange = (String, String, String);
+
+/// [`load_resolved`], with the config fields that differ from the checkpoint's own config (none
+/// that changes the policy's inputs or outputs: those are refused).
+fn load_resolved_noting(
+    run: &Resolved,
+    path: &Path,
+) -> Result<(ReachEnv, Box<dyn Agent>, Vec<ConfigChange>)> {
     let ck = checkpoint_for(run.config(), path)?;
     let mut agent = run.learner(Rng::derived(run.config().train.seed, 3).next_u64()).into_agent();
     agent.load(&ck)?;
     let env = run.env(0)?;
     check_policy(&ck, run.config(), &env, agent.as_ref(), path)?;
-    Ok((env, agent))
+    let changes = ck
+        .meta("config")
+        .map(|t| crate::run::policy::config_differences(t, run.config()))
+        .unwrap_or_default();
+    Ok((env, agent, changes))
 }
 
 /// An error if checkpoint `ck` (read from `path`) holds a policy with other inputs or outputs
