@@ -204,14 +204,14 @@ pub fn load_run_agent(
     Ok((path, env, agent))
 }
 
+/// What [`load_run_agent_noting`] loads: the checkpoint's path, an environment, the agent and the
+/// config fields changed since training.
+pub type NotedAgent = (PathBuf, ReachEnv, Box<dyn Agent>, Vec<super::ConfigChange>);
+
 /// [`load_run_agent`], with the fields of `cfg` that differ from the config the checkpoint was
 /// trained with (a `config.toml` edited since, say), for the caller to report: none of them
 /// changes the policy's inputs or outputs (such a checkpoint is refused).
-pub fn load_run_agent_noting(
-    run: &RunDir,
-    cfg: &Config,
-    checkpoint: Option<&Path>,
-) -> Result<(PathBuf, ReachEnv, Box<dyn Agent>, Vec<super::ConfigChange>)> {
+pub fn load_run_agent_noting(run: &RunDir, cfg: &Config, checkpoint: Option<&Path>) -> Result<NotedAgent> {
     let checkpoint = match checkpoint {
         Some(c) => c.to_path_buf(),
         None => run.best_available_checkpoint().ok_or_else(|| {
