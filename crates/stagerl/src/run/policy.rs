@@ -309,7 +309,13 @@ pub fn config_differences(stored_toml: &str, cfg: &Config) -> Vec<(String, Strin
     let (Some(a), Some(b)) = (parse(stored_toml), parse(&cfg.to_toml_string())) else { return Vec::new() };
     let mut paths = Vec::new();
     json_differences(&a, &b, "", false, &mut paths);
-    paths.into_iter().map(|p| (json_at(&a, &p), json_at(&b, &p), p)).map(|(x, y, p)| (p, x, y)).collect()
+    paths
+        .into_iter()
+        .map(|p| {
+            let (was, is) = (json_at(&a, &p), json_at(&b, &p));
+            (p, was, is)
+        })
+        .collect()
 }
 
 /// An error if the policy a checkpoint was trained as (`stored`, its [`POLICY_KEY`] metadata)
