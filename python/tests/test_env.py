@@ -152,15 +152,24 @@ def test_info_holds_every_term_and_the_reward_is_the_chosen_one():
 
 def test_info_reports_a_contact_and_terminate_ends_the_episode_without_success():
     """A sphere around the arm's shoulder: every step ends in contact; with
-    task.on_collision = "terminate" the first one ends the episode with the penalty."""
+    task.on_collision = "terminate" that scene is refused (every episode would end at its first
+    step). Started below the floor, "terminate" ends the episode at the first step with the
+    penalty."""
     ball = {"shape": "sphere", "radius_m": 0.2, "position_m": [0.0, 0.0, 0.3]}
     env = gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball]}})
     env.reset(seed=1)
     _, r, term, trunc, info = env.step(np.zeros(6, np.float32))
     assert info["collision"] == 1.0 and not term and not trunc
-    stop = gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball], "on_collision": "terminate"},
+    with pytest.raises(ValueError, match=r"home pose .* the arm touches \(link `\w+` with obstacle 0\)"):
+        gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball], "on_collision": "terminate"}})
+    low = {"start": [0.0, 0.6, 0.0, 0.0, 0.0, 0.0], "target": [0.4, 0.2, 0.3]}  # the tool below the floor
+    env = gym.make("stagerl/Reach-v0")
+    env.reset(options=low)
+    _, r, term, trunc, info = env.step(np.zeros(6, np.float32))
+    assert info["collision"] == 1.0 and not term and not trunc
+    stop = gym.make("stagerl/Reach-v0", config={"task": {"on_collision": "terminate"},
                                                  "reward": {"collision_penalty": 5.0}})
-    stop.reset(seed=1)
+    stop.reset(options=low)
     _, r2, term2, _, info2 = stop.step(np.zeros(6, np.float32))
     assert term2 and info2["collision"] == 1.0 and info2["is_success"] is False
     assert r2 == r - 5.0
@@ -268,3 +277,23 @@ def test_the_module_prefixed_id_makes_the_env_in_a_forkserver_worker():
     # Without the module prefix a fresh interpreter has not registered the id (Gymnasium 1.x loads
     # no plugins): docs/python.md says to use the prefixed id with SubprocVecEnv and other pools.
     assert results["stagerl/Reach-v0"][0] == "error" and "stagerl" in results["stagerl/Reach-v0"][1], results
+
+
+@pytest.mark.parametrize(
+    "target, match",
+    [
+        ([8.7, 0.0, 0.3], r"out of reach"),
+        ([1e308, 0.0, 0.3], r"out of reach"),
+        ([0.4, 0.2, -0.05], r"below the floor"),
+        ([float("nan"), 0.2, 0.3], r"not finite"),
+        ([0.4, 0.2], r"`target` = \[0.4, 0.2\] is invalid: 3 values x, y, z in metres"),
+    ],
+)
+def test_reset_targets_are_checked_as_stagerl_plan_checks_them(target, match):
+    """reset(options={"target": ...}) takes the targets `stagerl plan` takes: within the arm's
+    reach of its first joint, above the floor, finite (one check in Rust for both)."""
+    env = gym.make("stagerl/Reach-v0")
+    with pytest.raises(ValueError, match=match):
+        env.reset(options={"target": target})
+    obs, info = env.reset(options={"target": [0.4, 0.2, 0.3]})
+    assert env.observation_space.contains(obs)

@@ -4,6 +4,7 @@ bit), plan returns the CLI's numbers, the checkpoint's portable description hold
 is a ValueError or FileNotFoundError naming it."""
 
 import json
+import os
 import struct
 import subprocess
 
@@ -145,6 +146,14 @@ def test_bad_policy_and_plan_arguments(trained_run, tmp_path):
         stagerl.Policy.load(junk)
     with pytest.raises(ValueError, match=r"`path` = 3 is invalid"):
         stagerl.Policy.load(3)
+    # Not regular files: refused unread (/dev/zero used to be read until memory ran out; a FIFO
+    # without a writer blocked for ever).
+    with pytest.raises(ValueError, match=r"/dev/zero is a character device; a checkpoint must be a regular file"):
+        stagerl.Policy.load("/dev/zero")
+    fifo = tmp_path / "ck.fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match=r"ck.fifo is a FIFO \(named pipe\); a checkpoint must be a regular file"):
+        stagerl.Policy.load(fifo)
     policy = stagerl.Policy.load(trained_run)
     with pytest.raises(ValueError, match=r"`obs.shape` = \(2, 15\) is invalid: \(N, 16\)"):
         policy(np.zeros((2, 15), np.float32))

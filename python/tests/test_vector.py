@@ -156,6 +156,8 @@ def test_native_speed_measurement_steps_a_copy():
     "kwargs, match",
     [
         ({"num_envs": 0}, r"`num_envs` = 0 is invalid: an integer >= 1"),
+        # Refused before anything is allocated for them (it used to abort the interpreter).
+        ({"num_envs": 10_000_000}, r"`num_envs` = 10000000 is invalid: an integer from 1 to 65536"),
         ({"num_envs": 2.5}, r"`num_envs` = 2.5 is invalid"),
         ({"num_envs": 2, "reward": "fast"}, r"`reward` = \"fast\" is invalid: one of"),
         ({"num_envs": 2, "render_mode": "human"}, r"`render_mode` = 'human' is invalid"),

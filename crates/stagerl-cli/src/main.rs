@@ -8,7 +8,7 @@ mod plan_batch;
 mod progress;
 mod run_control;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -67,7 +67,8 @@ enum Command {
 
 fn main() -> ExitCode {
     stagerl::run::provenance::Code::record_build(env!("STAGERL_GIT_COMMIT"), env!("STAGERL_GIT_DIRTY"));
-    let cli = match Cli::try_parse() {
+    let cli = match negative_numbers(Cli::command()).try_get_matches().and_then(|m| Cli::from_arg_matches(&m))
+    {
         Ok(cli) => cli,
         Err(e) => return usage(&e),
     };
@@ -94,6 +95,14 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Every flag that takes a value takes a negative number as its value (`--obstacles-in-path
+/// -0.5`, `--seed -1`): the value then reaches the flag's own check and its message, instead of
+/// clap reading it as an unknown flag `-0`.
+fn negative_numbers(cmd: clap::Command) -> clap::Command {
+    cmd.mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
+        .mut_subcommands(negative_numbers)
 }
 
 /// Print clap's help, version or usage error through [`out`] (so a failing output is an error,

@@ -159,14 +159,14 @@ impl ReachCore {
         target: Vec<f64>,
         start: Option<Vec<f64>>,
     ) -> PyResult<(Obs<'py>, f64)> {
-        let &[x, y, z] = target.as_slice() else {
+        if target.len() != 3 {
             return Err(bad_arg("target", format!("{target:?}"), "3 values x, y, z in metres"));
-        };
+        }
+        // The check of `stagerl plan`: finite, above the floor, within the arm's reach.
+        let t = self.env.check_target(&target).map_err(to_py)?;
         let start = start.unwrap_or_else(|| self.env.task().home_pose.clone());
         let env = &mut self.env;
-        let obs = guard("reset", || {
-            Ok(env.reset_to(&start, stagerl::nalgebra::Vector3::new(x, y, z)).map_err(to_py)?.to_vec())
-        })?;
+        let obs = guard("reset", || Ok(env.reset_to(&start, t).map_err(to_py)?.to_vec()))?;
         Ok((PyArray1::from_vec(py, obs), self.env.distance()))
     }
 

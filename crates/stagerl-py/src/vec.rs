@@ -143,8 +143,13 @@ impl VecCore {
         reward: Option<&str>,
         robot: Option<&str>,
     ) -> PyResult<Self> {
-        if num_envs == 0 {
-            return Err(bad_arg("num_envs", 0, "an integer >= 1"));
+        if num_envs == 0 || num_envs > stagerl::env::MAX_VEC_ENVS {
+            // Checked before anything is allocated for them.
+            return Err(bad_arg(
+                "num_envs",
+                num_envs,
+                &format!("an integer from 1 to {}", stagerl::env::MAX_VEC_ENVS),
+            ));
         }
         let env = guard("ReachVectorEnv", || {
             let cfg = build_config(config_path, config_json, reward, robot)?;

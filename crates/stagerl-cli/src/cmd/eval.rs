@@ -43,8 +43,25 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(s) = sim {
         cfg.task.sim = s;
     }
-    let (checkpoint, mut env, mut agent) =
-        train::eval::load_run_agent(&dir, &cfg, args.run.checkpoint.as_deref())?;
+    let (checkpoint, mut env, mut agent, changes) =
+        train::eval::load_run_agent_noting(&dir, &cfg, args.run.checkpoint.as_deref())?;
+    // The evaluation runs under the run's config.toml: say so when it is not the config the
+    // checkpoint was trained with (--sim's own change aside).
+    let changes: Vec<String> = changes
+        .into_iter()
+        .filter(|(field, _, _)| !(sim.is_some() && field == "task.sim"))
+        .map(|(field, was, is)| format!("`{field}` = {was} there, {is} here"))
+        .collect();
+    if !changes.is_empty() {
+        errln!(
+            "stagerl: warning: {} was trained under another config than {} ({}{}); evaluating under {}",
+            checkpoint.display(),
+            dir.config().display(),
+            changes.iter().take(3).cloned().collect::<Vec<_>>().join(", "),
+            if changes.len() > 3 { format!(" and {} more", changes.len() - 3) } else { String::new() },
+            dir.config().display()
+        )?;
+    }
     let in_path = args.obstacles_in_path.filter(|&p| p != 0.0);
     if let Some(p) = in_path {
         env.set_obstacles_in_path(p).context("--obstacles-in-path")?;

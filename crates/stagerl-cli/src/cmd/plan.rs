@@ -60,6 +60,11 @@ pub enum Format {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(view) = &args.view {
+        let inputs: Vec<&std::path::Path> =
+            args.checkpoint.as_deref().into_iter().chain(args.targets.as_deref()).collect();
+        stagerl::run::dir::check_output_path(view, "--view", &inputs)?;
+    }
     let mut planner = planner(&args)?;
     let mut view = args.view.as_ref().map(|_| View::for_planner(&view_title(&args), &planner));
     if let Some(path) = &args.targets {

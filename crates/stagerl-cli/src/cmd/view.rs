@@ -30,6 +30,9 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     let run = RunDir::new(&args.run.run);
+    let inputs: Vec<&std::path::Path> =
+        args.run.checkpoint.as_deref().into_iter().chain(args.plans.as_deref()).collect();
+    stagerl::run::dir::check_output_path(&args.out, "--out", &inputs)?;
     let source = match &args.plans {
         Some(p) => ViewSource::Requests { text: read_plans(p)?, origin: p.display().to_string() },
         None => {

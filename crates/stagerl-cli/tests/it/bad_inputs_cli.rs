@@ -166,6 +166,33 @@ const REWARD_LINES: &[Case] = &[
     Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "$DIR/no-such-dir/v.html"], stdin: "", expect: &["no-such-dir/v.html", "No such file"] },
     Case { args: &["plan", "--controller", "jacobian", "--target", "0.4,0.2,0.3", "--view", "$DIR/bad.toml"], stdin: "", expect: &["bad.toml exists", "--force"] },
     Case { args: &["plan", "--controller", "jacobian", "--target", "0.4,0.2,0.3", "--force"], stdin: "", expect: &["--view"] },
+    // Negative values reach the flag's own check (not clap's "unexpected argument '-0'").
+    Case { args: &["eval", "--run", "$RUN", "--obstacles-in-path", "-0.5"], stdin: "", expect: &["--obstacles-in-path", "-0.5", "a probability in [0, 1]"] },
+    Case { args: &["eval", "--run", "$RUN", "--obstacles-in-path=-1e308"], stdin: "", expect: &["--obstacles-in-path", "a probability in [0, 1]"] },
+    Case { args: &["train", "--seed", "-1"], stdin: "", expect: &["invalid value '-1' for '--seed"] },
+    // Outputs and inputs that are not regular files: refused, never read.
+    Case { args: &["export", "--run", "$RUN", "--checkpoint", "/dev/zero", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["/dev/zero is a character device", "must be a regular file"] },
+    Case { args: &["export", "--run", "$RUN", "--out", "/dev/full", "--force"], stdin: "", expect: &["/dev/full is a character device, not a regular file"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "/dev/null"], stdin: "", expect: &["/dev/null is a character device"] },
+    Case { args: &["plan", "--controller", "jacobian", "--target", "0.4,0.2,0.3", "--view", "/dev/full"], stdin: "", expect: &["/dev/full is a character device"] },
+    Case { args: &["eval", "--run", "$DIR/devzero-run"], stdin: "", expect: &["config.toml is a character device"] },
+    // A run's files are written by the run alone, whatever --force says (symbolic links and `..`
+    // resolved); an output is never the checkpoint it is made from.
+    Case { args: &["export", "--run", "$RUN", "--out", "$RUN/checkpoints/final.safetensors", "--force"], stdin: "", expect: &["checkpoints/final.safetensors", "in `checkpoints/`", "--force does not change that"] },
+    Case { args: &["export", "--run", "$RUN", "--out", "$RUN/checkpoints/latest.safetensors", "--force"], stdin: "", expect: &["latest.safetensors", "in `checkpoints/`"] },
+    Case { args: &["export", "--run", "$RUN", "--out", "$RUN/checkpoints/../config.toml", "--force"], stdin: "", expect: &["`config.toml`, a file of the run"] },
+    Case { args: &["export", "--run", "$RUN", "--out", "$DIR/link-to-final.onnx", "--force"], stdin: "", expect: &["link-to-final.onnx", "in `checkpoints/`"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "$RUN/episodes.csv", "--force"], stdin: "", expect: &["`episodes.csv`, a file of the run"] },
+    Case { args: &["view", "--run", "$RUN", "--targets", "1", "--out", "$RUN/eval-final-seed0.csv", "--force"], stdin: "", expect: &["`eval-final-seed0.csv`, a file of the run"] },
+    Case { args: &["plan", "--run", "$RUN", "--target", "0.4,0.2,0.3", "--view", "$RUN/eval.csv", "--force"], stdin: "", expect: &["--view", "`eval.csv`, a file of the run"] },
+    Case { args: &["plan", "--run", "$RUN", "--target", "0.4,0.2,0.3", "--view", "$RUN/tb/v.html", "--force"], stdin: "", expect: &["in `tb/`"] },
+    Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/copy.safetensors", "--out", "$DIR/copy.safetensors", "--force"], stdin: "", expect: &["is the file this command reads"] },
+    // A checkpoint under a config that changes its policy's inputs or outputs.
+    Case { args: &["eval", "--run", "$RUN", "--checkpoint", "$DIR/runs/scale1/checkpoints/final.safetensors"], stdin: "", expect: &["trained with `observation.obs_delta_scale` = 1.0, used with 10.0 (config: `task.obs_delta_scale` = 1.0 there, 10.0 here)", "refused"] },
+    Case { args: &["plan", "--run", "$RUN", "--checkpoint", "$DIR/runs/scale1/checkpoints/final.safetensors", "--target", "0.4,0.2,0.3"], stdin: "", expect: &["obs_delta_scale", "refused"] },
+    Case { args: &["export", "--run", "$RUN", "--checkpoint", "$DIR/runs/scale1/checkpoints/final.safetensors", "--out", "$DIR/out/p.onnx"], stdin: "", expect: &["obs_delta_scale", "refused"] },
+    Case { args: &["eval", "--run", "$DIR/runs/edited"], stdin: "", expect: &["task.obs_delta_scale", "refused"] },
+    Case { args: &["view", "--run", "$DIR/runs/edited", "--targets", "1", "--out", "$DIR/out/v.html"], stdin: "", expect: &["task.obs_delta_scale", "refused"] },
     // Finite input whose terms overflow f64.
     Case { args: &["reward", "--function", "sar"], stdin: "{\"ee_pos\":[1e200,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n", expect: &["line 1", "`distance` = inf is not finite"] },
     Case { args: &["reward", "--function", "stride"], stdin: "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[1e200,0,0,0,0,0]}\n", expect: &["line 1", "`move` = inf is not finite"] },
@@ -173,7 +200,11 @@ const REWARD_LINES: &[Case] = &[
 ];
 
 fn small_run(dir: &Path, algo: Algo, hidden: usize) {
-    let mut cfg = Config::default();
+    small_run_of(dir, algo, hidden, Config::default());
+}
+
+/// [`small_run`] from another config than the default.
+fn small_run_of(dir: &Path, algo: Algo, hidden: usize, mut cfg: Config) {
     cfg.agent.algo = algo;
     cfg.agent.hidden = vec![hidden, hidden];
     cfg.agent.batch_size = 8;
@@ -223,6 +254,22 @@ fn fixture(dir: &Path) {
     }
     nan.save(&dir.join("nan.safetensors")).unwrap();
 
+    // A run trained with obs_delta_scale = 1 (the others: 10, the default), and a run whose
+    // config.toml was edited after training.
+    let mut scale1 = Config::default();
+    scale1.task.obs_delta_scale = 1.0;
+    small_run_of(&runs.join("scale1"), Algo::Sac, 8, scale1);
+    small_run(&runs.join("edited"), Algo::Sac, 8);
+    let edited = RunDir::new(&runs.join("edited")).config();
+    let text = std::fs::read_to_string(&edited).unwrap();
+    assert!(text.contains("obs_delta_scale = 10.0"), "{text}");
+    std::fs::write(&edited, text.replace("obs_delta_scale = 10.0", "obs_delta_scale = 2.0")).unwrap();
+    // A run directory whose config.toml is /dev/zero; a link to a run's checkpoint; a copy of one.
+    std::fs::create_dir_all(dir.join("devzero-run")).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", dir.join("devzero-run/config.toml")).unwrap();
+    let final_ck = RunDir::new(&runs.join("sac")).final_checkpoint();
+    std::os::unix::fs::symlink(&final_ck, dir.join("link-to-final.onnx")).unwrap();
+    std::fs::copy(&final_ck, dir.join("copy.safetensors")).unwrap();
     std::fs::write(dir.join("bad.toml"), "[task]\nmax_step = 10\n").unwrap();
     std::fs::write(dir.join("huge_buffer.toml"), "[agent]\nbuffer_size = 100000000000000\n").unwrap();
     std::fs::write(dir.join("displacement.toml"), "[reward]\ndirection = \"displacement\"\n").unwrap();

@@ -690,8 +690,17 @@ fn static_colliders(obstacles: &[Obstacle], floor: bool) -> Vec<Collider> {
     out
 }
 
+/// The link masses the dynamic simulation takes, kg: from a milligram to ten tonnes.
+pub const MIN_LINK_MASS_KG: f64 = 1e-6;
+pub const MAX_LINK_MASS_KG: f64 = 1e4;
+/// The largest magnitude of a link's inertia value, kg m^2.
+pub const MAX_LINK_INERTIA_KG_M2: f64 = 1e4;
+/// The farthest a link's centre of mass may lie from its frame, metres.
+pub const MAX_INERTIAL_OFFSET_M: f64 = 100.0;
+
 /// An error for a link moved by an actuated chain joint without a positive mass, or a link on
-/// the chain with non-finite or negative inertial values.
+/// the chain with non-finite or negative inertial values or values outside physical ranges
+/// (the link and the value named).
 fn check_inertials(urdf: &urdf_rs::Robot, chain: &Chain) -> Result<()> {
     for j in urdf.joints.iter().filter(|j| chain.joints().iter().any(|c| c.name == j.name)) {
         let name = &j.child.link;
@@ -713,6 +722,28 @@ fn check_inertials(urdf: &urdf_rs::Robot, chain: &Chain) -> Result<()> {
             return Err(Error::Urdf(format!(
                 "link `{name}` has <mass value=\"{m}\"> and inertia {tensor:?}; the dynamic \
                  simulation needs a finite mass > 0 and a finite inertia with ixx, iyy, izz >= 0"
+            )));
+        }
+        // Physical ranges: a mass or an inertia far outside a robot arm's overflows the
+        // simulation's f32 arithmetic (positions turn NaN a few steps in).
+        if !(MIN_LINK_MASS_KG..=MAX_LINK_MASS_KG).contains(&m) {
+            return Err(Error::Urdf(format!(
+                "link `{name}` has <mass value=\"{m}\">; the dynamic simulation takes a link mass \
+                 from {MIN_LINK_MASS_KG:e} to {MAX_LINK_MASS_KG:e} kg"
+            )));
+        }
+        if let Some((k, v)) = tensor.iter().enumerate().find(|(_, v)| v.abs() > MAX_LINK_INERTIA_KG_M2) {
+            let names = ["ixx", "iyy", "izz", "ixy", "ixz", "iyz"];
+            return Err(Error::Urdf(format!(
+                "link `{name}` has <inertia {}=\"{v}\">; the dynamic simulation takes inertia \
+                 values of at most {MAX_LINK_INERTIA_KG_M2:e} kg m^2 in magnitude",
+                names[k]
+            )));
+        }
+        if let Some(v) = i.origin.xyz.0.iter().find(|v| v.abs() > MAX_INERTIAL_OFFSET_M) {
+            return Err(Error::Urdf(format!(
+                "link `{name}` has its <inertial> origin at {v} m from its frame; at most \
+                 {MAX_INERTIAL_OFFSET_M} m is taken"
             )));
         }
     }

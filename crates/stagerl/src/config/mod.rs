@@ -37,6 +37,9 @@ pub struct Config {
     pub train: TrainConfig,
 }
 
+/// The largest config file read, bytes (a config is a few kB).
+pub const MAX_CONFIG_BYTES: u64 = 16 << 20;
+
 /// The most memory a run may be estimated to need ([`Config::estimated_memory`]): 16 GiB.
 pub const MAX_RUN_MEMORY_BYTES: f64 = 16.0 * (1u64 << 30) as f64;
 
@@ -87,7 +90,7 @@ impl Config {
         let layer_values = widths.iter().sum::<f64>() + obs + 2.0 * act;
         MemoryEstimate {
             networks: params * nets * 4.0 * f32_bytes,
-            activations: self.agent.batch_size as f64 * layer_values * nets * 2.0 * f32_bytes,
+            activations: self.update_batch() * layer_values * nets * 2.0 * f32_bytes,
             replay: if self.agent.algo.is_off_policy() {
                 self.agent.buffer_size as f64 * (2.0 * obs + act + 2.0) * f32_bytes
             } else {
@@ -95,6 +98,18 @@ impl Config {
                 (p.num_steps * p.num_envs) as f64 * (obs + act + 4.0) * f32_bytes
             },
             evaluation: f64::from(self.train.eval_trials) * 64.0,
+        }
+    }
+
+    /// The rows of one update's activation matrices: the off-policy agents' `batch_size`, PPO's
+    /// minibatch (`num_envs x num_steps / num_minibatches`, rounded up), as f64.
+    fn update_batch(&self) -> f64 {
+        if self.agent.algo.is_off_policy() {
+            self.agent.batch_size as f64
+        } else {
+            let p = self.agent.ppo();
+            let rollout = p.num_envs as f64 * p.num_steps as f64;
+            (rollout / p.num_minibatches.max(1) as f64).ceil()
         }
     }
 
@@ -108,7 +123,18 @@ impl Config {
         let gib = |b: f64| b / (1u64 << 30) as f64;
         let parts = [
             (m.networks, "agent.hidden", format!("{:?}", self.agent.hidden)),
-            (m.activations, "agent.batch_size", self.agent.batch_size.to_string()),
+            match self.agent.algo.is_off_policy() {
+                true => (m.activations, "agent.batch_size", self.agent.batch_size.to_string()),
+                false => (
+                    m.activations,
+                    "agent.ppo.num_minibatches",
+                    format!(
+                        "{} (minibatches of {} transitions)",
+                        self.agent.ppo().num_minibatches,
+                        self.update_batch()
+                    ),
+                ),
+            },
             match self.agent.algo.is_off_policy() {
                 true => (m.replay, "agent.buffer_size", self.agent.buffer_size.to_string()),
                 false => (m.replay, "agent.ppo.num_steps", self.agent.ppo().num_steps.to_string()),
@@ -157,9 +183,13 @@ impl Config {
         Ok(cfg)
     }
 
-    /// Read, parse and check a TOML file (see [`Config::from_toml_str`]).
+    /// Read, parse and check a TOML file (see [`Config::from_toml_str`]): a regular file of at
+    /// most [`MAX_CONFIG_BYTES`] (a FIFO or a device is refused unread).
     pub fn load(path: &Path) -> Result<Config> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::read_regular(path, MAX_CONFIG_BYTES, "config")?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            Error::io(path, std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()))
+        })?;
         Config::from_toml_str(&text, path)
     }
 

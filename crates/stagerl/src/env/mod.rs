@@ -17,7 +17,7 @@ mod vec;
 
 pub use observation::{empty_slot_distance, ObsEntry, ObservationLayout};
 pub use rollout::{rollout, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
-pub use vec::VecEnv;
+pub use vec::{VecEnv, MAX_VEC_ENVS};
 
 use nalgebra::Vector3;
 use std::f64::consts::PI;
@@ -214,13 +214,21 @@ pub fn check_parts(chain: &Chain, task: &ResolvedTask, reward: &RewardConfig) ->
 /// end an episode only on an arm with collision shapes.
 pub fn check_task_for_arm(chain: &Chain, task: &ResolvedTask) -> Result<()> {
     let n = chain.dof();
+    let meshes = chain.mesh_collision_links();
+    let mesh_note = match meshes.len() {
+        0 => String::new(),
+        _ => format!(
+            " (the collision meshes of links {} were not loaded)",
+            meshes.iter().map(|l| format!("`{l}`")).collect::<Vec<_>>().join(", ")
+        ),
+    };
     if task.on_collision == OnCollision::Terminate && chain.collision_shapes().is_empty() {
         return Err(Error::config(
             "task.on_collision",
             "\"terminate\"",
             format!(
                 "\"record\" for this arm: no link of `{}` to `{}` has a collision shape (box, \
-                 sphere, cylinder or loaded mesh), so no contact can end an episode",
+                 sphere, cylinder or loaded mesh){mesh_note}, so no contact can end an episode",
                 chain.base_link(),
                 chain.tip_link()
             ),
@@ -232,8 +240,115 @@ pub fn check_task_for_arm(chain: &Chain, task: &ResolvedTask) -> Result<()> {
             task.home_pose.len()
         )));
     }
+    check_collision_mechanism(chain, task, &mesh_note)?;
+    if let Some(r) = &task.random_obstacles {
+        check_random_obstacles_placeable(chain, task, r)?;
+    }
     Ok(())
 }
+
+/// Refusals of settings under which a collision check can never fire or fires at once: an arm
+/// whose only collision geometry is meshes that were not loaded (a URDF given as text, or
+/// `robot.missing_collision = "ignore"`) and checks or obstacles that would then
+/// never report a contact; `on_collision = "terminate"` with every check off and no obstacle;
+/// `"terminate"` with the home pose already in contact (every episode would end at its first
+/// step).
+fn check_collision_mechanism(chain: &Chain, task: &ResolvedTask, mesh_note: &str) -> Result<()> {
+    let checks = task.collision;
+    let obstacles = !task.obstacles.is_empty() || task.random_obstacles.is_some();
+    if chain.collision_shapes().is_empty() && !chain.mesh_collision_links().is_empty() {
+        let what = if obstacles { "the obstacles" } else { "the floor and the arm itself" };
+        if obstacles || checks.floor || checks.self_collision {
+            return Err(Error::config(
+                "robot.urdf",
+                format!("\"{}\"", chain.base_link()),
+                format!(
+                    "an arm with collision shapes (box, sphere, cylinder or loaded mesh) for contacts \
+                     with {what}: no link of `{}` to `{}` has one{mesh_note}, so every contact would go \
+                     unseen and the collision rate would read 0 %; load the URDF from its file with \
+                     its meshes (robot.missing_collision = \"error\" says why one is not read), or turn \
+                     the checks off ([task.collision] floor = false, self_collision = false) and \
+                     remove the obstacles",
+                    chain.base_link(),
+                    chain.tip_link()
+                ),
+            ));
+        }
+    }
+    if task.on_collision != OnCollision::Terminate {
+        return Ok(());
+    }
+    if !checks.floor && !checks.self_collision && !obstacles {
+        return Err(Error::config(
+            "task.on_collision",
+            "\"terminate\"",
+            "\"record\" here: [task.collision] has floor = false and self_collision = false and \
+             the task has no obstacle, so no contact can ever end an episode",
+        ));
+    }
+    let mut collider = crate::sim::collision::ArmCollider::new(chain, checks);
+    collider.set_obstacles(&task.obstacles);
+    if let Some(c) = collider.check(chain, &task.home_pose) {
+        return Err(Error::config(
+            "task.on_collision",
+            "\"terminate\"",
+            format!(
+                "a home pose (task.home_pose_rad = {:?}) clear of contacts: there the arm touches \
+                 ({}), so every episode would end at its first step; move the pose or the obstacle, \
+                 or set on_collision = \"record\"",
+                task.home_pose,
+                c.describe(chain)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Sample episodes of the random obstacles' placement (home pose, random targets, a stream of
+/// its own): an error, naming the settings, when none of the obstacles asked for can be placed
+/// (all of them would be left out, every episode, without a word).
+fn check_random_obstacles_placeable(
+    chain: &Chain,
+    task: &ResolvedTask,
+    r: &crate::sim::scene::RandomObstacles,
+) -> Result<()> {
+    if r.count[1] == 0 {
+        return Ok(());
+    }
+    let mut rng = Rng::new(0x0B57_C1EA);
+    let mut collider = (!chain.collision_shapes().is_empty())
+        .then(|| crate::sim::collision::ArmCollider::new(chain, task.collision));
+    let mut q = vec![0.0; chain.dof()];
+    let (mut asked, mut placed, mut out) = (0usize, 0usize, Vec::new());
+    for _ in 0..SAMPLE_EPISODES {
+        let target = task.draw_target_candidate(chain, &mut rng, &mut q);
+        let p = Placement { chain, q: &task.home_pose, target, in_path: 0.0 };
+        // The count drawn is at least count[0]; ask for count[1] to be safe: what matters is
+        // whether any can be placed.
+        place_obstacles(&[], Some(r), &p, collider.as_mut(), &mut rng, &mut out);
+        asked += r.count[1] as usize;
+        placed += out.len();
+        if placed > 0 {
+            return Ok(());
+        }
+    }
+    Err(Error::config(
+        "task.random_obstacles",
+        format!(
+            "{{ target_clearance_m = {}, size_m = {:?}, region_min_m = {:?}, region_max_m = {:?} }}",
+            r.target_clearance_m, r.size_m, r.region_min_m, r.region_max_m
+        ),
+        format!(
+            "obstacles that can be placed: in {SAMPLE_EPISODES} sample episodes none of up to {asked} \
+             could be (each must be at least target_clearance_m from the target and clear of the arm \
+             at its home pose), so every episode would run without them; lower target_clearance_m, \
+             or move or widen the region"
+        ),
+    ))
+}
+
+/// Episodes sampled by [`check_random_obstacles_placeable`].
+const SAMPLE_EPISODES: usize = 50;
 
 impl ReachEnv {
     /// An environment for `chain`, seeded; call [`ReachEnv::reset`] before stepping. Its parts
@@ -305,6 +420,40 @@ impl ReachEnv {
         self.q.copy_from_slice(&self.task.home_pose);
         self.target = target;
         Ok(self.begin_episode())
+    }
+
+    /// Check a target asked for by a user (metres; `stagerl plan`, the Python `reset(options=)`):
+    /// three finite values, `z >= 0`, within the arm's reach ([`Chain::reach_m`]) of its first
+    /// joint. The one check of every entry point that takes a target.
+    pub fn check_target(&self, target: &[f64]) -> Result<Vector3<f64>> {
+        let chain = &self.chain;
+        let (origin, reach) = (chain.first_joint_origin(), chain.reach_m());
+        let &[x, y, z] = target else {
+            return Err(Error::InvalidInput(format!(
+                "target has {} values, expected 3 (x, y, z in metres)",
+                target.len()
+            )));
+        };
+        if !target.iter().all(|v| v.is_finite()) {
+            return Err(Error::InvalidInput(format!("target {target:?} is not finite")));
+        }
+        let t = Vector3::new(x, y, z);
+        let d = (t - origin).norm();
+        let reach_text = format!(
+            "the arm reaches at most {reach:.4} m from its first joint at [{}, {}, {}], above the floor z = 0",
+            origin.x, origin.y, origin.z
+        );
+        if z < 0.0 {
+            return Err(Error::InvalidInput(format!(
+                "target [{x}, {y}, {z}] is below the floor (z = {z} m < 0); {reach_text}"
+            )));
+        }
+        if d > reach {
+            return Err(Error::InvalidInput(format!(
+                "target [{x}, {y}, {z}] is {d:.4} m from the first joint, out of reach: {reach_text}"
+            )));
+        }
+        Ok(t)
     }
 
     /// Start a new episode at joint positions `start` (radians, metres for prismatic joints)

@@ -31,6 +31,10 @@ pub struct VecEnv {
     autoreset: Vec<bool>,
 }
 
+/// The most environments one [`VecEnv`] holds: 65 536 (checked before any is allocated; a
+/// PPO run uses at most `agent::ppo::MAX_PPO_ENVS`).
+pub const MAX_VEC_ENVS: usize = 1 << 16;
+
 impl VecEnv {
     /// `n >= 1` environments on one arm; each is reset.
     pub fn new(
@@ -52,8 +56,14 @@ impl VecEnv {
         reward: RewardConfig,
         seed: u64,
     ) -> Result<VecEnv> {
-        if n == 0 {
-            return Err(Error::InvalidInput("a vector env needs at least one environment".into()));
+        if n == 0 || n > MAX_VEC_ENVS {
+            return Err(Error::config(
+                "num_envs",
+                n,
+                format!(
+                    "1 to {MAX_VEC_ENVS} environments in one vector env (each holds its own arm and scene)"
+                ),
+            ));
         }
         let mut envs = Vec::with_capacity(n);
         for i in 0..n {

@@ -34,6 +34,10 @@ use std::path::{Path, PathBuf};
 
 use crate::{Error, Result};
 
+/// The largest checkpoint file read, bytes: 17 GiB (a run is refused beyond an estimated 16 GiB,
+/// `config::MAX_RUN_MEMORY_BYTES`, which bounds its replay buffer and networks).
+pub const MAX_CHECKPOINT_BYTES: u64 = 17 << 30;
+
 /// The metadata key of the checksum.
 pub const CHECKSUM_KEY: &str = "sha256";
 
@@ -233,9 +237,10 @@ impl Checkpoint {
         Ok(ck)
     }
 
-    /// Read a checkpoint file.
+    /// Read a checkpoint file: a regular file of at most [`MAX_CHECKPOINT_BYTES`] (a FIFO or a
+    /// device such as `/dev/zero` is refused unread).
     pub fn load(path: &Path) -> Result<Checkpoint> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::read_regular(path, MAX_CHECKPOINT_BYTES, "checkpoint")?;
         Checkpoint::from_bytes(&bytes, path)
     }
 }

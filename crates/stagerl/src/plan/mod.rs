@@ -332,34 +332,7 @@ impl Planner {
     /// Check a target (metres): three finite values, `z >= 0`, within the arm's reach of its
     /// first joint.
     pub fn check_target(&self, target: &[f64]) -> Result<Vector3<f64>> {
-        let chain = self.env.chain();
-        let (origin, reach) = (chain.first_joint_origin(), chain.reach_m());
-        let &[x, y, z] = target else {
-            return Err(Error::InvalidInput(format!(
-                "target has {} values, expected 3 (x, y, z in metres)",
-                target.len()
-            )));
-        };
-        if !target.iter().all(|v| v.is_finite()) {
-            return Err(Error::InvalidInput(format!("target {target:?} is not finite")));
-        }
-        let t = Vector3::new(x, y, z);
-        let d = (t - origin).norm();
-        let reach_text = format!(
-            "the arm reaches at most {reach:.4} m from its first joint at [{}, {}, {}], above the floor z = 0",
-            origin.x, origin.y, origin.z
-        );
-        if z < 0.0 {
-            return Err(Error::InvalidInput(format!(
-                "target [{x}, {y}, {z}] is below the floor (z = {z} m < 0); {reach_text}"
-            )));
-        }
-        if d > reach {
-            return Err(Error::InvalidInput(format!(
-                "target [{x}, {y}, {z}] is {d:.4} m from the first joint, out of reach: {reach_text}"
-            )));
-        }
-        Ok(t)
+        self.env.check_target(target)
     }
 
     /// Plan from `start` (radians; default: the home pose) to `target` (metres).

@@ -173,6 +173,83 @@ impl RunDir {
     }
 }
 
+/// `path` resolved as the file system will resolve it: canonical (symbolic links followed, `..`
+/// and `.` removed) when it exists; else its parent's canonical path joined with its name (a
+/// dangling symbolic link: its target, resolved the same way, up to 40 links).
+pub fn resolve_path(path: &Path) -> PathBuf {
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        if let Ok(c) = std::fs::canonicalize(&p) {
+            return c;
+        }
+        match std::fs::read_link(&p) {
+            Ok(target) => {
+                p = match p.parent() {
+                    Some(dir) => dir.join(target),
+                    None => target,
+                };
+            }
+            Err(_) => break,
+        }
+    }
+    let (Some(name), parent) = (p.file_name(), p.parent()) else { return p };
+    let parent = match parent.filter(|d| !d.as_os_str().is_empty()) {
+        Some(d) => std::fs::canonicalize(d).unwrap_or_else(|_| d.to_path_buf()),
+        None => std::fs::canonicalize(".").unwrap_or_default(),
+    };
+    parent.join(name)
+}
+
+/// Whether `name`, a file in a run's directory, is one the run's own writer (training, its
+/// evaluations) writes: `config.toml`, the metrics (`episodes.csv`, `eval.csv`), the evaluations
+/// (`eval-*.csv`, `eval-*.json`), the provenance record or the lock.
+fn is_run_file_name(name: &str) -> bool {
+    matches!(name, "config.toml" | "episodes.csv" | "eval.csv" | LOCK_FILE | crate::run::provenance::FILE)
+        || (name.starts_with("eval-") && (name.ends_with(".csv") || name.ends_with(".json")))
+}
+
+/// An error if writing the output `out` would replace a file of a run that only the run's own
+/// writer may write, whatever `--force` says: its config, its metrics, its evaluations, anything
+/// in its `checkpoints/` or `tb/`; or one of `inputs` (the checkpoint a command reads). Paths are
+/// compared resolved ([`resolve_path`]): a symbolic link or `..` does not get round it. And an
+/// error if `out` is not a regular file ([`crate::io::check_output_kind`]). `flag` names the
+/// output in the message (`--out`).
+pub fn check_output_path(out: &Path, flag: &str, inputs: &[&Path]) -> Result<()> {
+    crate::io::check_output_kind(out).map_err(|e| match e {
+        Error::InvalidInput(m) => Error::InvalidInput(format!("{flag} {m}")),
+        other => other,
+    })?;
+    let resolved = resolve_path(out);
+    for input in inputs {
+        if resolve_path(input) == resolved {
+            return Err(Error::InvalidInput(format!(
+                "{flag} {}: is the file this command reads ({}); write the output elsewhere",
+                out.display(),
+                input.display()
+            )));
+        }
+    }
+    let refuse = |what: &str, run: &Path| {
+        Err(Error::InvalidInput(format!(
+            "{flag} {}: is {what} of the run in {} (only the run's training writes it; --force does \
+             not change that); write the output elsewhere",
+            out.display(),
+            run.display()
+        )))
+    };
+    let Some(dir) = resolved.parent() else { return Ok(()) };
+    let name = resolved.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    if RunDir::new(dir).holds_run() && is_run_file_name(&name) {
+        return refuse(&format!("`{name}`, a file"), dir);
+    }
+    if let (Some(sub), Some(root)) = (dir.file_name(), dir.parent()) {
+        if (sub == "checkpoints" || sub == "tb") && RunDir::new(root).holds_run() {
+            return refuse(&format!("in `{}/`, a directory", sub.to_string_lossy()), root);
+        }
+    }
+    Ok(())
+}
+
 /// The first directory `parent/<name>`, `parent/<name>-2`, ... that does not exist (a new run
 /// beside the old ones instead of over them).
 pub fn first_free(parent: &Path, name: &str) -> PathBuf {

@@ -239,3 +239,129 @@ fn observation_spec(env: &ReachEnv) -> ObservationSpec {
         normalization: None,
     }
 }
+
+/// The leaves of two JSON values that differ, by path (`observation.obs_delta_scale`); numbers
+/// equal to 1e-12 relative count as equal (a JSON round trip of an f64 may move its last bit).
+///
+/// With `a_keys_only`, only the fields `a` has are compared (`a` is a spec written by an older
+/// version, which did not have the newer fields), and an array of `a` with the first as many
+/// values of `b`'s.
+fn json_differences(
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+    path: &str,
+    a_keys_only: bool,
+    out: &mut Vec<String>,
+) {
+    use serde_json::Value;
+    let join = |k: &str| if path.is_empty() { k.to_string() } else { format!("{path}.{k}") };
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            let keys: std::collections::BTreeSet<&String> = match a_keys_only {
+                true => x.keys().collect(),
+                false => x.keys().chain(y.keys()).collect(),
+            };
+            for k in keys {
+                let (va, vb) = (x.get(k).unwrap_or(&Value::Null), y.get(k).unwrap_or(&Value::Null));
+                json_differences(va, vb, &join(k), a_keys_only, out);
+            }
+        }
+        // An older spec's layout lists fewer entries (format 3 added the obstacle slots' to a
+        // layout whose `dim` already counted them): its entries against the first ones.
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() || (a_keys_only && x.len() < y.len()) => {
+            for (i, (va, vb)) in x.iter().zip(y).enumerate() {
+                json_differences(va, vb, &format!("{path}[{i}]"), a_keys_only, out);
+            }
+        }
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
+            if !(x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs())) {
+                out.push(path.to_string());
+            }
+        }
+        _ if a == b => {}
+        _ => out.push(path.to_string()),
+    }
+}
+
+/// The value at a JSON path of [`json_differences`], as text (`absent` when there is none).
+fn json_at(v: &serde_json::Value, path: &str) -> String {
+    let mut cur = Some(v);
+    for part in path.split('.') {
+        let (key, index) = match part.split_once('[') {
+            Some((k, i)) => (k, i.trim_end_matches(']').parse::<usize>().ok()),
+            None => (part, None),
+        };
+        cur = cur.and_then(|c| c.get(key));
+        if let Some(i) = index {
+            cur = cur.and_then(|c| c.get(i));
+        }
+    }
+    match cur {
+        None | Some(serde_json::Value::Null) => "absent".into(),
+        Some(v) => crate::base::text::excerpt(&v.to_string()),
+    }
+}
+
+/// The config fields (`task.obs_delta_scale`) whose values differ between two configs' TOML.
+pub fn config_differences(stored_toml: &str, cfg: &Config) -> Vec<(String, String, String)> {
+    let parse = |t: &str| toml::from_str::<toml::Table>(t).ok().and_then(|t| serde_json::to_value(t).ok());
+    let (Some(a), Some(b)) = (parse(stored_toml), parse(&cfg.to_toml_string())) else { return Vec::new() };
+    let mut paths = Vec::new();
+    json_differences(&a, &b, "", false, &mut paths);
+    paths
+        .into_iter()
+        .map(|p| {
+            let (was, is) = (json_at(&a, &p), json_at(&b, &p));
+            (p, was, is)
+        })
+        .collect()
+}
+
+/// An error if the policy a checkpoint was trained as (`stored`, its [`POLICY_KEY`] metadata)
+/// differs from the one the config it is used with describes (`current`) in what goes in or
+/// comes out of it: the observation (its size, layout, scale, obstacle slots, normalisation),
+/// the action (its size, rule, speed limits, control period, joint limits), the joints, the
+/// actor's layers or the algorithm. The error names the policy field, both values and the config
+/// fields that differ (from the checkpoint's `config` metadata, `stored_config`). The robot's
+/// file path is not compared (a run may be moved); its joints and tip are.
+pub fn check_same_policy(
+    stored: &serde_json::Value,
+    current: &PolicySpec,
+    stored_config: Option<&str>,
+    cfg: &Config,
+    origin: &std::path::Path,
+) -> crate::Result<()> {
+    let Ok(current_json) = serde_json::to_value(current) else { return Ok(()) };
+    let mut paths = Vec::new();
+    json_differences(stored, &current_json, "", true, &mut paths);
+    // Not compared: the robot file's path (a run may be moved), the format's version and the
+    // rules and entries in words (`rule_text`, a layout entry's `value`), which versions reword.
+    paths.retain(|p| {
+        p != "robot" && p != "format_version" && !p.ends_with("rule_text") && !p.ends_with(".value")
+    });
+    // The plainest field first: a value of the spec's own before its layout's entries.
+    paths.sort_by_key(|p| (p.contains("layout"), p.clone()));
+    let Some(first) = paths.first() else { return Ok(()) };
+    let fields: Vec<String> = stored_config
+        .map(|t| config_differences(t, cfg))
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(field, was, is)| format!("`{field}` = {was} there, {is} here"))
+        .collect();
+    let fields = match fields.len() {
+        0 => String::new(),
+        n => format!(
+            " (config: {}{})",
+            fields.iter().take(3).cloned().collect::<Vec<_>>().join(", "),
+            if n > 3 { format!(" and {} more", n - 3) } else { String::new() }
+        ),
+    };
+    Err(crate::Error::InvalidInput(format!(
+        "{}: trained with `{first}` = {}, used with {}{fields}: the policy's inputs or outputs \
+         would mean something else; refused",
+        origin.display(),
+        json_at(stored, first),
+        json_at(&current_json, first),
+    )))
+}

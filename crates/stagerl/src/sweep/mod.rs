@@ -160,7 +160,7 @@ impl Preset {
                 names.join(", ")
             )));
         }
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = read_preset(path)?;
         Ok((Preset::from_toml_str(&text, path)?, text))
     }
 
@@ -180,7 +180,7 @@ impl Preset {
 
     /// Read a preset file.
     pub fn load(path: &Path) -> Result<Preset> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = read_preset(path)?;
         Preset::from_toml_str(&text, path)
     }
 
@@ -510,6 +510,14 @@ pub fn run_sweep(
 /// Summarise an existing evaluation file.
 pub fn read_eval(dir: &Path, eval_seed: u64) -> Result<EvalSummary> {
     train::eval::read_run_eval(&RunDir::new(dir), eval_seed)
+}
+
+/// A preset file's text: a regular file of at most [`crate::config::MAX_CONFIG_BYTES`] (a FIFO
+/// or a device is refused unread).
+fn read_preset(path: &Path) -> Result<String> {
+    let bytes = crate::io::read_regular(path, crate::config::MAX_CONFIG_BYTES, "preset")?;
+    String::from_utf8(bytes)
+        .map_err(|e| Error::io(path, std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error())))
 }
 
 #[cfg(test)]

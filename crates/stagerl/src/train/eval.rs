@@ -200,14 +200,26 @@ pub fn load_run_agent(
     cfg: &Config,
     checkpoint: Option<&Path>,
 ) -> Result<(PathBuf, ReachEnv, Box<dyn Agent>)> {
+    let (path, env, agent, _) = load_run_agent_noting(run, cfg, checkpoint)?;
+    Ok((path, env, agent))
+}
+
+/// What [`load_run_agent_noting`] loads: the checkpoint's path, an environment, the agent and the
+/// config fields changed since training.
+pub type NotedAgent = (PathBuf, ReachEnv, Box<dyn Agent>, Vec<super::ConfigChange>);
+
+/// [`load_run_agent`], with the fields of `cfg` that differ from the config the checkpoint was
+/// trained with (a `config.toml` edited since, say), for the caller to report: none of them
+/// changes the policy's inputs or outputs (such a checkpoint is refused).
+pub fn load_run_agent_noting(run: &RunDir, cfg: &Config, checkpoint: Option<&Path>) -> Result<NotedAgent> {
     let checkpoint = match checkpoint {
         Some(c) => c.to_path_buf(),
         None => run.best_available_checkpoint().ok_or_else(|| {
             Error::InvalidInput(format!("{} holds no checkpoint yet", run.checkpoints().display()))
         })?,
     };
-    let (env, agent) = super::load_resolved(&cfg.resolve()?, &checkpoint)?;
-    Ok((checkpoint, env, agent))
+    let (env, agent, changes) = super::load_resolved_noting(&cfg.resolve()?, &checkpoint)?;
+    Ok((checkpoint, env, agent, changes))
 }
 
 /// A trained policy from `path`: a run directory (its best available checkpoint, with its

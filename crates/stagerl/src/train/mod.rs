@@ -101,15 +101,47 @@ pub fn load_agent(cfg: &Config, env: &ReachEnv, path: &Path) -> Result<Box<dyn A
     let ck = checkpoint_for(cfg, path)?;
     let mut agent = build_agent(cfg, env)?;
     agent.load(&ck)?; // the checkpoint's errors name its file
+    check_policy(&ck, cfg, env, agent.as_ref(), path)?;
     Ok(agent)
 }
 
-/// [`load_agent`] for a resolved config, with an environment for it.
+/// [`load_agent`] for a resolved config, with an environment for it; the checkpoint's policy
+/// must be the one the config describes ([`check_policy`]).
 fn load_resolved(run: &Resolved, path: &Path) -> Result<(ReachEnv, Box<dyn Agent>)> {
+    load_resolved_noting(run, path).map(|(env, agent, _)| (env, agent))
+}
+
+/// A config field that differs between the config a checkpoint was trained with and the one it
+/// is used with: the field (`reward.function`), its value there and here.
+pub type ConfigChange = (String, String, String);
+
+/// [`load_resolved`], with the config fields that differ from the checkpoint's own config (none
+/// that changes the policy's inputs or outputs: those are refused).
+fn load_resolved_noting(
+    run: &Resolved,
+    path: &Path,
+) -> Result<(ReachEnv, Box<dyn Agent>, Vec<ConfigChange>)> {
     let ck = checkpoint_for(run.config(), path)?;
     let mut agent = run.learner(Rng::derived(run.config().train.seed, 3).next_u64()).into_agent();
     agent.load(&ck)?;
-    Ok((run.env(0)?, agent))
+    let env = run.env(0)?;
+    check_policy(&ck, run.config(), &env, agent.as_ref(), path)?;
+    let changes = ck
+        .meta("config")
+        .map(|t| crate::run::policy::config_differences(t, run.config()))
+        .unwrap_or_default();
+    Ok((env, agent, changes))
+}
+
+/// An error if checkpoint `ck` (read from `path`) holds a policy with other inputs or outputs
+/// than the one `cfg` describes on `env` ([`crate::run::policy::check_same_policy`]), naming
+/// the field. A checkpoint written before policies were described is not checked here (its
+/// tensors' shapes still are).
+fn check_policy(ck: &Checkpoint, cfg: &Config, env: &ReachEnv, agent: &dyn Agent, path: &Path) -> Result<()> {
+    use crate::run::policy::{check_same_policy, PolicySpec, POLICY_KEY};
+    let Ok(stored) = ck.json::<serde_json::Value>(POLICY_KEY) else { return Ok(()) };
+    let current = PolicySpec::new(cfg, env, agent);
+    check_same_policy(&stored, &current, ck.meta("config").ok(), cfg, path)
 }
 
 /// The checkpoint at `path`, if written for the algorithm of `cfg`.

@@ -40,10 +40,29 @@ pub struct ViewTrajectory {
     pub reached: bool,
     pub steps: u32,
     pub final_distance: f64,
-    /// Per row of the plan, the arm's skeleton: the joint-frame origins then the tip (metres).
+    /// Rows of the plan per frame: 1, or more for a plan of over [`MAX_FRAMES`] rows, of which
+    /// every `stride`-th row is kept (and the last).
+    pub stride: usize,
+    /// Per kept row of the plan, the arm's skeleton: the joint-frame origins then the tip (metres).
     pub frames: Vec<Vec<[f64; 3]>>,
-    /// Distance to the target per row, metres.
+    /// Distance to the target per kept row, metres.
     pub distance: Vec<f64>,
+}
+
+/// Most frames a trajectory of a view keeps (a longer plan is shown every `stride`-th row): what
+/// a view holds stays bounded whatever `--max-steps` a plan ran with (500 trajectories of 8
+/// joint frames: about 100 MB at most, where every row of 500 plans of 10^6 steps would be
+/// hundreds of GB).
+pub const MAX_FRAMES: usize = 1000;
+
+/// The rows of a plan of `rows` rows a view keeps: every `stride`-th, and the last.
+fn kept_rows(rows: usize) -> (usize, Vec<usize>) {
+    let stride = rows.div_ceil(MAX_FRAMES).max(1);
+    let mut kept: Vec<usize> = (0..rows).step_by(stride).collect();
+    if rows > 0 && kept.last() != Some(&(rows - 1)) {
+        kept.push(rows - 1);
+    }
+    (stride, kept)
 }
 
 /// What a view shows (serialised into the page).
@@ -95,15 +114,20 @@ impl View {
                 "a view holds at most {MAX_TRAJECTORIES} trajectories; `{label}` would be one more"
             )));
         }
-        let frames = plan.q.chunks_exact(plan.dof).map(|q| chain.joint_origins(q)).collect::<Result<_>>()?;
+        let (stride, kept) = kept_rows(plan.rows());
+        let frames = kept
+            .iter()
+            .map(|&k| chain.joint_origins(&plan.q[k * plan.dof..(k + 1) * plan.dof]))
+            .collect::<Result<_>>()?;
         self.trajectories.push(ViewTrajectory {
             label: label.into(),
             target,
             reached: plan.summary.reached,
             steps: plan.summary.steps,
             final_distance: plan.summary.final_distance,
+            stride,
             frames,
-            distance: plan.distance.clone(),
+            distance: kept.iter().map(|&k| plan.distance[k]).collect(),
         });
         Ok(())
     }
@@ -251,6 +275,41 @@ mod tests {
         view.trajectories = vec![t.clone(); MAX_TRAJECTORIES];
         let e = view.push(&chain, "one more", target, &plan).unwrap_err().to_string();
         assert!(e.contains("at most 500") && e.contains("one more"), "{e}");
+    }
+
+    #[test]
+    fn a_long_plan_is_kept_as_at_most_max_frames_frames() {
+        let cfg = Config::default();
+        let mut planner = Planner::jacobian(&cfg, None).unwrap();
+        let target = [0.4, 0.2, 0.3];
+        let short = planner.plan(&target, None).unwrap();
+        // A plan of 100 001 rows (the short one's rows over and over), 100 000 steps.
+        let rows = 100_001;
+        let mut long = short.clone();
+        let (dof, n) = (short.dof, short.rows());
+        long.q = (0..rows).flat_map(|k| short.q[(k % n) * dof..(k % n + 1) * dof].to_vec()).collect();
+        long.joint_vel = long.q.clone();
+        long.distance = (0..rows).map(|k| k as f64).collect();
+        long.reward = vec![0.0; rows];
+        long.ee_pos = (0..rows).map(|k| short.ee_pos[k % n]).collect();
+        long.ee_quat = (0..rows).map(|k| short.ee_quat[k % n]).collect();
+        long.summary.steps = (rows - 1) as u32;
+        assert_eq!(long.rows(), rows);
+        let chain = planner.env().chain().clone();
+        let mut view = View::for_planner("long", &planner);
+        view.push(&chain, "long", target, &long).unwrap();
+        view.push(&chain, "short", target, &short).unwrap();
+        let t = &view.trajectories[0];
+        assert_eq!(t.stride, 101, "100 001 rows in frames of 101 rows");
+        assert!(t.frames.len() <= MAX_FRAMES + 1 && t.frames.len() == t.distance.len(), "{}", t.frames.len());
+        // Every 101st row, then the last.
+        assert_eq!(&t.distance[..3], [0.0, 101.0, 202.0]);
+        assert_eq!(*t.distance.last().unwrap(), 100_000.0);
+        // A short plan keeps every row.
+        let s = &view.trajectories[1];
+        assert_eq!((s.stride, s.frames.len()), (1, short.rows()));
+        let html = view.to_html().unwrap();
+        assert!(html.len() < 1 << 20, "{} bytes", html.len());
     }
 
     #[test]

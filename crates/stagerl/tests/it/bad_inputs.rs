@@ -173,6 +173,14 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[train]\nobstacles_in_path = 0.5\n", expect: "train.obstacles_in_path" },
     Cfg { toml: "[train]\nobstacles_in_path = 2\n[task.random_obstacles]\n", expect: "train.obstacles_in_path" },
     Cfg { toml: "[train]\nobstacles_in_path = nan\n[task.random_obstacles]\n", expect: "train.obstacles_in_path" },
+    // Settings that make a check or a mechanism a no-op (or fire at once).
+    Cfg { toml: "[task]\non_collision = \"terminate\"\n[task.collision]\nfloor = false\nself_collision = false\n", expect: "no contact can ever end an episode" },
+    Cfg { toml: "[task]\non_collision = \"terminate\"\n[[task.obstacles]]\nshape = \"sphere\"\nradius_m = 0.3\nposition_m = [0, 0, 0.6]\n", expect: "touches (link `" },
+    Cfg { toml: "[task.random_obstacles]\ntarget_clearance_m = 1e9\n", expect: "`task.random_obstacles` = { target_clearance_m = 1000000000" },
+    Cfg { toml: "[task.random_obstacles]\nregion_min_m = [-0.1, -0.1, 0.0]\nregion_max_m = [0.1, 0.1, 0.3]\nsize_m = [0.5, 0.6]\n", expect: "none of up to" },
+    Cfg { toml: "[robot]\nurdf = \"$DIR/mesh.urdf\"\n[task]\nhome_pose_rad = [0, 0]\ntarget_joint_range_rad = [1, 1]\n", expect: "links `l1`, `tip` have only mesh collision geometry" },
+    // PPO's minibatch (num_envs x num_steps / num_minibatches rows) counts in the estimate.
+    Cfg { toml: "[agent]\nalgo = \"ppo\"\nhidden = [4096, 4096]\n[agent.ppo]\nnum_envs = 4096\nnum_steps = 1024\nnum_minibatches = 1\n", expect: "`agent.ppo.num_minibatches` = 1 (minibatches of 4194304 transitions) is invalid" },
 ];
 
 const TWO_JOINT_URDF: &str = r#"<robot name="two">
@@ -187,6 +195,15 @@ const TWO_JOINT_URDF: &str = r#"<robot name="two">
 fn bad_configs_are_refused_naming_the_field() {
     let dir = Scratch::new("cfg");
     std::fs::write(dir.0.join("two.urdf"), TWO_JOINT_URDF).unwrap();
+    // The two-joint arm with mesh collision geometry only.
+    let mesh = "<collision><geometry><mesh filename=\"package://x/m.stl\"/></geometry></collision>";
+    std::fs::write(
+        dir.0.join("mesh.urdf"),
+        TWO_JOINT_URDF
+            .replace("<link name=\"l1\"/>", &format!("<link name=\"l1\">{mesh}</link>"))
+            .replace("<link name=\"tip\"/>", &format!("<link name=\"tip\">{mesh}</link>")),
+    )
+    .unwrap();
     std::fs::write(
         dir.0.join("bad.urdf"),
         TWO_JOINT_URDF.replace("<link name=\"tip\"/>", "<link name=\"tip\"/><link name=\"side\"/>").replace(

@@ -3,6 +3,7 @@
 
 mod bad_inputs;
 mod code_shape;
+mod degenerate;
 mod determinism;
 mod docs_links;
 mod float_roundtrip;

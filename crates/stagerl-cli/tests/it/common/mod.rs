@@ -54,7 +54,12 @@ pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
             if p.file_name().is_some_and(|n| n == stagerl::run::dir::LOCK_FILE) {
                 continue;
             }
-            if p.is_dir() {
+            let link = std::fs::symlink_metadata(&p).unwrap().file_type().is_symlink();
+            if link {
+                // Its target's name, not its contents (it may point at /dev/zero).
+                let target = std::fs::read_link(&p).unwrap();
+                out.insert(p.clone(), Some(target.to_string_lossy().as_bytes().to_vec()));
+            } else if p.is_dir() {
                 out.insert(p.clone(), None);
                 stack.push(p);
             } else {
