@@ -178,7 +178,10 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[task]\non_collision = \"terminate\"\n[[task.obstacles]]\nshape = \"sphere\"\nradius_m = 0.3\nposition_m = [0, 0, 0.6]\n", expect: "touches (link `" },
     Cfg { toml: "[task.random_obstacles]\ntarget_clearance_m = 1e9\n", expect: "`task.random_obstacles` = { target_clearance_m = 1000000000" },
     Cfg { toml: "[task.random_obstacles]\nregion_min_m = [-0.1, -0.1, 0.0]\nregion_max_m = [0.1, 0.1, 0.3]\nsize_m = [0.5, 0.6]\n", expect: "none of up to" },
-    Cfg { toml: "[robot]\nurdf = \"$DIR/mesh.urdf\"\n[task]\nhome_pose_rad = [0, 0]\ntarget_joint_range_rad = [1, 1]\n", expect: "links `l1`, `tip` have only mesh collision geometry" },
+    // Its meshes cannot be found: an error naming the link and the file; told to go on without
+    // them, the checks that would then never see a contact are refused.
+    Cfg { toml: "[robot]\nurdf = \"$DIR/mesh.urdf\"\n[task]\nhome_pose_rad = [0, 0]\ntarget_joint_range_rad = [1, 1]\n", expect: "link `l1`: collision mesh `package://x/m.stl` cannot be used" },
+    Cfg { toml: "[robot]\nurdf = \"$DIR/mesh.urdf\"\nmissing_collision = \"ignore\"\n[task]\nhome_pose_rad = [0, 0]\ntarget_joint_range_rad = [1, 1]\n", expect: "the collision meshes of links `l1`, `tip` were not loaded" },
     // PPO's minibatch (num_envs x num_steps / num_minibatches rows) counts in the estimate.
     Cfg { toml: "[agent]\nalgo = \"ppo\"\nhidden = [4096, 4096]\n[agent.ppo]\nnum_envs = 4096\nnum_steps = 1024\nnum_minibatches = 1\n", expect: "`agent.ppo.num_minibatches` = 1 (minibatches of 4194304 transitions) is invalid" },
 ];
