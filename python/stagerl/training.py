@@ -24,7 +24,7 @@ from typing import Any, Callable, Mapping, Optional, Union
 import numpy as np
 
 from . import _core
-from .policies import Policy
+from .policies import Policy, plan as _plan
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -136,7 +136,8 @@ class Run:
     ``steps``, ``success``, ``final_distance_m``, ``env_steps``, ``collision_steps``,
     ``wall_s``) and ``evaluations`` (``eval.csv``, the periodic evaluations: ``episode``,
     ``env_steps``, ``success_rate``, ``mean_reward``, ``mean_steps``,
-    ``median_final_distance_m``; empty when there were none).
+    ``median_final_distance_m``; empty when there were none). Methods: :meth:`policy`,
+    :meth:`evaluate`, :meth:`export_onnx`, :meth:`plan`.
     """
 
     def __init__(self, directory: Union[str, "os.PathLike[str]"]):
@@ -169,6 +170,38 @@ class Run:
             name = names[checkpoint]
             return Policy.load(self.dir if name is None else os.path.join(self.dir, "checkpoints", name))
         return Policy.load(checkpoint)
+
+    def _checkpoint(self, checkpoint: str) -> str:
+        if not isinstance(checkpoint, (str, os.PathLike)):
+            raise ValueError(f"`checkpoint` = {checkpoint!r} is invalid: \"best\", \"final\", \"latest\" or a path")
+        return os.fspath(checkpoint)
+
+    def evaluate(self, trials: int = 500, seed: int = 0, checkpoint: str = "best",
+                 obstacles_in_path: Optional[float] = None) -> dict:
+        """``stagerl eval``'s figures for the run's deterministic policy under its config, on
+        ``trials`` random targets of ``seed`` (nothing is written): ``trials``,
+        ``success_rate``, ``mean_reward``, ``mean_steps_success``, ``median_final_distance_m``,
+        ``mean_final_distance_m`` and ``collision_rate`` when contacts are checked.
+        ``obstacles_in_path``: the probability that the first random obstacle is placed across
+        the way (the run's task must have random obstacles). The GIL is released meanwhile."""
+        for name, value in [("trials", trials), ("seed", seed)]:
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ValueError(f"`{name}` = {value!r} is invalid: a non-negative integer")
+        if obstacles_in_path is not None and not (isinstance(obstacles_in_path, (int, float)) and 0.0 <= obstacles_in_path <= 1.0):
+            raise ValueError(f"`obstacles_in_path` = {obstacles_in_path!r} is invalid: a probability in [0, 1]")
+        text = _core.evaluate_run(self.dir, int(trials), int(seed), self._checkpoint(checkpoint),
+                                  None if obstacles_in_path is None else float(obstacles_in_path))
+        return json.loads(text)
+
+    def export_onnx(self, path, checkpoint: str = "best", force: bool = False) -> str:
+        """Write the run's policy as an ONNX model to ``path`` (``stagerl export``: observation in,
+        joint velocities in rad/s out); an existing file is replaced only with ``force=True``, and
+        never one of the run's own files. Returns the checkpoint exported."""
+        return _core.export_onnx(self.dir, os.fspath(path), self._checkpoint(checkpoint), bool(force))
+
+    def plan(self, target, start=None, checkpoint: Optional[str] = None, max_steps: Optional[int] = None) -> dict:
+        """:func:`stagerl.plan` with this run's policy."""
+        return _plan(self.dir, target, start=start, checkpoint=checkpoint, max_steps=max_steps)
 
     def __repr__(self) -> str:
         return f"Run({self.dir!r})"

@@ -152,3 +152,31 @@ def test_bad_settings_raise_value_errors_with_the_cli_messages(tmp_path):
         stagerl.train(TINY, out=tmp_path / "once", episodes=5)
     with pytest.raises(FileNotFoundError):
         stagerl.Run.load(tmp_path / "nothing")
+
+
+def test_a_run_evaluates_exports_and_plans_as_the_cli_does(tmp_path, stagerl_bin):
+    run = stagerl.train(TINY, out=tmp_path / "run", episodes=60, eval_trials=0)
+    ours = run.evaluate(trials=20, seed=3)
+    cli = subprocess.run([stagerl_bin, "eval", "--run", run.dir, "--trials", "20", "--seed", "3", "--json"],
+                         check=True, capture_output=True, text=True)
+    import json
+
+    theirs = json.loads(cli.stdout.strip().splitlines()[-1])
+    for key in ["trials", "success_rate", "mean_reward", "median_final_distance_m"]:
+        assert ours[key] == theirs[key], key
+    final = run.evaluate(trials=20, seed=3, checkpoint="final")
+    assert final["trials"] == 20
+    onnx = tmp_path / "policy.onnx"
+    used = run.export_onnx(onnx)
+    assert used.endswith("best.safetensors") and onnx.stat().st_size > 1000
+    assert run.export_onnx(onnx) == used  # the same bytes again: left as it is
+    with pytest.raises(ValueError, match="force"):
+        run.export_onnx(onnx, checkpoint="final")  # other bytes onto an existing file
+    assert run.export_onnx(onnx, checkpoint="final", force=True).endswith("final.safetensors")
+    with pytest.raises(ValueError):
+        run.export_onnx(os.path.join(run.dir, "checkpoints", "final.safetensors"), force=True)
+    plan = run.plan([0.4, 0.2, 0.3])
+    assert plan["summary"]["steps"] >= 1 and plan["q"].shape == (plan["summary"]["steps"] + 1, 6)
+    for bad in [dict(trials=-1), dict(seed="x"), dict(obstacles_in_path=2.0), dict(checkpoint=5)]:
+        with pytest.raises(ValueError):
+            run.evaluate(**bad)

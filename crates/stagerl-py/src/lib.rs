@@ -80,6 +80,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<policy::PolicyCore>()?;
     m.add_function(wrap_pyfunction!(policy::plan, m)?)?;
     m.add_function(wrap_pyfunction!(train::train, m)?)?;
+    m.add_function(wrap_pyfunction!(train::evaluate_run, m)?)?;
+    m.add_function(wrap_pyfunction!(train::export_onnx, m)?)?;
     m.add_function(wrap_pyfunction!(reward::compute, m)?)?;
     m.add_function(wrap_pyfunction!(reward::keys, m)?)?;
     Ok(())

@@ -269,3 +269,66 @@ fn closing_evaluation(out: &Path, cfg: &Config, trials: u32, how: &'static str) 
     }
     Ok(how)
 }
+
+/// The checkpoint `checkpoint` names in the run `dir`: "best" (the best periodic evaluation's,
+/// else the final one: `None` to the library), "final", "latest", or a file's path.
+fn checkpoint_of(dir: &RunDir, checkpoint: &str) -> Option<PathBuf> {
+    match checkpoint {
+        "best" => None,
+        "final" => Some(dir.final_checkpoint()),
+        "latest" => Some(dir.latest()),
+        path => Some(PathBuf::from(path)),
+    }
+}
+
+/// Evaluate a run's policy (deterministic) under its config on `trials` targets of `seed`, the
+/// first obstacle in the way with probability `obstacles_in_path` when set; the summary as JSON
+/// (`stagerl eval`'s figures; nothing is written). The GIL is released meanwhile.
+#[pyfunction]
+#[pyo3(signature = (run, trials=500, seed=0, checkpoint="best", obstacles_in_path=None))]
+pub fn evaluate_run(
+    py: Python<'_>,
+    run: PathBuf,
+    trials: u32,
+    seed: u64,
+    checkpoint: &str,
+    obstacles_in_path: Option<f64>,
+) -> PyResult<String> {
+    if !(1..=stagerl::config::MAX_EVAL_TRIALS).contains(&trials) {
+        let allowed = format!("1 to {}", stagerl::config::MAX_EVAL_TRIALS);
+        return Err(bad_arg("trials", trials, &allowed));
+    }
+    py.detach(|| {
+        guard("Run.evaluate", || {
+            let dir = RunDir::new(&run);
+            let cfg = dir.load_config().map_err(to_py)?;
+            let ckpt = checkpoint_of(&dir, checkpoint);
+            let (_, mut env, mut agent, _) =
+                trainer::eval::load_run_agent_noting(&dir, &cfg, ckpt.as_deref()).map_err(to_py)?;
+            if let Some(p) = obstacles_in_path.filter(|&p| p != 0.0) {
+                env.set_obstacles_in_path(p).map_err(to_py)?;
+            }
+            let opts = trainer::eval::EvalOptions::new(trials, seed);
+            let policy = &mut stagerl::env::Policy(trainer::eval::deterministic(agent.as_mut()));
+            let (summary, _) = trainer::eval::evaluate(&mut env, policy, &opts).map_err(to_py)?;
+            serde_json::to_string(&summary).map_err(|e| bad_arg("run", run.display(), &e.to_string()))
+        })
+    })
+}
+
+/// Write a run's policy as an ONNX model to `out` (`stagerl export`: the same checks of the
+/// output path; an existing file is replaced only with `force`); the checkpoint exported.
+#[pyfunction]
+#[pyo3(signature = (run, out, checkpoint="best", force=false))]
+pub fn export_onnx(run: PathBuf, out: PathBuf, checkpoint: &str, force: bool) -> PyResult<String> {
+    guard("Run.export_onnx", || {
+        let dir = RunDir::new(&run);
+        let ckpt = checkpoint_of(&dir, checkpoint);
+        let inputs: Vec<&Path> = ckpt.as_deref().into_iter().collect();
+        stagerl::run::dir::check_output_path(&out, "path", &inputs).map_err(to_py)?;
+        let (used, bytes) = stagerl::export::onnx_of_run(&dir, ckpt.as_deref()).map_err(to_py)?;
+        stagerl::run::dir::check_output_path(&out, "path", &[&used]).map_err(to_py)?;
+        stagerl::io::write_new(&out, &bytes, force).map_err(to_py)?;
+        Ok(used.display().to_string())
+    })
+}
