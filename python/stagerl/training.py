@@ -31,7 +31,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - the tests run on 3.11
     import tomli as tomllib
 
-__all__ = ["train", "Run"]
+__all__ = ["train", "Run", "report"]
 
 ConfigLike = Union[None, str, "os.PathLike[str]", Mapping[str, Any]]
 
@@ -109,6 +109,21 @@ def train(
         callback_every_episodes=callback_every_episodes,
     )
     return Run.load(directory)
+
+
+def report(runs, out, trajectories: int = 5, include_incomplete: bool = False) -> dict:
+    """``stagerl report``: Table 1, the claims with their verdicts, aggregates and figures of the
+    runs under ``runs`` (a folder of run directories, or a study's ``runs.tar.xz``), written into
+    ``out``; returns the report (``out``/table1.json) as a dict, with ``files``: the paths
+    written. The GIL is released meanwhile."""
+    if isinstance(trajectories, bool) or not isinstance(trajectories, (int, np.integer)) or not 0 <= trajectories <= 1000:
+        raise ValueError(f"`trajectories` = {trajectories!r} is invalid: an integer from 0 to 1000")
+    out = os.fspath(out)
+    files = _core.report(os.fspath(runs), out, int(trajectories), bool(include_incomplete))
+    with open(os.path.join(out, "table1.json"), encoding="utf-8") as f:
+        doc = json.load(f)
+    doc["files"] = files
+    return doc
 
 
 def _columns(path: str) -> dict:

@@ -180,3 +180,16 @@ def test_a_run_evaluates_exports_and_plans_as_the_cli_does(tmp_path, stagerl_bin
     for bad in [dict(trials=-1), dict(seed="x"), dict(obstacles_in_path=2.0), dict(checkpoint=5)]:
         with pytest.raises(ValueError):
             run.evaluate(**bad)
+
+
+def test_report_writes_the_committed_report_of_the_quick_study(tmp_path, root):
+    study = root / "docs" / "results" / "quick"
+    doc = stagerl.report(study / "runs.tar.xz", tmp_path / "report", trajectories=0)
+    assert len(doc["claims"]) == 21 and any(f.endswith("claims.md") for f in doc["files"])
+    keep = lambda t: [l for l in t.splitlines() if not l.startswith("This report: `")]  # noqa: E731
+    for name in ["claims.md", "aggregates.md"]:
+        assert keep((tmp_path / "report" / name).read_text()) == keep((study / name).read_text()), name
+    with pytest.raises(ValueError, match="trajectories"):
+        stagerl.report(study / "runs.tar.xz", tmp_path / "r2", trajectories=5000)
+    with pytest.raises((ValueError, FileNotFoundError)):
+        stagerl.report(tmp_path / "nothing", tmp_path / "r3")

@@ -78,7 +78,7 @@ fn config(
 
 /// What the callback is given: the episode's counters, the training success and reward over
 /// the last 100 episodes, and the periodic evaluation's figures when one ran.
-fn report<'py>(
+fn progress_report<'py>(
     py: Python<'py>,
     p: &Progress<'_>,
     recent: &VecDeque<(f64, bool)>,
@@ -143,7 +143,7 @@ impl Watch {
                 return;
             }
             let Some(cb) = self.callback.as_ref().filter(|_| due) else { return };
-            match report(py, p, &self.recent).and_then(|d| cb.call1(py, (d,))) {
+            match progress_report(py, p, &self.recent).and_then(|d| cb.call1(py, (d,))) {
                 Ok(v) if v.bind(py).is(pyo3::types::PyBool::new(py, false)) => {
                     self.by_callback = true;
                     self.flag.store(true, Ordering::SeqCst);
@@ -330,5 +330,28 @@ pub fn export_onnx(run: PathBuf, out: PathBuf, checkpoint: &str, force: bool) ->
         stagerl::run::dir::check_output_path(&out, "path", &[&used]).map_err(to_py)?;
         stagerl::io::write_new(&out, &bytes, force).map_err(to_py)?;
         Ok(used.display().to_string())
+    })
+}
+
+/// `stagerl report`: the report of the runs under `dir` (a folder of runs or a study's
+/// `runs.tar.xz`) written into `out`; the files written. The GIL is released meanwhile.
+#[pyfunction]
+#[pyo3(signature = (dir, out, trajectories=5, include_incomplete=false))]
+pub fn report(
+    py: Python<'_>,
+    dir: PathBuf,
+    out: PathBuf,
+    trajectories: u32,
+    include_incomplete: bool,
+) -> PyResult<Vec<String>> {
+    py.detach(|| {
+        guard("report", || {
+            let mut opts = stagerl::report::ReportOptions::new(&out);
+            opts.trajectories = trajectories;
+            opts.include_incomplete = include_incomplete;
+            opts.command = vec!["stagerl.report (Python)".into(), dir.display().to_string()];
+            let r = stagerl::report::generate(&dir, &opts).map_err(to_py)?;
+            Ok(r.files.iter().map(|f| out.join(f).display().to_string()).collect())
+        })
     })
 }
