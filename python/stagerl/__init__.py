@@ -22,10 +22,10 @@ from . import envs, kinematics, policies, rewards, training, vector
 from .envs import ReachEnv, register_envs
 from .kinematics import Chain
 from .policies import Policy, plan
-from .training import Run, report, train
+from .training import Run, report, reproduce, train
 from .vector import ReachVectorEnv
 
 __version__ = _core.__version__
-__all__ = ["ReachEnv", "ReachVectorEnv", "Chain", "Policy", "plan", "train", "Run", "report", "training", "policies", "envs", "kinematics", "rewards", "vector", "register_envs", "__version__"]
+__all__ = ["ReachEnv", "ReachVectorEnv", "Chain", "Policy", "plan", "train", "Run", "report", "reproduce", "training", "policies", "envs", "kinematics", "rewards", "vector", "register_envs", "__version__"]
 
 register_envs()

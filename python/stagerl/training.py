@@ -31,7 +31,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - the tests run on 3.11
     import tomli as tomllib
 
-__all__ = ["train", "Run", "report"]
+__all__ = ["train", "Run", "report", "reproduce"]
 
 ConfigLike = Union[None, str, "os.PathLike[str]", Mapping[str, Any]]
 
@@ -124,6 +124,22 @@ def report(runs, out, trajectories: int = 5, include_incomplete: bool = False) -
         doc = json.load(f)
     doc["files"] = files
     return doc
+
+
+def reproduce(preset, out, jobs: int = 1, task_index: Optional[int] = None,
+              task_count: Optional[int] = None) -> dict:
+    """``stagerl reproduce``: train and evaluate every run of ``preset`` (a bundled preset's name,
+    ``quick``, ``tuned``, ``paper``..., or a preset file) into ``out``, ``jobs`` at once;
+    finished runs are skipped and interrupted ones resume. ``task_index`` of ``task_count``
+    takes one shard (default: Slurm's array variables, else all). Ctrl-C saves the runs under
+    way and raises KeyboardInterrupt; failed runs raise RuntimeError naming each. Returns
+    ``runs`` (in this shard), ``taken`` (by other processes) and ``wall_s``; then
+    :func:`report` makes the tables."""
+    for name, value in [("jobs", jobs), ("task_index", task_index), ("task_count", task_count)]:
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0):
+            raise ValueError(f"`{name}` = {value!r} is invalid: a non-negative integer")
+    runs, taken, wall_s = _core.reproduce(os.fspath(preset), os.fspath(out), int(jobs), task_index, task_count)
+    return {"runs": runs, "taken": taken, "wall_s": wall_s}
 
 
 def _columns(path: str) -> dict:

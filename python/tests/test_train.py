@@ -193,3 +193,25 @@ def test_report_writes_the_committed_report_of_the_quick_study(tmp_path, root):
         stagerl.report(study / "runs.tar.xz", tmp_path / "r2", trajectories=5000)
     with pytest.raises((ValueError, FileNotFoundError)):
         stagerl.report(tmp_path / "nothing", tmp_path / "r3")
+
+
+def test_reproduce_then_report_a_tiny_sweep(tmp_path):
+    preset = tmp_path / "tiny.toml"
+    preset.write_text(
+        '[sweep]\nalgorithms = ["sac"]\nrewards = ["posture", "sar"]\nseeds = [1, 2]\neval_trials = 10\nregime = "tuned"\n'
+        '[agent]\nhidden = [16, 16]\nbatch_size = 32\nlearning_starts = 200\n'
+        '[train]\nepisodes = 40\neval_every_episodes = 20\neval_trials = 5\n'
+    )
+    out = tmp_path / "sweep"
+    done = stagerl.reproduce(preset, out, jobs=2)
+    assert done["runs"] == 4 and done["taken"] == 0
+    for name in ["sac-posture-seed1", "sac-sar-seed2"]:
+        assert len(stagerl.Run.load(out / name).episodes["episode"]) == 40
+    again = stagerl.reproduce(preset, out)  # finished runs are skipped
+    assert again["runs"] == 4 and again["wall_s"] < done["wall_s"] + 5
+    doc = stagerl.report(out, tmp_path / "report", trajectories=0)
+    assert sorted((g["algo"], g["reward"], g["seeds"]) for g in doc["groups"]) == [("sac", "posture", 2), ("sac", "sar", 2)]
+    with pytest.raises(ValueError):
+        stagerl.reproduce("no-such-preset", tmp_path / "x")
+    with pytest.raises(ValueError):
+        stagerl.reproduce(preset, tmp_path / "y", jobs=0)

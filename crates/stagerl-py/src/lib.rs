@@ -83,6 +83,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(train::evaluate_run, m)?)?;
     m.add_function(wrap_pyfunction!(train::export_onnx, m)?)?;
     m.add_function(wrap_pyfunction!(train::report, m)?)?;
+    m.add_function(wrap_pyfunction!(train::reproduce, m)?)?;
     m.add_function(wrap_pyfunction!(reward::compute, m)?)?;
     m.add_function(wrap_pyfunction!(reward::keys, m)?)?;
     Ok(())

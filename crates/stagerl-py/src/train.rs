@@ -355,3 +355,70 @@ pub fn report(
         })
     })
 }
+
+/// `stagerl reproduce`: the runs of `preset` (a bundled preset's name or a preset file) into
+/// `out`, `jobs` at once, with its shard (`task_index` of `task_count`); finished runs are
+/// skipped and interrupted ones resume, as the CLI does. The sweep runs on its own threads while
+/// this one, without the GIL, looks for Ctrl-C every 100 ms: the runs are then saved and
+/// `KeyboardInterrupt` raised. Returns `(runs in this shard, taken by other processes, wall
+/// seconds)`; failed runs raise `RuntimeError` naming each.
+#[pyfunction]
+#[pyo3(signature = (preset, out, jobs=1, task_index=None, task_count=None))]
+pub fn reproduce(
+    py: Python<'_>,
+    preset: &str,
+    out: PathBuf,
+    jobs: usize,
+    task_index: Option<usize>,
+    task_count: Option<usize>,
+) -> PyResult<(usize, usize, f64)> {
+    use stagerl::sweep;
+    if jobs == 0 {
+        return Err(bad_arg("jobs", 0, "at least 1"));
+    }
+    let (spec, text) = sweep::Preset::resolve(preset).map_err(to_py)?;
+    let (index, count) =
+        sweep::resolve_shard(task_index, task_count, &|name| std::env::var(name).ok()).map_err(to_py)?;
+    let runs = sweep::shard(spec.runs(), index, count).map_err(to_py)?;
+    sweep::check_all_existing(&runs, &out).map_err(to_py)?;
+    sweep::write_preset(&out, &text).map_err(to_py)?;
+    let argv = vec!["stagerl.reproduce (Python)".to_string(), preset.to_string(), out.display().to_string()];
+    let recorder = stagerl::run::provenance::Recorder::start(&out, argv).map_err(to_py)?;
+    let stop = AtomicBool::new(false);
+    let mut signal: Option<PyErr> = None;
+    let outcome = py.detach(|| {
+        std::thread::scope(|scope| {
+            let sweep = scope.spawn(|| sweep::run_sweep(&runs, &out, &spec.sweep, jobs, &stop, &|_| {}));
+            while !sweep.is_finished() {
+                std::thread::sleep(SIGNAL_POLL);
+                if signal.is_none() {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        signal = Some(e);
+                        stop.store(true, Ordering::SeqCst);
+                    }
+                }
+            }
+            sweep.join().map_err(|_| pyo3::exceptions::PyRuntimeError::new_err("the sweep's thread panicked"))
+        })
+    })?;
+    let ended = if outcome.interrupted || signal.is_some() {
+        "interrupted".to_string()
+    } else if !outcome.failures.is_empty() {
+        format!("{} of {} runs failed", outcome.failures.len(), runs.len())
+    } else {
+        format!("finished ({} runs taken by other processes)", outcome.taken)
+    };
+    recorder.finish(&out, &ended).map_err(to_py)?;
+    if let Some(e) = signal {
+        return Err(e);
+    }
+    if !outcome.failures.is_empty() {
+        return Err(pyo3::exceptions::PyRuntimeError::new_err(format!(
+            "{} of {} runs failed:\n  {}",
+            outcome.failures.len(),
+            runs.len(),
+            outcome.failures.join("\n  ")
+        )));
+    }
+    Ok((runs.len(), outcome.taken, outcome.wall_s))
+}
