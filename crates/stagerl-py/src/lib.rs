@@ -17,6 +17,8 @@ use pyo3::prelude::*;
 mod env;
 mod kin;
 mod policy;
+mod raster;
+mod render;
 mod reward;
 mod train;
 mod vec;
