@@ -101,7 +101,7 @@ def check_render_args(render_mode: Optional[str], render_width: Optional[int], r
             raise ValueError(f"`{name}` = {v!r} is invalid without a render mode: pass render_mode='rgb_array' too")
 
 
-def enable_render(env, core, render_mode: Optional[str], render_width: Optional[int], render_height: Optional[int]) -> None:
+def enable_render(env: Union[gym.Env, "gym.vector.VectorEnv"], core: Any, render_mode: Optional[str], render_width: Optional[int], render_height: Optional[int]) -> None:
     """Set ``env.render_mode`` and, for ``"rgb_array"``, make the native ``core`` draw frames of
     the given size (pixels; None: 480 x 360) and ``env.metadata["render_fps"]`` ``1 / dt_s``."""
     env.render_mode = render_mode
@@ -111,8 +111,10 @@ def enable_render(env, core, render_mode: Optional[str], render_width: Optional[
     env.metadata = {**type(env).metadata, "render_fps": 1.0 / env.dt_s}
 
 
-def core_args(reward, config, robot) -> dict:
-    """The native constructor's keyword arguments for the environment's arguments, checked."""
+def core_args(reward: Optional[str], config: Union[None, str, os.PathLike, dict],
+              robot: Union[None, str, os.PathLike]) -> dict:
+    """The native constructor's keyword arguments for the environment's arguments (see
+    :class:`ReachEnv`), checked: ValueError or FileNotFoundError naming a bad one."""
     reward = _str_arg("reward", reward, "one of 'basic', 'posture', 'stride', 'har', 'sar'")
     robot = _str_arg("robot", robot, "'ur5', 'panda' or a path to a URDF file")
     if robot is not None and robot not in ("ur5", "panda") and not os.path.isfile(robot):
@@ -120,7 +122,7 @@ def core_args(reward, config, robot) -> dict:
     return {"reward": reward, "robot": robot, **_config_args(config)}
 
 
-def describe(env, core) -> tuple:
+def describe(env: Union[gym.Env, "gym.vector.VectorEnv"], core: Any) -> tuple:
     """Set ``env``'s ``max_steps``, ``dt_s`` (seconds), ``joint_names`` and ``_beta_m``
     (metres) from the native ``core``; one environment's observation and action spaces (float32,
     finite bounds; actions in [-1, 1])."""
@@ -177,7 +179,10 @@ class ReachEnv(gym.Env):
             return None
         return self._core.render()
 
-    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None) -> tuple[np.ndarray, dict]:
+        """Start an episode: ``(observation, {"distance": metres, "is_success": bool})``; ``seed``
+        reseeds ``np_random``, ``options={"target": [x, y, z], "start": [q1, ...]}`` sets the
+        target (metres) and the start pose (radians). The path drawn by :meth:`render` restarts."""
         super().reset(seed=seed)
         if options:
             obs, distance = self._reset_to(options)
@@ -199,7 +204,10 @@ class ReachEnv(gym.Env):
             raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
         return self._core.reset_to(target, start)
 
-    def step(self, action):
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """One step with ``action`` (one value per joint in [-1, 1]): ``(observation, reward,
+        terminated, truncated, info)``, ``info`` holding every reward term, ``collision`` and
+        ``is_success``."""
         action = np.asarray(action, dtype=np.float32)
         if action.shape != self.action_space.shape:
             raise ValueError(f"`action.shape` = {action.shape} is invalid: expected {self.action_space.shape}")

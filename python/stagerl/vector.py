@@ -32,6 +32,7 @@ sub-environment's path restarts with its episode (autoresets included).
 
 from __future__ import annotations
 
+import os
 from typing import Optional, Sequence, Union
 
 import gymnasium as gym
@@ -55,7 +56,8 @@ class ReachVectorEnv(VectorEnv):
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 20, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int = 1, reward: Optional[str] = None, config=None, robot=None,
+    def __init__(self, num_envs: int = 1, reward: Optional[str] = None,
+                 config: Union[None, str, os.PathLike, dict] = None, robot: Union[None, str, os.PathLike] = None,
                  render_mode: Optional[str] = None, render_width: Optional[int] = None,
                  render_height: Optional[int] = None):
         """``num_envs`` (an integer >= 1) environments; the other arguments as for
