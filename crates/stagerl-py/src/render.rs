@@ -6,10 +6,10 @@
 //! A small software rasterizer ([`crate::raster`]): each solid is drawn over its screen
 //! rectangle by casting each pixel's ray at it, with a depth buffer; the floor and sky are drawn
 //! once (the camera does not move) and copied under every frame; the path is a depth-tested
-//! polyline. No GPU. Every buffer is made on the first frame and reused: a frame allocates
-//! nothing after the first (a frame with more obstacles than any before it grows the list of
-//! solids once). Rendering only reads the environment: its results are the same with or
-//! without it.
+//! polyline. No GPU. Every buffer is made with the renderer (when the environment is made with
+//! `render_mode="rgb_array"`) and reused, the list of solids sized for the most obstacles an
+//! episode can have: a frame allocates nothing; the caller copies it into a new numpy array.
+//! Rendering only reads the environment: its results are the same with or without it.
 
 use stagerl::env::ReachEnv;
 use stagerl::robot::{mul_tf, Shape};
