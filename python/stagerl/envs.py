@@ -15,6 +15,7 @@ Keyword arguments of ``gymnasium.make("stagerl/Reach-v0", ...)``:
   axis red, y green), seen by a fixed perspective camera. ``metadata["render_fps"]`` is
   ``1 / task.dt_s`` (20 by default), so Gymnasium's ``RecordVideo`` plays episodes in real time.
   Rendering only reads the state: observations and rewards are the same with or without it.
+  ``gymnasium.make`` builds ``"rgb_array_list"`` and ``"human"`` (a pygame window) on it.
 - ``render_width``, ``render_height``: the frame's size in pixels, 16 to 4096 (default 480 x 360);
   only with ``render_mode="rgb_array"``.
 

@@ -183,6 +183,21 @@ def test_bad_render_arguments(kwargs, match):
         ReachVectorEnv(num_envs=2, **kwargs)
 
 
+def test_gymnasium_builds_the_other_modes_on_rgb_array():
+    """gym.make wraps an rgb_array env for "rgb_array_list" (RenderCollection: the frames since
+    the last render) and "human" (HumanRendering, a pygame window; not opened here)."""
+    from gymnasium.wrappers import HumanRendering, RenderCollection
+
+    env = gym.make("stagerl/Reach-v0", render_mode="rgb_array_list", render_width=64, render_height=48)
+    assert isinstance(env, RenderCollection)
+    env.reset(seed=0)
+    env.step(np.zeros(6, np.float32))
+    frames = env.render()
+    assert len(frames) == 2 and all(f.shape == (48, 64, 3) for f in frames)
+    with pytest.warns(UserWarning, match="HumanRendering"):
+        assert isinstance(gym.make("stagerl/Reach-v0", render_mode="human"), HumanRendering)
+
+
 def test_render_without_a_render_mode_warns_and_returns_none():
     env = ReachEnv()
     env.reset(seed=0)
