@@ -7,6 +7,17 @@ Keyword arguments of ``gymnasium.make("stagerl/Reach-v0", ...)``:
 - ``config``: a TOML config file (path) or a dict with the TOML's sections and fields (e.g.
   ``{"task": {"max_steps": 100}}``); defaults otherwise.
 - ``robot``: ``"ur5"`` or ``"panda"`` (bundled) or a path to a URDF file (overrides ``robot.urdf``).
+- ``render_mode``: None (default) or ``"rgb_array"``: ``render()`` then returns the current frame,
+  a new ``(render_height, render_width, 3)`` uint8 array (RGB) drawn offscreen in Rust (no GPU):
+  the arm (its collision shapes; red while in contact), the target (a ball of radius
+  ``reward.beta_m``, at least 2.5 cm so that it shows; green once reached), the end effector's path since the episode began (a blue
+  polyline), the episode's obstacles (orange) and the floor with a 10 cm grid (the base frame's x
+  axis red, y green), seen by a fixed perspective camera. ``metadata["render_fps"]`` is
+  ``1 / task.dt_s`` (20 by default), so Gymnasium's ``RecordVideo`` plays episodes in real time.
+  Rendering only reads the state: observations and rewards are the same with or without it.
+  ``gymnasium.make`` builds ``"rgb_array_list"`` and ``"human"`` (a pygame window) on it.
+- ``render_width``, ``render_height``: the frame's size in pixels, 16 to 4096 (default 480 x 360);
+  only with ``render_mode="rgb_array"``.
 
 Observation (float32): q / pi per joint, end-effector position (m), target (m),
 ``obs_delta_scale * (target - end effector)`` and its norm. Action (float32): one value per joint
@@ -71,10 +82,40 @@ def _str_arg(name: str, value: Any, allowed: str) -> Optional[str]:
     return value
 
 
-def core_args(reward, config, robot, render_mode) -> dict:
-    """The native constructor's keyword arguments for the environment's arguments, checked."""
+#: The render modes of ``stagerl/Reach-v0`` (besides None).
+RENDER_MODES = ["rgb_array"]
+
+
+def check_render_args(render_mode: Optional[str], render_width: Optional[int], render_height: Optional[int]) -> None:
+    """Raise ValueError unless ``render_mode`` is None or ``"rgb_array"`` and the frame sizes are
+    None or integers (their range, 16 to 4096 pixels, is checked in Rust), given only with a
+    render mode."""
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"`render_mode` = {render_mode!r} is invalid: None or 'rgb_array' "
+                         "(stagerl/Reach-v0 draws offscreen frames only; no window)")
+    for name, v in (("render_width", render_width), ("render_height", render_height)):
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            raise ValueError(f"`{name}` = {v!r} is invalid: an integer from 16 to 4096 (pixels)")
+        if render_mode is None:
+            raise ValueError(f"`{name}` = {v!r} is invalid without a render mode: pass render_mode='rgb_array' too")
+
+
+def enable_render(env: Union[gym.Env, "gym.vector.VectorEnv"], core: Any, render_mode: Optional[str], render_width: Optional[int], render_height: Optional[int]) -> None:
+    """Set ``env.render_mode`` and, for ``"rgb_array"``, make the native ``core`` draw frames of
+    the given size (pixels; None: 480 x 360) and ``env.metadata["render_fps"]`` ``1 / dt_s``."""
+    env.render_mode = render_mode
     if render_mode is not None:
-        raise ValueError(f"`render_mode` = {render_mode!r} is invalid: stagerl/Reach-v0 renders nothing (None)")
+        core.enable_render(None if render_width is None else int(render_width),
+                           None if render_height is None else int(render_height))
+    env.metadata = {**type(env).metadata, "render_fps": 1.0 / env.dt_s}
+
+
+def core_args(reward: Optional[str], config: Union[None, str, os.PathLike, dict],
+              robot: Union[None, str, os.PathLike]) -> dict:
+    """The native constructor's keyword arguments for the environment's arguments (see
+    :class:`ReachEnv`), checked: ValueError or FileNotFoundError naming a bad one."""
     reward = _str_arg("reward", reward, "one of 'basic', 'posture', 'stride', 'har', 'sar'")
     robot = _str_arg("robot", robot, "'ur5', 'panda' or a path to a URDF file")
     if robot is not None and robot not in ("ur5", "panda") and not os.path.isfile(robot):
@@ -82,12 +123,11 @@ def core_args(reward, config, robot, render_mode) -> dict:
     return {"reward": reward, "robot": robot, **_config_args(config)}
 
 
-def describe(env, core) -> tuple:
-    """Set ``env``'s ``render_mode`` (None), ``max_steps``, ``dt_s`` (seconds), ``joint_names``
-    and ``_beta_m`` (metres) from the native ``core``; one environment's observation and action
-    spaces (float32, finite bounds; actions in [-1, 1])."""
+def describe(env: Union[gym.Env, "gym.vector.VectorEnv"], core: Any) -> tuple:
+    """Set ``env``'s ``max_steps``, ``dt_s`` (seconds), ``joint_names`` and ``_beta_m``
+    (metres) from the native ``core``; one environment's observation and action spaces (float32,
+    finite bounds; actions in [-1, 1])."""
     facts = core.describe()
-    env.render_mode = None
     env.max_steps, env.dt_s, env.joint_names = facts["max_steps"], facts["dt_s"], facts["joint_names"]
     env._beta_m = facts["beta_m"]
     n = facts["act_dim"]
@@ -101,15 +141,49 @@ def draw_seed(rng: np.random.Generator) -> int:
 
 
 class ReachEnv(gym.Env):
-    """One reaching environment over the Rust ``ReachEnv`` (see the module documentation)."""
+    """One reaching environment over the Rust ``ReachEnv`` (see the module documentation).
 
-    metadata = {"render_modes": []}
+    Args:
+        reward: the reward the agent receives (``"basic"``, ``"posture"``, ``"stride"``,
+            ``"har"``, ``"sar"``); None: the config's ``reward.function``.
+        config: a TOML config file (``str`` or path) or a ``dict`` of the TOML's sections; None:
+            the defaults.
+        robot: ``"ur5"``, ``"panda"`` or a path to a URDF file; None: the config's ``robot.urdf``.
+        render_mode: None or ``"rgb_array"`` (see :meth:`render`).
+        render_width: the frame's width in pixels (16 to 4096; None: 480).
+        render_height: the frame's height in pixels (16 to 4096; None: 360).
 
-    def __init__(self, reward: Optional[str] = None, config=None, robot=None, render_mode: Optional[str] = None):
-        self._core = _core.ReachCore(**core_args(reward, config, robot, render_mode))
+    Raises:
+        ValueError: a bad argument (the message names it, its value and what is allowed).
+        FileNotFoundError: a ``config`` or ``robot`` file that does not exist.
+    """
+
+    #: ``render_fps`` is the default ``1 / task.dt_s``; an instance's ``metadata`` holds its own.
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 20}
+
+    def __init__(self, reward: Optional[str] = None, config: Union[None, str, os.PathLike, dict] = None,
+                 robot: Union[None, str, os.PathLike] = None, render_mode: Optional[str] = None,
+                 render_width: Optional[int] = None, render_height: Optional[int] = None):
+        check_render_args(render_mode, render_width, render_height)
+        self._core = _core.ReachCore(**core_args(reward, config, robot))
         self.observation_space, self.action_space = describe(self, self._core)
+        enable_render(self, self._core, render_mode, render_width, render_height)
 
-    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+    def render(self) -> Optional[np.ndarray]:
+        """The current frame with ``render_mode="rgb_array"``: a new ``(render_height,
+        render_width, 3)`` uint8 array (RGB) of the arm, the target, the end effector's path since
+        the last ``reset`` and the obstacles (see the module documentation). With
+        ``render_mode=None``: None, with a warning (Gymnasium's convention)."""
+        if self.render_mode is None:
+            gym.logger.warn("stagerl/Reach-v0: render() was called with render_mode=None; make the "
+                            "environment with render_mode='rgb_array' to get frames")
+            return None
+        return self._core.render()
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None) -> tuple[np.ndarray, dict]:
+        """Start an episode: ``(observation, {"distance": metres, "is_success": bool})``; ``seed``
+        reseeds ``np_random``, ``options={"target": [x, y, z], "start": [q1, ...]}`` sets the
+        target (metres) and the start pose (radians). The path drawn by :meth:`render` restarts."""
         super().reset(seed=seed)
         if options:
             obs, distance = self._reset_to(options)
@@ -131,7 +205,10 @@ class ReachEnv(gym.Env):
             raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
         return self._core.reset_to(target, start)
 
-    def step(self, action):
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """One step with ``action`` (one value per joint in [-1, 1]): ``(observation, reward,
+        terminated, truncated, info)``, ``info`` holding every reward term, ``collision`` and
+        ``is_success``."""
         action = np.asarray(action, dtype=np.float32)
         if action.shape != self.action_space.shape:
             raise ValueError(f"`action.shape` = {action.shape} is invalid: expected {self.action_space.shape}")

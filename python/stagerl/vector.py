@@ -24,19 +24,25 @@ for ``gymnasium.make``). It behaves exactly as ``gymnasium.vector.SyncVectorEnv`
   array may serve several keys and steps).
 
 Observations are float32 (N, obs_dim), actions float32 (N, act_dim) in [-1, 1], rewards float64.
+
+``render_mode="rgb_array"`` (with ``render_width``, ``render_height``, as for ``ReachEnv``):
+``render()`` returns a tuple of one frame per sub-environment, as ``SyncVectorEnv`` does; each
+sub-environment's path restarts with its episode (autoresets included).
 """
 
 from __future__ import annotations
 
+import os
 from typing import Optional, Sequence, Union
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from . import _core
-from .envs import core_args, describe
+from .envs import RENDER_MODES, check_render_args, core_args, describe, enable_render
 
 #: The keys of a step's reward terms in ``info``, in the order of ``ReachEnv``'s step info.
 STEP_KEYS = tuple(_core.STEP_KEYS)
@@ -48,15 +54,21 @@ SEED_BLOCK = 64
 class ReachVectorEnv(VectorEnv):
     """``num_envs`` reaching environments over the Rust ``VecEnv`` (see the module documentation)."""
 
-    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 20, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int = 1, reward: Optional[str] = None, config=None, robot=None,
-                 render_mode: Optional[str] = None):
+    def __init__(self, num_envs: int = 1, reward: Optional[str] = None,
+                 config: Union[None, str, os.PathLike, dict] = None, robot: Union[None, str, os.PathLike] = None,
+                 render_mode: Optional[str] = None, render_width: Optional[int] = None,
+                 render_height: Optional[int] = None):
+        """``num_envs`` (an integer >= 1) environments; the other arguments as for
+        :class:`stagerl.envs.ReachEnv`. Raises ValueError naming a bad argument."""
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"`num_envs` = {num_envs!r} is invalid: an integer >= 1")
-        self._core = _core.VecCore(int(num_envs), **core_args(reward, config, robot, render_mode))
+        check_render_args(render_mode, render_width, render_height)
+        self._core = _core.VecCore(int(num_envs), **core_args(reward, config, robot))
         self.num_envs = int(num_envs)
         self.single_observation_space, self.single_action_space = describe(self, self._core)
+        enable_render(self, self._core, render_mode, render_width, render_height)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs: list = [None] * self.num_envs
@@ -79,6 +91,16 @@ class ReachVectorEnv(VectorEnv):
         info = {"distance": distance, "_distance": self._ones}
         info["is_success"], info["_is_success"] = distance < self._beta_m, self._ones
         return obs, info
+
+    def render(self) -> Optional[tuple]:
+        """With ``render_mode="rgb_array"``: a tuple of each sub-environment's current frame, a
+        ``(render_height, render_width, 3)`` uint8 array (see :meth:`stagerl.envs.ReachEnv.render`);
+        with ``render_mode=None``: None, with a warning."""
+        if self.render_mode is None:
+            gym.logger.warn("stagerl/Reach-v0: render() was called with render_mode=None; make the "
+                            "environments with render_mode='rgb_array' to get frames")
+            return None
+        return tuple(self._core.render(i) for i in range(self.num_envs))
 
     def _refill(self, i: int) -> None:
         """The next :data:`SEED_BLOCK` episode seeds of sub-environment ``i``, from its generator

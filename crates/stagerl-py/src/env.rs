@@ -1,6 +1,6 @@
 //! The reaching environment for `stagerl.envs.ReachEnv` (the Gymnasium wrapper lives in Python).
 
-use numpy::{PyArray1, PyReadonlyArray1};
+use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyString};
@@ -10,6 +10,7 @@ use stagerl::config::Config;
 use stagerl::env::{ReachEnv, Step};
 use stagerl::reward::RewardFunction;
 
+use crate::render::{EePath, Renderer, DEFAULT_SIZE, SIDE_RANGE};
 use crate::{bad_arg, guard, to_py};
 
 /// A whole config from a TOML file, or from a JSON text of the TOML's fields (a Python dict),
@@ -119,6 +120,29 @@ type Obs<'py> = Bound<'py, PyArray1<f32>>;
 #[pyclass(module = "stagerl._core")]
 pub struct ReachCore {
     env: ReachEnv,
+    /// The renderer and the end effector's path, once [`ReachCore::enable_render`] is called.
+    render: Option<Box<(Renderer, EePath)>>,
+}
+
+/// A frame's width and height, pixels, checked against [`SIDE_RANGE`] (None: the default).
+pub(crate) fn frame_size(width: Option<i64>, height: Option<i64>) -> PyResult<(usize, usize)> {
+    let (lo, hi) = SIDE_RANGE;
+    let check = |name: &str, v: Option<i64>, default: usize| match v {
+        None => Ok(default),
+        Some(v) if (lo as i64..=hi as i64).contains(&v) => Ok(v as usize),
+        Some(v) => Err(bad_arg(name, v, &format!("an integer from {lo} to {hi} (pixels)"))),
+    };
+    Ok((check("render_width", width, DEFAULT_SIZE.0)?, check("render_height", height, DEFAULT_SIZE.1)?))
+}
+
+/// A frame's bytes as a new `(height, width, 3)` uint8 array.
+pub(crate) fn frame_array<'py>(
+    py: Python<'py>,
+    rgb: &[u8],
+    width: usize,
+    height: usize,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    PyArray1::from_slice(py, rgb).reshape([height, width, 3])
 }
 
 #[pymethods]
@@ -135,7 +159,7 @@ impl ReachCore {
             let cfg = build_config(config_path, config_json, reward, robot)?;
             let mut env = ReachEnv::from_config(&cfg, 0).map_err(to_py)?;
             env.set_obstacles_in_path(cfg.train.obstacles_in_path).map_err(to_py)?;
-            Ok(ReachCore { env })
+            Ok(ReachCore { env, render: None })
         })
     }
 
@@ -144,9 +168,38 @@ impl ReachCore {
         describe(py, &self.env)
     }
 
+    /// Draw frames of `width x height` pixels from now on (`render`), recording the end
+    /// effector's path from the next episode on (and this one's current position).
+    #[pyo3(signature = (width=None, height=None))]
+    fn enable_render(&mut self, width: Option<i64>, height: Option<i64>) -> PyResult<()> {
+        let (w, h) = frame_size(width, height)?;
+        let env = &self.env;
+        let (renderer, mut path) = guard("render", || {
+            Ok((Renderer::new(env, w, h), EePath::new(env.task().max_steps as usize + 1)))
+        })?;
+        path.restart(env);
+        self.render = Some(Box::new((renderer, path)));
+        Ok(())
+    }
+
+    /// The current frame: a new `(height, width, 3)` uint8 array (RGB).
+    fn render<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let Some(r) = self.render.as_deref_mut() else {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "`render_mode` = None: this environment renders nothing (make it with render_mode=\"rgb_array\")",
+            ));
+        };
+        let (renderer, path) = (&mut r.0, &r.1);
+        let env = &self.env;
+        let (w, h) = renderer.size();
+        let rgb = guard("render", || Ok(renderer.render(env, path)))?;
+        frame_array(py, rgb, w, h)
+    }
+
     /// Reseed the environment's random stream and start an episode; returns (obs, distance_m).
     fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Obs<'py>, f64)> {
         let obs = guard("reset", || Ok(self.env.reset_with_seed(seed).to_vec()))?;
+        self.restart_path();
         Ok((PyArray1::from_vec(py, obs), self.env.distance()))
     }
 
@@ -167,6 +220,7 @@ impl ReachCore {
         let start = start.unwrap_or_else(|| self.env.task().home_pose.clone());
         let env = &mut self.env;
         let obs = guard("reset", || Ok(env.reset_to(&start, t).map_err(to_py)?.to_vec()))?;
+        self.restart_path();
         Ok((PyArray1::from_vec(py, obs), self.env.distance()))
     }
 
@@ -184,6 +238,9 @@ impl ReachCore {
             };
             s.map_err(to_py)
         })?;
+        if let Some(r) = self.render.as_deref_mut() {
+            r.1.push(&self.env);
+        }
         let obs = PyArray1::from_slice(py, self.env.observation());
         Ok((obs, s.total(), s.terminated, s.truncated, step_info(py, &s)?))
     }
@@ -192,6 +249,15 @@ impl ReachCore {
     fn positions(&self) -> ([f64; 3], [f64; 3]) {
         let (p, t) = (self.env.ee_pose().position, self.env.target());
         ([p.x, p.y, p.z], [t.x, t.y, t.z])
+    }
+}
+
+impl ReachCore {
+    /// A new episode began: its path starts at the end effector (when rendering).
+    fn restart_path(&mut self) {
+        if let Some(r) = self.render.as_deref_mut() {
+            r.1.restart(&self.env);
+        }
     }
 }
 

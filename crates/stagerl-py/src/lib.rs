@@ -2,9 +2,11 @@
 //!
 //! Thin bindings over the library: the reaching environment ([`env`]) and a batch of them
 //! ([`vec`]), the rewards over batches of rows ([`reward`]), the kinematics of any URDF chain
-//! ([`kin`]), trained policies and planning ([`policy`]). The Python modules in
-//! `python/stagerl/` hold the Gymnasium API, argument defaults and documentation; this crate
-//! holds no logic of its own beyond shapes, conversions and error mapping.
+//! ([`kin`]), trained policies and planning ([`policy`]), the trainer ([`train`]). The Python
+//! modules in `python/stagerl/` hold the Gymnasium API, argument defaults and documentation;
+//! this crate holds no logic of its own beyond shapes, conversions and error mapping, and the
+//! offscreen frames of `render_mode="rgb_array"` ([`render`], over the small software rasterizer
+//! [`raster`]), which only read the environments.
 //!
 //! Errors: every library error becomes a `ValueError` (a missing file a `FileNotFoundError`,
 //! other I/O failures an `OSError`) carrying the library's message, which names the field, the
@@ -17,6 +19,8 @@ use pyo3::prelude::*;
 mod env;
 mod kin;
 mod policy;
+mod raster;
+mod render;
 mod reward;
 mod train;
 mod vec;

@@ -2,14 +2,17 @@
 //! `VectorEnv` lives in Python): the library's `VecEnv` with next-step autoreset.
 
 use numpy::PyUntypedArrayMethods;
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{
+    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+};
 use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
 use stagerl::env::VecEnv;
 
-use crate::env::{build_config, describe, step_values, STEP_KEYS};
+use crate::env::{build_config, describe, frame_array, frame_size, step_values, STEP_KEYS};
+use crate::render::{EePath, Renderer};
 use crate::{bad_arg, contiguous, guard, to_py};
 
 type F64s<'py> = Bound<'py, PyArray1<f64>>;
@@ -35,6 +38,10 @@ pub struct VecCore {
     keys: Vec<(Py<PyString>, Py<PyString>)>,
     /// A read-only all-true mask, shared by every key that every environment holds.
     all: Py<PyArray1<bool>>,
+    /// One renderer for every environment (they share the arm and the frame size) and each
+    /// environment's end-effector path, once [`VecCore::enable_render`] is called.
+    renderer: Option<Box<Renderer>>,
+    paths: Vec<EePath>,
 }
 
 impl VecCore {
@@ -164,7 +171,8 @@ impl VecCore {
         let all = PyArray1::from_vec(py, vec![true; num_envs]);
         all.getattr("flags")?.setattr("writeable", false)?;
         let (pools, used, next_seeds) = (vec![Vec::new(); num_envs], vec![0; num_envs], vec![0; num_envs]);
-        Ok(VecCore { env, pools, used, next_seeds, keys, all: all.unbind() })
+        let (renderer, paths) = (None, Vec::new());
+        Ok(VecCore { env, pools, used, next_seeds, keys, all: all.unbind(), renderer, paths })
     }
 
     #[getter]
@@ -175,6 +183,44 @@ impl VecCore {
     /// What one environment is: see `env::describe`.
     fn describe<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         describe(py, &self.env.envs()[0])
+    }
+
+    /// Draw frames of `width x height` pixels from now on (`render`), recording each
+    /// environment's end-effector path.
+    #[pyo3(signature = (width=None, height=None))]
+    fn enable_render(&mut self, width: Option<i64>, height: Option<i64>) -> PyResult<()> {
+        let (w, h) = frame_size(width, height)?;
+        let envs = self.env.envs();
+        let (renderer, paths) = guard("render", || {
+            let paths = envs
+                .iter()
+                .map(|e| {
+                    let mut p = EePath::new(e.task().max_steps as usize + 1);
+                    p.restart(e);
+                    p
+                })
+                .collect();
+            Ok((Renderer::new(&envs[0], w, h), paths))
+        })?;
+        (self.renderer, self.paths) = (Some(Box::new(renderer)), paths);
+        Ok(())
+    }
+
+    /// Environment `i`'s current frame: a new `(height, width, 3)` uint8 array (RGB).
+    fn render<'py>(&mut self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let n = self.env.len();
+        let Some(renderer) = self.renderer.as_deref_mut() else {
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "`render_mode` = None: this environment renders nothing (make it with render_mode=\"rgb_array\")",
+            ));
+        };
+        if i >= n {
+            return Err(bad_arg("i", i, &format!("an environment index, 0 to {}", n - 1)));
+        }
+        let (env, path) = (&self.env.envs()[i], &self.paths[i]);
+        let (w, h) = renderer.size();
+        let rgb = guard("render", || Ok(renderer.render(env, path)))?;
+        frame_array(py, rgb, w, h)
     }
 
     /// Replace environment `i`'s seed pool (its next episodes' seeds, in order).
@@ -209,6 +255,9 @@ impl VecCore {
             }
             Ok(())
         })?;
+        for (p, e) in self.paths.iter_mut().zip(self.env.envs()) {
+            p.restart(e);
+        }
         let d: Vec<f64> = self.env.envs().iter().map(|e| e.distance()).collect();
         Ok((self.observations(py), PyArray1::from_vec(py, d), self.exhausted()))
     }
@@ -225,6 +274,13 @@ impl VecCore {
         let (env, seeds) = (&mut self.env, &self.next_seeds);
         py.detach(|| guard("step", || env.step_next_step_reset(actions, seeds).map_err(to_py)))?;
         let env = &self.env;
+        for ((p, e), &reset) in self.paths.iter_mut().zip(env.envs()).zip(env.autoreset()) {
+            if reset {
+                p.restart(e);
+            } else {
+                p.push(e);
+            }
+        }
         let success = env
             .last_steps()
             .iter()
