@@ -35,6 +35,18 @@ fn sigkill_then_resume_with_an_env_step_budget_gives_the_uninterrupted_run() {
     sigkills_then_resume_expecting("resume-kill-env-steps", &config, 0, 4);
 }
 
+/// The same with REDQ (ten critics, two drawn per target: the draws come from the agent's
+/// random stream, which the checkpoint holds) at 3 updates per step.
+#[test]
+fn sigkill_then_resume_with_redq_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[agent.sac]\nn_critics = 10\ncritic_subset = 2\n",
+        CONFIG.replace("[agent]\n", "[agent]\nupdates_per_step = 3\n")
+    );
+    assert!(config.contains("updates_per_step = 3"));
+    sigkills_then_resume("resume-kill-redq", &config);
+}
+
 /// The same with PPO (small rollouts, so that kills land between updates and inside rollouts),
 /// with observation normalisation, whose running statistics must survive the kills too (the
 /// SIGTERM test runs PPO without it).
