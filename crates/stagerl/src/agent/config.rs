@@ -417,6 +417,9 @@ mod tests {
             (sac(21, None, None), "agent.sac.n_critics", "1..=20"),
             (sac(10, Some(0), None), "agent.sac.critic_subset", "1..=10"),
             (sac(2, Some(3), None), "agent.sac.critic_subset", "at most agent.sac.n_critics = 2"),
+            (SacConfig { critic_dropout: 1.0, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
+            (SacConfig { critic_dropout: -0.1, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
+            (SacConfig { critic_dropout: f64::NAN, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
         ] {
             let e = bad.validate().unwrap_err().to_string();
             assert!(e.contains(field) && e.contains(allowed), "{e}");
@@ -428,7 +431,8 @@ mod tests {
         assert_eq!(sac(2, None, Some(crate::agent::ActorQ::Mean)).actor_q(), crate::agent::ActorQ::Mean);
         // The defaults are left out of a written config (runs from before read the same).
         let written = toml::to_string(&SacConfig::default()).unwrap();
-        assert!(!written.contains("n_critics") && !written.contains("critic_subset"), "{written}");
+        assert!(!written.contains("n_critics") && !written.contains("critic_"), "{written}");
+        assert_eq!(SacConfig::default().critic_norm(), None);
         let back: SacConfig = toml::from_str("n_critics = 10\ncritic_subset = 2\n").unwrap();
         assert_eq!((back.n_critics, back.subset()), (10, 2));
         assert!(toml::from_str::<SacConfig>("actor_q = \"max\"\n").unwrap_err().to_string().contains("max"));

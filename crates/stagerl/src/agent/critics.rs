@@ -22,7 +22,7 @@ use std::ops::Range;
 use super::step;
 use crate::base::par;
 use crate::base::rng::Rng;
-use crate::nn::{Activation, Adam, Mlp};
+use crate::nn::{Activation, Adam, HiddenNorm, Mlp};
 
 /// Checkpoint names of the critics of an ensemble, `[critic, its target, its optimiser]` each:
 /// `q1` .. `q20` (an ensemble of `n` takes the first `n`).
@@ -49,6 +49,31 @@ pub const ENSEMBLE: &[[&str; 3]] = &[
     ["q20", "q20_target", "q20_opt"],
 ];
 
+/// Checkpoint names of the dropout streams of an ensemble's critics and of their targets
+/// (`[critic's, target's]`), saved only when the critics drop out (DroQ's).
+pub const DROPOUT_RNG: &[[&str; 2]] = &[
+    ["q1_dropout_rng", "q1_target_dropout_rng"],
+    ["q2_dropout_rng", "q2_target_dropout_rng"],
+    ["q3_dropout_rng", "q3_target_dropout_rng"],
+    ["q4_dropout_rng", "q4_target_dropout_rng"],
+    ["q5_dropout_rng", "q5_target_dropout_rng"],
+    ["q6_dropout_rng", "q6_target_dropout_rng"],
+    ["q7_dropout_rng", "q7_target_dropout_rng"],
+    ["q8_dropout_rng", "q8_target_dropout_rng"],
+    ["q9_dropout_rng", "q9_target_dropout_rng"],
+    ["q10_dropout_rng", "q10_target_dropout_rng"],
+    ["q11_dropout_rng", "q11_target_dropout_rng"],
+    ["q12_dropout_rng", "q12_target_dropout_rng"],
+    ["q13_dropout_rng", "q13_target_dropout_rng"],
+    ["q14_dropout_rng", "q14_target_dropout_rng"],
+    ["q15_dropout_rng", "q15_target_dropout_rng"],
+    ["q16_dropout_rng", "q16_target_dropout_rng"],
+    ["q17_dropout_rng", "q17_target_dropout_rng"],
+    ["q18_dropout_rng", "q18_target_dropout_rng"],
+    ["q19_dropout_rng", "q19_target_dropout_rng"],
+    ["q20_dropout_rng", "q20_target_dropout_rng"],
+];
+
 /// Checkpoint names of twin critics (TD3, SAC): `[critic, its target, its optimiser]` each.
 pub const TWIN: &[[&str; 3]] = &[ENSEMBLE[0], ENSEMBLE[1]];
 
@@ -64,11 +89,15 @@ pub struct Critics {
     pub(super) opts: Vec<Adam<f32>>,
     /// Per critic: its target's values on the batch.
     target_q: Vec<Vec<f32>>,
+    /// Per critic: its target's dropout stream (used only when the critics drop out).
+    pub(super) target_drop: Vec<Rng>,
+    /// The critics' dropout and layer normalisation (DroQ's), if any.
+    norm: Option<HiddenNorm>,
     /// Per critic: whether its target takes part in the next target minimum (all, but for the
     /// one after [`Critics::choose_targets`]), and the draw's scratch.
     chosen: Vec<bool>,
     order: Vec<usize>,
-    scratch: Vec<Scratch>,
+    pub(super) scratch: Vec<Scratch>,
     /// The losses of the last fit, per critic.
     losses: Vec<f64>,
     /// Per row of the last [`Critics::forward_min`]: the critic of the smallest value, and it.
@@ -76,8 +105,10 @@ pub struct Critics {
     min: Vec<f32>,
 }
 
-/// One critic's buffers for an update.
-struct Scratch {
+/// One critic's buffers for an update, and its dropout stream.
+pub(super) struct Scratch {
+    /// The dropout masks' random stream (used only when the critics drop out).
+    pub(super) drop: Rng,
     /// dL/dQ_i per row (the fit's, then the actor side's).
     dq: Vec<f32>,
     /// dQ_i/da (actor side, `batch x act`).
@@ -99,15 +130,38 @@ impl Critics {
         batch: usize,
         act_dim: usize,
     ) -> Critics {
-        let mut nets: Vec<Mlp<f32>> =
-            names.iter().map(|_| Mlp::new(sizes, Activation::Relu, Activation::Identity, init)).collect();
+        Self::with_norm(names, sizes, lr, init, (batch, act_dim), None)
+    }
+
+    /// [`Critics::new`] with dropout and layer normalisation after the critics' hidden layers
+    /// (DroQ's; [`HiddenNorm`]); with dropout, each critic and each target gets its own stream,
+    /// seeded from `init` after the networks are drawn.
+    pub fn with_norm(
+        names: &'static [[&'static str; 3]],
+        sizes: &[usize],
+        lr: f64,
+        init: &mut Rng,
+        (batch, act_dim): (usize, usize),
+        norm: Option<HiddenNorm>,
+    ) -> Critics {
+        let mut nets: Vec<Mlp<f32>> = names
+            .iter()
+            .map(|_| Mlp::with_norm(sizes, Activation::Relu, Activation::Identity, norm, init))
+            .collect();
         // Buffers for the batch now: a target of an ensemble may be drawn for the first time
         // long after the first update, and must not allocate then.
         for q in &mut nets {
             q.reserve(batch);
         }
         let n = nets.len();
+        let dropout = norm.is_some_and(|h| h.dropout > 0.0);
+        let mut stream = || if dropout { Rng::new(init.next_u64()) } else { Rng::new(0) };
+        let drops: Vec<Rng> = (0..n).map(|_| stream()).collect();
+        let target_drop: Vec<Rng> = (0..n).map(|_| stream()).collect();
+        let mut drops = drops.into_iter();
         Critics {
+            target_drop,
+            norm,
             names,
             opts: nets.iter().map(|q| Adam::new(q.num_params(), lr)).collect(),
             targets: nets.clone(),
@@ -116,7 +170,12 @@ impl Critics {
             chosen: vec![true; n],
             order: (0..n).collect(),
             scratch: (0..n)
-                .map(|_| Scratch { dq: vec![0.0; batch], da: vec![0.0; batch * act_dim], loss: 0.0 })
+                .map(|_| Scratch {
+                    drop: drops.next().expect("one stream per critic"),
+                    dq: vec![0.0; batch],
+                    da: vec![0.0; batch * act_dim],
+                    loss: 0.0,
+                })
                 .collect(),
             losses: vec![0.0; n],
             argmin: vec![0; batch],
@@ -142,7 +201,13 @@ impl Critics {
     }
 
     fn target_side(&mut self) -> TargetSide<'_> {
-        TargetSide { targets: &mut self.targets, q: &mut self.target_q, chosen: &mut self.chosen }
+        let Critics { targets, target_q, chosen, target_drop, .. } = self;
+        TargetSide { targets, q: target_q, chosen, drop: target_drop }
+    }
+
+    /// Whether the critics drop out (their dropout streams are then part of the agent's state).
+    pub fn drops_out(&self) -> bool {
+        self.norm.is_some_and(|h| h.dropout > 0.0)
     }
 
     /// REDQ's in-target minimisation: the next target minimum is over `m` (1..=N) of the
@@ -167,8 +232,8 @@ impl Critics {
     /// The critics' forward pass on `input` (`b` rows, for [`Critics::fit_forwarded`]) at once
     /// with `f`, which gets the target side (on two threads with a pool; the same values).
     pub fn forward_alongside(&mut self, input: &[f32], b: usize, f: impl FnOnce(TargetSide<'_>) + Send) {
-        let Critics { nets, targets, target_q, chosen, .. } = self;
-        let side = TargetSide { targets, q: target_q, chosen };
+        let Critics { nets, targets, target_q, chosen, target_drop, .. } = self;
+        let side = TargetSide { targets, q: target_q, chosen, drop: target_drop };
         par::join(
             move || f(side),
             || {
@@ -183,7 +248,7 @@ impl Critics {
     /// (`y.len()` rows). Returns the losses.
     pub fn fit(&mut self, input: &[f32], y: &[f32], max_grad_norm: f64) -> &[f64] {
         par::for_each_mut3(&mut self.nets, &mut self.opts, &mut self.scratch, &|_, q, opt, s| {
-            q.forward(input, y.len());
+            q.forward_dropout(input, y.len(), &mut s.drop);
             s.loss = fit_forwarded(q, opt, y, &mut s.dq, max_grad_norm)
         });
         self.collect_losses()
@@ -220,8 +285,8 @@ impl Critics {
     /// Step 3 (SAC): `min_i Q_i(input[r])` for the `b` rows of `input`, each critic's forward
     /// pass kept for [`Critics::input_grad_min`]. Of equal values the first critic's is taken.
     pub fn forward_min(&mut self, input: &[f32], b: usize) -> &[f32] {
-        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, _| {
-            q.forward(input, b);
+        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, s| {
+            q.forward_dropout(input, b, &mut s.drop);
         });
         let (argmin, min) = (&mut self.argmin[..b], &mut self.min[..b]);
         let first = self.nets[0].output();
@@ -267,8 +332,8 @@ impl Critics {
     /// critics' order, then scaled), each critic's forward pass kept for
     /// [`Critics::input_grad_mean`].
     pub fn forward_mean(&mut self, input: &[f32], b: usize) -> &[f32] {
-        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, _| {
-            q.forward(input, b);
+        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, s| {
+            q.forward_dropout(input, b, &mut s.drop);
         });
         let mean = &mut self.min[..b];
         mean.copy_from_slice(&self.nets[0].output()[..b]);
@@ -332,6 +397,7 @@ pub struct TargetSide<'a> {
     targets: &'a mut [Mlp<f32>],
     q: &'a mut [Vec<f32>],
     chosen: &'a mut [bool],
+    drop: &'a mut [Rng],
 }
 
 impl TargetSide<'_> {
@@ -339,9 +405,13 @@ impl TargetSide<'_> {
     /// (in their order; then every target is chosen again).
     pub fn min(&mut self, input: &[f32], b: usize, out: &mut [f32]) {
         let chosen = &*self.chosen;
-        par::for_each_mut(self.targets, self.q, &|k, t, q| {
-            if chosen[k] {
-                q[..b].copy_from_slice(t.predict(input, b));
+        par::for_each_mut3(self.targets, self.q, self.drop, &|k, t, q, drop| {
+            // DroQ: the targets drop out too (a training pass, from their own streams).
+            let dropout = t.hidden_norm().is_some_and(|h| h.dropout > 0.0);
+            match (chosen[k], dropout) {
+                (false, _) => {}
+                (true, true) => q[..b].copy_from_slice(t.forward_dropout(input, b, drop)),
+                (true, false) => q[..b].copy_from_slice(t.predict(input, b)),
             }
         });
         let out = &mut out[..b];

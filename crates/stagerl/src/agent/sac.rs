@@ -1,6 +1,6 @@
 //! Soft Actor-Critic with automatic entropy tuning (Haarnoja et al. 2018), as in CleanRL and
-//! Stable-Baselines3, and its ensemble variants REDQ (Chen et al., ICLR 2021) and the critic
-//! side of DroQ (Hiraoka et al., ICLR 2022: its dropout and layer norm are not in yet).
+//! Stable-Baselines3, and its ensemble variants REDQ (Chen et al., ICLR 2021) and DroQ (Hiraoka
+//! et al., ICLR 2022: dropout and layer normalisation in the critics and their targets).
 //!
 //! Networks: a tanh-squashed Gaussian actor `obs -> [mean | s]` (log-std `l = -5 + 3.5 (tanh s + 1)`,
 //! in [-5, 2]), `N = n_critics` critics `Q_i: [obs | act] -> 1` (2, SAC's twins, by default) and
@@ -18,19 +18,23 @@
 //!    (times `target_entropy_per_dim`);
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
 //!
-//! REDQ is `n_critics = 10`, `critic_subset = 2` with `agent.updates_per_step = 20`.
+//! REDQ is `n_critics = 10`, `critic_subset = 2` with `agent.updates_per_step = 20`; DroQ is
+//! `critic_dropout = 0.01`, `critic_layer_norm = true`, `actor_q = "mean"` with
+//! `agent.updates_per_step = 20` (each critic's hidden layers `relu(LN(dropout(x W^T + b)))`,
+//! [`crate::nn::HiddenNorm`]; the critics, their targets and the actor's critics all drop out,
+//! each from its own stream).
 //!
 //! Its own settings: `[agent.sac]`, [`SacConfig`] (the entropy coefficient, the ensemble).
 
 use serde::{Deserialize, Serialize};
 
-use super::critics::{self, Critics, ENSEMBLE};
+use super::critics::{self, Critics, DROPOUT_RNG, ENSEMBLE};
 use super::parts::learned_parts;
 use super::{sizes, step, Agent, AgentConfig, Algo, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
 use crate::base::rng::Rng;
 use crate::base::validate::{finite, positive};
-use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
+use crate::nn::{concat_cols, Activation, Adam, HiddenNorm, LogStdBound, Mlp, SquashedGaussian};
 use crate::{Error, Result};
 
 /// Most critics of an ensemble (`agent.sac.n_critics`).
@@ -69,6 +73,21 @@ pub struct SacConfig {
     /// mean, REDQ's); unset: `"mean"` when `critic_subset` is below `n_critics` (REDQ), else `"min"`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub actor_q: Option<ActorQ>,
+    /// Dropout probability after each critic's hidden layers, in [0, 1) (DroQ: 0.01); 0: none.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub critic_dropout: f64,
+    /// Layer normalisation (learned scale and bias) after each critic's hidden layers, after
+    /// dropout (DroQ's).
+    #[serde(skip_serializing_if = "is_false")]
+    pub critic_layer_norm: bool,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 fn is_two(n: &usize) -> bool {
@@ -85,6 +104,8 @@ impl Default for SacConfig {
             n_critics: 2,
             critic_subset: None,
             actor_q: None,
+            critic_dropout: 0.0,
+            critic_layer_norm: false,
         }
     }
 }
@@ -112,7 +133,20 @@ impl SacConfig {
                 ),
             ));
         }
+        if !(self.critic_dropout.is_finite() && (0.0..1.0).contains(&self.critic_dropout)) {
+            return Err(Error::config(
+                "agent.sac.critic_dropout",
+                self.critic_dropout,
+                "a probability in [0, 1) (0: no dropout; DroQ: 0.01)",
+            ));
+        }
         Ok(())
+    }
+
+    /// The critics' dropout and layer normalisation, if any.
+    pub fn critic_norm(&self) -> Option<HiddenNorm> {
+        (self.critic_dropout > 0.0 || self.critic_layer_norm)
+            .then_some(HiddenNorm { dropout: self.critic_dropout, layer_norm: self.critic_layer_norm })
     }
 
     /// Critics whose minimum makes the target: `critic_subset`, else all.
@@ -166,8 +200,9 @@ impl Sac {
         );
         let (b, own) = (cfg.batch_size, cfg.sac());
         let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
-        let critics =
-            Critics::new(&ENSEMBLE[..own.n_critics], &critic_sizes, cfg.critic_lr(), &mut init, b, act_dim);
+        let names = &ENSEMBLE[..own.n_critics];
+        let norm = own.critic_norm();
+        let critics = Critics::with_norm(names, &critic_sizes, cfg.critic_lr(), &mut init, (b, act_dim), norm);
         Sac {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
             log_alpha: [own.init_alpha.ln() as f32],
@@ -313,4 +348,12 @@ learned_parts!(Sac, |s, f| {
     }
     f("alpha_opt", P::Adam(r!(s.alpha_opt)));
     f("agent_rng", P::State(r!(s.rng)));
+    // DroQ: the dropout streams (listed only when the critics drop out).
+    let drops = s.critics.drops_out();
+    for (name, c) in DROPOUT_RNG.iter().zip(each!(s.critics.scratch)).filter(|_| drops) {
+        f(name[0], P::State(r!(c.drop)));
+    }
+    for (name, t) in DROPOUT_RNG.iter().zip(each!(s.critics.target_drop)).filter(|_| drops) {
+        f(name[1], P::State(t));
+    }
 });

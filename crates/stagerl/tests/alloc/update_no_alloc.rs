@@ -55,10 +55,13 @@ fn sac_updates_allocate_nothing() {
     no_allocation_in(Algo::Sac, 256, 3);
 }
 
-/// REDQ: ten critics, two drawn per target, the actor on their mean.
+/// REDQ: ten critics, two drawn per target, the actor on their mean; DroQ: dropout and layer
+/// normalisation in the critics.
 #[test]
-fn redq_updates_allocate_nothing() {
+fn redq_and_droq_updates_allocate_nothing() {
     let sac = SacConfig { n_critics: 10, critic_subset: Some(2), ..SacConfig::default() };
+    no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 20);
+    let sac = SacConfig { critic_dropout: 0.01, critic_layer_norm: true, ..SacConfig::default() };
     no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 20);
 }
 
@@ -84,6 +87,8 @@ fn updates_on_two_threads_allocate_nothing() {
         }
         no_allocation_in(Algo::Sac, 256, 2);
         let sac = SacConfig { n_critics: 10, critic_subset: Some(2), ..SacConfig::default() };
+        no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 10);
+        let sac = SacConfig { critic_dropout: 0.01, critic_layer_norm: true, ..SacConfig::default() };
         no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 10);
     });
     assert!(stagerl::base::par::split_jobs() > split, "work went to the worker");
