@@ -35,6 +35,29 @@ fn sigkill_then_resume_with_an_env_step_budget_gives_the_uninterrupted_run() {
     sigkills_then_resume_expecting("resume-kill-env-steps", &config, 0, 4);
 }
 
+/// The same with REDQ (ten critics, two drawn per target: the draws come from the agent's
+/// random stream, which the checkpoint holds) at 3 updates per step.
+#[test]
+fn sigkill_then_resume_with_redq_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[agent.sac]\nn_critics = 10\ncritic_subset = 2\n",
+        CONFIG.replace("[agent]\n", "[agent]\nupdates_per_step = 3\n")
+    );
+    assert!(config.contains("updates_per_step = 3"));
+    sigkills_then_resume("resume-kill-redq", &config);
+}
+
+/// The same with DroQ (dropout and layer normalisation in the critics: the dropout streams of
+/// the critics and their targets are in the checkpoint).
+#[test]
+fn sigkill_then_resume_with_droq_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[agent.sac]\ncritic_dropout = 0.01\ncritic_layer_norm = true\nactor_q = \"mean\"\n",
+        CONFIG.replace("[agent]\n", "[agent]\nupdates_per_step = 3\n")
+    );
+    sigkills_then_resume("resume-kill-droq", &config);
+}
+
 /// The same with PPO (small rollouts, so that kills land between updates and inside rollouts),
 /// with observation normalisation, whose running statistics must survive the kills too (the
 /// SIGTERM test runs PPO without it).

@@ -2,6 +2,7 @@
 
 use std::ops::Range;
 
+use super::norm::{self, HiddenNorm};
 use super::ops::{grow, polyak_update};
 use super::{Activation, Linear, Scalar};
 use crate::base::rng::Rng;
@@ -55,6 +56,13 @@ pub struct Workspace<T> {
     grad_b: Vec<T>,
     /// dL/dx of the last backward pass (`batch x in`).
     grad_in: Vec<T>,
+    /// With a [`HiddenNorm`], per hidden layer: the dropout mask of the last training pass
+    /// (empty when it dropped nothing), layer normalisation's `xhat` and `1 / std` per row.
+    mask: Vec<Vec<T>>,
+    xhat: Vec<Vec<T>>,
+    inv_std: Vec<Vec<T>>,
+    /// Whether the last training pass drew a dropout mask.
+    dropped: bool,
 }
 
 /// A multilayer perceptron `sizes[0] -> sizes[1] -> ... -> sizes[L]` with activation `hidden`
@@ -77,6 +85,10 @@ pub struct Mlp<T: Scalar> {
     layers: Vec<Linear>,
     hidden: Activation,
     output: Activation,
+    /// Dropout and layer normalisation after the hidden layers (DroQ's critics), whose scales
+    /// and biases follow the layers' parameters from `ln_offset` on.
+    norm: Option<HiddenNorm>,
+    ln_offset: usize,
     params: Vec<T>,
     grads: Vec<T>,
     train: Workspace<T>,
@@ -90,6 +102,19 @@ impl<T: Scalar> Mlp<T> {
     /// # Panics
     /// If `sizes` has fewer than two entries or a zero entry.
     pub fn new(sizes: &[usize], hidden: Activation, output: Activation, rng: &mut Rng) -> Self {
+        Self::with_norm(sizes, hidden, output, None, rng)
+    }
+
+    /// [`Mlp::new`] with dropout and layer normalisation between every hidden layer's product
+    /// and its activation ([`super::norm`]); the layers are drawn from `rng` as by
+    /// [`Mlp::new`], layer normalisation's scales start at 1 and its biases at 0.
+    pub fn with_norm(
+        sizes: &[usize],
+        hidden: Activation,
+        output: Activation,
+        norm: Option<HiddenNorm>,
+        rng: &mut Rng,
+    ) -> Self {
         assert!(sizes.len() >= 2, "Mlp needs at least an input and an output size");
         assert!(sizes.iter().all(|&s| s > 0), "Mlp sizes must be positive");
         let mut layers = Vec::with_capacity(sizes.len() - 1);
@@ -99,16 +124,38 @@ impl<T: Scalar> Mlp<T> {
             offset += layer.param_len();
             layers.push(layer);
         }
+        let ln_offset = offset;
+        let hidden_widths: usize = sizes[1..sizes.len() - 1].iter().sum();
+        if norm.is_some_and(|n| n.layer_norm) {
+            offset += 2 * hidden_widths;
+        }
         let mut params = vec![T::ZERO; offset];
         for layer in &layers {
             layer.init(&mut params, rng);
         }
-        let workspace = Workspace { acts: vec![Vec::new(); layers.len()], ..Workspace::default() };
+        if norm.is_some_and(|n| n.layer_norm) {
+            // Scales 1, biases 0: the scales come first per layer (see `ln_ranges`).
+            let mut at = ln_offset;
+            for &h in &sizes[1..sizes.len() - 1] {
+                params[at..at + h].fill(T::ONE);
+                at += 2 * h;
+            }
+        }
+        let hidden_layers = layers.len() - 1;
+        let workspace = Workspace {
+            acts: vec![Vec::new(); layers.len()],
+            mask: vec![Vec::new(); hidden_layers],
+            xhat: vec![Vec::new(); hidden_layers],
+            inv_std: vec![Vec::new(); hidden_layers],
+            ..Workspace::default()
+        };
         Mlp {
             sizes: sizes.to_vec(),
             layers,
             hidden,
             output,
+            norm,
+            ln_offset,
             grads: vec![T::ZERO; offset],
             params,
             train: workspace.clone(),
@@ -126,6 +173,13 @@ impl<T: Scalar> Mlp<T> {
             }
         }
         let ws = &mut self.train;
+        if self.norm.is_some() {
+            for (l, &h) in self.sizes[1..self.sizes.len() - 1].iter().enumerate() {
+                grow(&mut ws.mask[l], batch * h);
+                grow(&mut ws.xhat[l], batch * h);
+                grow(&mut ws.inv_std[l], batch);
+            }
+        }
         grow(&mut ws.input, batch * self.sizes[0]);
         grow(&mut ws.grad_a, batch * widest);
         grow(&mut ws.grad_b, batch * widest);
@@ -160,6 +214,18 @@ impl<T: Scalar> Mlp<T> {
     /// Activation after the last layer.
     pub fn output_activation(&self) -> Activation {
         self.output
+    }
+
+    /// Dropout and layer normalisation after the hidden layers, if any.
+    pub fn hidden_norm(&self) -> Option<HiddenNorm> {
+        self.norm
+    }
+
+    /// The ranges of hidden layer `l`'s layer-normalisation scale and bias in the flat vector.
+    fn ln_ranges(ln_offset: usize, sizes: &[usize], l: usize) -> (Range<usize>, Range<usize>) {
+        let start = ln_offset + 2 * sizes[1..=l].iter().sum::<usize>() - 2 * sizes[l + 1];
+        let h = sizes[l + 1];
+        (start..start + h, start + h..start + 2 * h)
     }
 
     /// Number of parameters.
@@ -212,6 +278,14 @@ impl<T: Scalar> Mlp<T> {
                 offset: l.bias_range().start,
             });
         }
+        if self.norm.is_some_and(|n| n.layer_norm) {
+            for l in 0..self.layers.len() - 1 {
+                let (scale, bias) = Self::ln_ranges(self.ln_offset, &self.sizes, l);
+                let h = scale.len();
+                out.push(TensorInfo { name: format!("ln{l}.scale"), shape: vec![h], offset: scale.start });
+                out.push(TensorInfo { name: format!("ln{l}.bias"), shape: vec![h], offset: bias.start });
+            }
+        }
         out
     }
 
@@ -240,16 +314,46 @@ impl<T: Scalar> Mlp<T> {
     /// # Panics
     /// If `x.len() != batch * in`.
     pub fn forward(&mut self, x: &[T], batch: usize) -> &[T] {
+        self.forward_inner(x, batch, None)
+    }
+
+    /// [`Mlp::forward`] with dropout after the hidden layers (a network with a
+    /// [`HiddenNorm`] of `dropout > 0`), its masks drawn from `rng`; as [`Mlp::forward`]
+    /// otherwise (no draw).
+    pub fn forward_dropout(&mut self, x: &[T], batch: usize, rng: &mut Rng) -> &[T] {
+        self.forward_inner(x, batch, Some(rng))
+    }
+
+    fn forward_inner(&mut self, x: &[T], batch: usize, rng: Option<&mut Rng>) -> &[T] {
         assert_eq!(x.len(), batch * self.in_features(), "Mlp::forward: input size");
-        let ws = &mut self.train;
+        let Mlp { layers, hidden, output, params, train: ws, norm, ln_offset, sizes, .. } = self;
         grow(&mut ws.input, x.len());
         ws.input[..x.len()].copy_from_slice(x);
-        let net =
-            Net { layers: &self.layers, hidden: self.hidden, output: self.output, params: &self.params };
-        net.forward(&ws.input[..x.len()], batch, &mut ws.acts);
+        let norm_at = norm.map(|n| (n, *ln_offset, &sizes[..]));
+        let net = Net { layers, hidden: *hidden, output: *output, params, norm: norm_at };
+        ws.dropped = false;
+        match *norm {
+            None => net.forward(&ws.input[..x.len()], batch, &mut ws.acts),
+            Some(n) => {
+                let rng = rng.filter(|_| n.dropout > 0.0);
+                ws.dropped = rng.is_some();
+                let cache = NormCache { mask: &mut ws.mask, xhat: &mut ws.xhat, inv_std: &mut ws.inv_std, rng };
+                net.forward_normed(&ws.input[..x.len()], batch, &mut ws.acts, Some(cache));
+            }
+        }
         ws.batch = batch;
         ws.ready = true;
         self.output()
+    }
+
+    fn net(&self) -> Net<'_, T> {
+        Net {
+            layers: &self.layers,
+            hidden: self.hidden,
+            output: self.output,
+            params: &self.params,
+            norm: self.norm.map(|n| (n, self.ln_offset, &self.sizes[..])),
+        }
     }
 
     /// Output of the last training forward pass (`batch x out`).
@@ -299,21 +403,23 @@ impl<T: Scalar> Mlp<T> {
     /// Inference on `x` (`batch x in`) using the network's own inference buffers; the training
     /// cache is left untouched. Returns `batch x out`.
     pub fn predict(&mut self, x: &[T], batch: usize) -> &[T] {
-        let Mlp { layers, hidden, output, params, infer, .. } = self;
-        Net { layers, hidden: *hidden, output: *output, params }.predict(x, batch, infer)
+        let Mlp { layers, hidden, output, params, infer, norm, ln_offset, sizes, .. } = self;
+        let norm = norm.map(|n| (n, *ln_offset, &sizes[..]));
+        Net { layers, hidden: *hidden, output: *output, params, norm }.predict(x, batch, infer)
     }
 
     /// Inference on `x` (`batch x in`) into a caller-owned workspace, so that `&self` suffices.
     pub fn predict_with<'w>(&self, x: &[T], batch: usize, ws: &'w mut Workspace<T>) -> &'w [T] {
-        let net =
-            Net { layers: &self.layers, hidden: self.hidden, output: self.output, params: &self.params };
-        net.predict(x, batch, ws)
+        self.net().predict(x, batch, ws)
     }
 
     /// Back-propagation: dL/dz_l = dL/dy_l * f'(z_l); dW_l += dz_l^T x_l; db_l += sum dz_l;
     /// dL/dx_l = dz_l W_l. Returns dL/dx for the input columns `input_cols` (empty if `None`).
     fn backprop(&mut self, grad_out: &[T], param_grads: bool, input_cols: Option<Range<usize>>) -> &[T] {
         assert!(self.train.ready, "Mlp backward without a forward pass");
+        if self.norm.is_some() {
+            return self.backprop_normed(grad_out, param_grads, input_cols);
+        }
         let batch = self.train.batch;
         let n_layers = self.layers.len();
         assert_eq!(grad_out.len(), batch * self.out_features(), "Mlp backward: grad_out size");
@@ -364,6 +470,17 @@ struct Net<'a, T> {
     hidden: Activation,
     output: Activation,
     params: &'a [T],
+    /// The hidden layers' dropout and normalisation, where their parameters start, the sizes.
+    norm: Option<(HiddenNorm, usize, &'a [usize])>,
+}
+
+/// What a training pass through normalised hidden layers keeps for the backward pass, and the
+/// random stream of its dropout (none: no dropout).
+struct NormCache<'a, T> {
+    mask: &'a mut [Vec<T>],
+    xhat: &'a mut [Vec<T>],
+    inv_std: &'a mut [Vec<T>],
+    rng: Option<&'a mut Rng>,
 }
 
 impl<T: Scalar> Net<'_, T> {
@@ -388,9 +505,115 @@ impl<T: Scalar> Net<'_, T> {
         if ws.acts.len() != layers.len() {
             ws.acts.resize(layers.len(), Vec::new());
         }
-        self.forward(x, batch, &mut ws.acts);
+        if self.norm.is_some() {
+            self.forward_normed(x, batch, &mut ws.acts, None);
+        } else {
+            self.forward(x, batch, &mut ws.acts);
+        }
         ws.batch = batch;
         let n = batch * layers[layers.len() - 1].out_features;
         &ws.acts[layers.len() - 1][..n]
+    }
+}
+
+impl<T: Scalar> Net<'_, T> {
+    /// [`Net::forward`] with dropout and layer normalisation after the hidden layers
+    /// ([`super::norm`]): `y = f(LN(drop(x W^T + b)))`; the output layer as usual. With `cache`
+    /// (a training pass) the masks and normalisation statistics are kept, and dropout runs when
+    /// its stream is given.
+    fn forward_normed(self, x: &[T], batch: usize, acts: &mut [Vec<T>], mut cache: Option<NormCache<'_, T>>) {
+        let (hn, ln_offset, sizes) = self.norm.expect("a normalised network");
+        let n_layers = self.layers.len();
+        for (l, layer) in self.layers.iter().enumerate() {
+            let (done, rest) = acts.split_at_mut(l);
+            let input: &[T] = if l == 0 { x } else { &done[l - 1] };
+            let out = &mut rest[0];
+            let n = batch * layer.out_features;
+            grow(out, n);
+            if l + 1 == n_layers {
+                layer.forward_act(self.params, input, batch, &mut out[..n], self.output);
+                continue;
+            }
+            layer.forward(self.params, input, batch, &mut out[..n]);
+            let h = layer.out_features;
+            if let Some(c) = cache.as_mut() {
+                if let Some(rng) = c.rng.as_deref_mut() {
+                    grow(&mut c.mask[l], n);
+                    norm::dropout_forward(&mut out[..n], &mut c.mask[l][..n], hn.dropout, rng);
+                }
+            }
+            if hn.layer_norm {
+                let (scale, bias) = Mlp::<T>::ln_ranges(ln_offset, sizes, l);
+                let (scale, bias) = (&self.params[scale], &self.params[bias]);
+                match cache.as_mut() {
+                    Some(c) => {
+                        grow(&mut c.xhat[l], n);
+                        grow(&mut c.inv_std[l], batch);
+                        let keep = Some((&mut c.xhat[l][..n], &mut c.inv_std[l][..batch]));
+                        norm::layer_norm_forward(&mut out[..n], h, scale, bias, keep);
+                    }
+                    None => norm::layer_norm_forward(&mut out[..n], h, scale, bias, None),
+                }
+            }
+            self.hidden.apply(&mut out[..n]);
+        }
+    }
+}
+
+impl<T: Scalar> Mlp<T> {
+    /// [`Mlp::backprop`] through normalised hidden layers, unfused: per layer from the last,
+    /// the activation's derivative, layer normalisation's backward pass, the dropout mask, then
+    /// the bias and weight gradients and dL/dx.
+    fn backprop_normed(&mut self, grad_out: &[T], param_grads: bool, input_cols: Option<Range<usize>>) -> &[T] {
+        let hn = self.norm.expect("a normalised network");
+        let batch = self.train.batch;
+        let n_layers = self.layers.len();
+        assert_eq!(grad_out.len(), batch * self.out_features(), "Mlp backward: grad_out size");
+        let widest = self.sizes.iter().copied().max().unwrap_or(0);
+        let Mlp { layers, params, grads, train: ws, sizes, ln_offset, hidden, output, .. } = self;
+        grow(&mut ws.grad_a, batch * widest);
+        grow(&mut ws.grad_b, batch * widest);
+        let in_width = input_cols.as_ref().map_or(0, |c| c.len());
+        grow(&mut ws.grad_in, batch * in_width);
+        let (mut cur, mut next) = (&mut ws.grad_a, &mut ws.grad_b);
+        cur[..grad_out.len()].copy_from_slice(grad_out);
+        for l in (0..n_layers).rev() {
+            let layer = layers[l];
+            let n_out = batch * layer.out_features;
+            let g = &mut cur[..n_out];
+            if l + 1 == n_layers {
+                output.backward(&ws.acts[l][..n_out], g);
+            } else {
+                hidden.backward(&ws.acts[l][..n_out], g);
+                if hn.layer_norm {
+                    let (scale, bias) = Self::ln_ranges(*ln_offset, sizes, l);
+                    let stats = (&ws.xhat[l][..n_out], &ws.inv_std[l][..batch]);
+                    let pg = if param_grads {
+                        let (ds, db) = grads[scale.start..bias.end].split_at_mut(scale.len());
+                        Some((ds, db))
+                    } else {
+                        None
+                    };
+                    norm::layer_norm_backward(g, layer.out_features, stats, &params[scale], pg);
+                }
+                if ws.dropped {
+                    for (v, &m) in g.iter_mut().zip(&ws.mask[l][..n_out]) {
+                        *v = *v * m;
+                    }
+                }
+            }
+            if param_grads {
+                norm::add_column_sums(g, &mut grads[layer.bias_range()]);
+                let x: &[T] = if l == 0 { &ws.input } else { &ws.acts[l - 1] };
+                layer.backward_weight(grads, x, g, batch);
+            }
+            if l > 0 {
+                layer.backward_input(params, g, batch, &mut next[..batch * layer.in_features]);
+                std::mem::swap(&mut cur, &mut next);
+            } else if let Some(cols) = input_cols.clone() {
+                layer.backward_input_cols(params, g, batch, cols, &mut ws.grad_in);
+            }
+        }
+        &ws.grad_in[..batch * in_width]
     }
 }

@@ -63,6 +63,7 @@ mod linear;
 mod loss;
 mod matmul;
 mod mlp;
+mod norm;
 mod ops;
 mod scalar;
 
@@ -75,6 +76,7 @@ pub use gaussian::{LogStdBound, SquashedGaussian};
 pub use linear::Linear;
 pub use loss::{mse, mse_loss};
 pub use mlp::{Mlp, TensorInfo, Workspace};
+pub use norm::{HiddenNorm, LN_EPS};
 pub use ops::{
     add_assign, axpy, clip_grad_norm, concat_cols, copy_cols, copy_row, first_non_finite, l2_norm,
     polyak_update, scale, sum_of_squares,

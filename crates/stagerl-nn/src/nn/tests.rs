@@ -584,3 +584,129 @@ mod simd_levels {
         assert_eq!(outs[1], outs[2], "AVX2 (or its fallback) differs from the baseline");
     }
 }
+
+/// DroQ's hidden layers, written out naively from the named tensors and a given mask per hidden
+/// layer (`None`: no dropout): `y = relu(LN(drop(x W^T + b)))`, the output layer plain.
+fn naive_normed_forward(net: &Mlp<f64>, x: &[f64], batch: usize, masks: Option<&[Vec<f64>]>) -> Vec<f64> {
+    let p = net.params();
+    let tensors = net.tensors();
+    let find = |name: &str| tensors.iter().find(|t| t.name == name).map(|t| &p[t.range()]);
+    let n_layers = net.layers().len();
+    let mut input = x.to_vec();
+    for (l, layer) in net.layers().iter().enumerate() {
+        let (ni, no) = (layer.in_features, layer.out_features);
+        let (w, b) = (find(&format!("layer{l}.weight")).unwrap(), find(&format!("layer{l}.bias")).unwrap());
+        let mut z = vec![0.0; batch * no];
+        for r in 0..batch {
+            for o in 0..no {
+                z[r * no + o] = b[o] + (0..ni).map(|i| w[o * ni + i] * input[r * ni + i]).sum::<f64>();
+            }
+        }
+        if l + 1 < n_layers {
+            if let Some(m) = masks {
+                z.iter_mut().zip(&m[l]).for_each(|(v, m)| *v *= m);
+            }
+            if let (Some(s), Some(c)) = (find(&format!("ln{l}.scale")), find(&format!("ln{l}.bias"))) {
+                for row in z.chunks_mut(no) {
+                    let mu = row.iter().sum::<f64>() / no as f64;
+                    let var = row.iter().map(|v| (v - mu) * (v - mu)).sum::<f64>() / no as f64;
+                    for (j, v) in row.iter_mut().enumerate() {
+                        *v = s[j] * (*v - mu) / (var + LN_EPS).sqrt() + c[j];
+                    }
+                }
+            }
+            net.hidden_activation().apply(&mut z);
+        } else {
+            net.output_activation().apply(&mut z);
+        }
+        input = z;
+    }
+    input
+}
+
+/// Dropout then layer normalisation after the hidden layers (DroQ's critic): the forward pass
+/// equals the naive formulas with the same masks (drawn from the same stream: one uniform per
+/// value, `u < p` dropped, kept values scaled by 1 / (1 - p)); parameter and input gradients
+/// equal central differences with the masks held fixed; inference normalises without dropping.
+#[test]
+fn dropout_and_layer_norm_values_and_gradients() {
+    let (sizes, batch, p) = ([5usize, 7, 6, 2], 4, 0.3);
+    for hn in [
+        HiddenNorm { dropout: 0.0, layer_norm: true },
+        HiddenNorm { dropout: p, layer_norm: true },
+        HiddenNorm { dropout: p, layer_norm: false },
+    ] {
+        let mut rng = Rng::new(3);
+        let mut net = Mlp::<f64>::with_norm(&sizes, Activation::Relu, Activation::Identity, Some(hn), &mut rng);
+        // Plain layers drawn as `Mlp::new` draws them; scales 1 and biases 0, then moved off them.
+        let plain = Mlp::<f64>::new(&sizes, Activation::Relu, Activation::Identity, &mut Rng::new(3));
+        assert_eq!(&net.params()[..plain.num_params()], plain.params());
+        let names: Vec<String> = net.tensors().iter().map(|t| t.name.clone()).collect();
+        assert_eq!(names.iter().any(|n| n == "ln1.bias"), hn.layer_norm, "{names:?}");
+        let extra = net.num_params() - plain.num_params();
+        assert_eq!(extra, if hn.layer_norm { 2 * (7 + 6) } else { 0 });
+        if hn.layer_norm {
+            assert_eq!(&net.params()[plain.num_params()..plain.num_params() + 7], &[1.0; 7]);
+        }
+        for v in net.params_mut()[plain.num_params()..].iter_mut() {
+            *v += 0.3 * rng.normal();
+        }
+        let x = randn(&mut rng, batch * sizes[0]);
+        // The masks the stream gives: the same draws, in order, layer by layer.
+        let mut draws = Rng::new(77);
+        let masks: Vec<Vec<f64>> = sizes[1..3]
+            .iter()
+            .map(|&h| (0..batch * h).map(|_| if draws.uniform() < p { 0.0 } else { 1.0 / (1.0 - p) }).collect())
+            .collect();
+        let dropping = hn.dropout > 0.0;
+        let y = net.forward_dropout(&x, batch, &mut Rng::new(77)).to_vec();
+        let expect = naive_normed_forward(&net, &x, batch, dropping.then_some(&masks[..]));
+        for (a, b) in y.iter().zip(&expect) {
+            assert!(close(*a, *b, 1e-12), "{hn:?}: {a} vs {b}");
+        }
+        if dropping {
+            assert!(masks.iter().flatten().any(|&m| m == 0.0), "something dropped");
+        }
+        // Gradients: loss = sum(y * c).
+        let c = randn(&mut rng, batch * 2);
+        net.zero_grad();
+        net.forward_dropout(&x, batch, &mut Rng::new(77));
+        let dx = net.backward_with_input_grad(&c).to_vec();
+        let analytic = net.grads().to_vec();
+        let m = dropping.then_some(&masks[..]);
+        let probe = net.clone();
+        let numeric = numeric_grad(net.params(), |theta| {
+            let mut q = probe.clone();
+            q.params_mut().copy_from_slice(theta);
+            dot(&naive_normed_forward(&q, &x, batch, m), &c)
+        });
+        assert_grads_close(&format!("{hn:?} params"), &analytic, &numeric);
+        let numeric_x = numeric_grad(&x, |xs| dot(&naive_normed_forward(&probe, xs, batch, m), &c));
+        assert_grads_close(&format!("{hn:?} input"), &dx, &numeric_x);
+        // The input columns alone, without touching the parameter gradients.
+        net.forward_dropout(&x, batch, &mut Rng::new(77));
+        let cols = net.input_grad_cols(&c, 1..4).to_vec();
+        for r in 0..batch {
+            assert_eq!(cols[r * 3..r * 3 + 3], dx[r * 5 + 1..r * 5 + 4], "row {r}");
+        }
+        assert_eq!(net.grads(), &analytic[..]);
+        // Inference and a training pass without a stream: normalised, nothing dropped.
+        let inferred = net.predict(&x, batch).to_vec();
+        let expect = naive_normed_forward(&net, &x, batch, None);
+        assert!(inferred.iter().zip(&expect).all(|(a, b)| close(*a, *b, 1e-12)));
+        assert_eq!(net.forward(&x, batch), &inferred[..]);
+    }
+}
+
+/// Dropout's masks: about a fraction p dropped, kept values scaled so that the mean is kept.
+#[test]
+fn dropout_keeps_the_mean() {
+    let mut z = vec![1.0f64; 100_000];
+    let mut mask = vec![0.0; z.len()];
+    super::norm::dropout_forward(&mut z, &mut mask, 0.2, &mut Rng::new(5));
+    let dropped = mask.iter().filter(|&&m| m == 0.0).count() as f64 / z.len() as f64;
+    assert!((dropped - 0.2).abs() < 0.005, "{dropped}");
+    let mean = z.iter().sum::<f64>() / z.len() as f64;
+    assert!((mean - 1.0).abs() < 0.01, "{mean}");
+    assert!(mask.iter().all(|&m| m == 0.0 || m == 1.25));
+}

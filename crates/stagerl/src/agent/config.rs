@@ -410,6 +410,35 @@ mod tests {
     }
 
     #[test]
+    fn an_ensemble_is_checked_and_its_actor_objective_follows_redq() {
+        let sac = |n, m, q| SacConfig { n_critics: n, critic_subset: m, actor_q: q, ..SacConfig::default() };
+        for (bad, field, allowed) in [
+            (sac(0, None, None), "agent.sac.n_critics", "1..=20"),
+            (sac(21, None, None), "agent.sac.n_critics", "1..=20"),
+            (sac(10, Some(0), None), "agent.sac.critic_subset", "1..=10"),
+            (sac(2, Some(3), None), "agent.sac.critic_subset", "at most agent.sac.n_critics = 2"),
+            (SacConfig { critic_dropout: 1.0, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
+            (SacConfig { critic_dropout: -0.1, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
+            (SacConfig { critic_dropout: f64::NAN, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
+        ] {
+            let e = bad.validate().unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains(allowed), "{e}");
+        }
+        assert_eq!(SacConfig::default().actor_q(), crate::agent::ActorQ::Min);
+        assert_eq!(sac(10, Some(2), None).actor_q(), crate::agent::ActorQ::Mean);
+        assert_eq!(sac(10, None, None).actor_q(), crate::agent::ActorQ::Min);
+        assert_eq!(sac(10, Some(10), None).actor_q(), crate::agent::ActorQ::Min);
+        assert_eq!(sac(2, None, Some(crate::agent::ActorQ::Mean)).actor_q(), crate::agent::ActorQ::Mean);
+        // The defaults are left out of a written config (runs from before read the same).
+        let written = toml::to_string(&SacConfig::default()).unwrap();
+        assert!(!written.contains("n_critics") && !written.contains("critic_"), "{written}");
+        assert_eq!(SacConfig::default().critic_norm(), None);
+        let back: SacConfig = toml::from_str("n_critics = 10\ncritic_subset = 2\n").unwrap();
+        assert_eq!((back.n_critics, back.subset()), (10, 2));
+        assert!(toml::from_str::<SacConfig>("actor_q = \"max\"\n").unwrap_err().to_string().contains("max"));
+    }
+
+    #[test]
     fn a_moved_key_says_where_it_belongs() {
         for (key, home) in MOVED_KEYS {
             let table: toml::Table = toml::from_str(&format!("{key} = 1\n")).unwrap();

@@ -2,11 +2,13 @@
 //! such as REDQ's: N) with their Polyak-averaged targets `Q_i'`, their Adam optimisers and their
 //! buffers, and what the off-policy algorithms do with them:
 //! 1. the target value `min_i Q_i'(s', a')` ([`Critics::target_min`], or
-//!    [`TargetSide::min`] while the critics' forward pass runs, [`Critics::forward_alongside`]);
+//!    [`TargetSide::min`] while the critics' forward pass runs, [`Critics::forward_alongside`]),
+//!    over every target or over a random subset of them ([`Critics::choose_targets`], REDQ's);
 //! 2. each critic minimises `mean (Q_i(s, a) - y)^2`, one Adam step ([`Critics::fit`],
 //!    [`Critics::fit_forwarded`]);
 //! 3. the actor's side: SAC's `min_i Q_i(s, a~)`, its gradient dQ/da through the critic of the
-//!    smallest value of each row ([`Critics::forward_min`], [`Critics::input_grad_min`]); TD3's
+//!    smallest value of each row ([`Critics::forward_min`], [`Critics::input_grad_min`]); REDQ's
+//!    `(1/N) sum_i Q_i(s, a~)` ([`Critics::forward_mean`], [`Critics::input_grad_mean`]); TD3's
 //!    and DDPG's `Q_1(s, mu(s))` ([`Critics::forward_first`], [`Critics::input_grad_first`]);
 //! 4. targets `theta_i' <- (1 - tau) theta_i' + tau theta_i` ([`Critics::polyak`]).
 //!
@@ -20,10 +22,60 @@ use std::ops::Range;
 use super::step;
 use crate::base::par;
 use crate::base::rng::Rng;
-use crate::nn::{Activation, Adam, Mlp};
+use crate::nn::{Activation, Adam, HiddenNorm, Mlp};
+
+/// Checkpoint names of the critics of an ensemble, `[critic, its target, its optimiser]` each:
+/// `q1` .. `q20` (an ensemble of `n` takes the first `n`).
+pub const ENSEMBLE: &[[&str; 3]] = &[
+    ["q1", "q1_target", "q1_opt"],
+    ["q2", "q2_target", "q2_opt"],
+    ["q3", "q3_target", "q3_opt"],
+    ["q4", "q4_target", "q4_opt"],
+    ["q5", "q5_target", "q5_opt"],
+    ["q6", "q6_target", "q6_opt"],
+    ["q7", "q7_target", "q7_opt"],
+    ["q8", "q8_target", "q8_opt"],
+    ["q9", "q9_target", "q9_opt"],
+    ["q10", "q10_target", "q10_opt"],
+    ["q11", "q11_target", "q11_opt"],
+    ["q12", "q12_target", "q12_opt"],
+    ["q13", "q13_target", "q13_opt"],
+    ["q14", "q14_target", "q14_opt"],
+    ["q15", "q15_target", "q15_opt"],
+    ["q16", "q16_target", "q16_opt"],
+    ["q17", "q17_target", "q17_opt"],
+    ["q18", "q18_target", "q18_opt"],
+    ["q19", "q19_target", "q19_opt"],
+    ["q20", "q20_target", "q20_opt"],
+];
+
+/// Checkpoint names of the dropout streams of an ensemble's critics and of their targets
+/// (`[critic's, target's]`), saved only when the critics drop out (DroQ's).
+pub const DROPOUT_RNG: &[[&str; 2]] = &[
+    ["q1_dropout_rng", "q1_target_dropout_rng"],
+    ["q2_dropout_rng", "q2_target_dropout_rng"],
+    ["q3_dropout_rng", "q3_target_dropout_rng"],
+    ["q4_dropout_rng", "q4_target_dropout_rng"],
+    ["q5_dropout_rng", "q5_target_dropout_rng"],
+    ["q6_dropout_rng", "q6_target_dropout_rng"],
+    ["q7_dropout_rng", "q7_target_dropout_rng"],
+    ["q8_dropout_rng", "q8_target_dropout_rng"],
+    ["q9_dropout_rng", "q9_target_dropout_rng"],
+    ["q10_dropout_rng", "q10_target_dropout_rng"],
+    ["q11_dropout_rng", "q11_target_dropout_rng"],
+    ["q12_dropout_rng", "q12_target_dropout_rng"],
+    ["q13_dropout_rng", "q13_target_dropout_rng"],
+    ["q14_dropout_rng", "q14_target_dropout_rng"],
+    ["q15_dropout_rng", "q15_target_dropout_rng"],
+    ["q16_dropout_rng", "q16_target_dropout_rng"],
+    ["q17_dropout_rng", "q17_target_dropout_rng"],
+    ["q18_dropout_rng", "q18_target_dropout_rng"],
+    ["q19_dropout_rng", "q19_target_dropout_rng"],
+    ["q20_dropout_rng", "q20_target_dropout_rng"],
+];
 
 /// Checkpoint names of twin critics (TD3, SAC): `[critic, its target, its optimiser]` each.
-pub const TWIN: &[[&str; 3]] = &[["q1", "q1_target", "q1_opt"], ["q2", "q2_target", "q2_opt"]];
+pub const TWIN: &[[&str; 3]] = &[ENSEMBLE[0], ENSEMBLE[1]];
 
 /// The critics, their targets, optimisers and buffers. The networks, targets and optimisers are
 /// listed in the owning agent's learned parts (under [`Critics::names`]).
@@ -37,7 +89,15 @@ pub struct Critics {
     pub(super) opts: Vec<Adam<f32>>,
     /// Per critic: its target's values on the batch.
     target_q: Vec<Vec<f32>>,
-    scratch: Vec<Scratch>,
+    /// Per critic: its target's dropout stream (used only when the critics drop out).
+    pub(super) target_drop: Vec<Rng>,
+    /// The critics' dropout and layer normalisation (DroQ's), if any.
+    norm: Option<HiddenNorm>,
+    /// Per critic: whether its target takes part in the next target minimum (all, but for the
+    /// one after [`Critics::choose_targets`]), and the draw's scratch.
+    chosen: Vec<bool>,
+    order: Vec<usize>,
+    pub(super) scratch: Vec<Scratch>,
     /// The losses of the last fit, per critic.
     losses: Vec<f64>,
     /// Per row of the last [`Critics::forward_min`]: the critic of the smallest value, and it.
@@ -45,8 +105,10 @@ pub struct Critics {
     min: Vec<f32>,
 }
 
-/// One critic's buffers for an update.
-struct Scratch {
+/// One critic's buffers for an update, and its dropout stream.
+pub(super) struct Scratch {
+    /// The dropout masks' random stream (used only when the critics drop out).
+    pub(super) drop: Rng,
     /// dL/dQ_i per row (the fit's, then the actor side's).
     dq: Vec<f32>,
     /// dQ_i/da (actor side, `batch x act`).
@@ -68,17 +130,52 @@ impl Critics {
         batch: usize,
         act_dim: usize,
     ) -> Critics {
-        let nets: Vec<Mlp<f32>> =
-            names.iter().map(|_| Mlp::new(sizes, Activation::Relu, Activation::Identity, init)).collect();
+        Self::with_norm(names, sizes, lr, init, (batch, act_dim), None)
+    }
+
+    /// [`Critics::new`] with dropout and layer normalisation after the critics' hidden layers
+    /// (DroQ's; [`HiddenNorm`]); with dropout, each critic and each target gets its own stream,
+    /// seeded from `init` after the networks are drawn.
+    pub fn with_norm(
+        names: &'static [[&'static str; 3]],
+        sizes: &[usize],
+        lr: f64,
+        init: &mut Rng,
+        (batch, act_dim): (usize, usize),
+        norm: Option<HiddenNorm>,
+    ) -> Critics {
+        let mut nets: Vec<Mlp<f32>> = names
+            .iter()
+            .map(|_| Mlp::with_norm(sizes, Activation::Relu, Activation::Identity, norm, init))
+            .collect();
+        // Buffers for the batch now: a target of an ensemble may be drawn for the first time
+        // long after the first update, and must not allocate then.
+        for q in &mut nets {
+            q.reserve(batch);
+        }
         let n = nets.len();
+        let dropout = norm.is_some_and(|h| h.dropout > 0.0);
+        let mut stream = || if dropout { Rng::new(init.next_u64()) } else { Rng::new(0) };
+        let drops: Vec<Rng> = (0..n).map(|_| stream()).collect();
+        let target_drop: Vec<Rng> = (0..n).map(|_| stream()).collect();
+        let mut drops = drops.into_iter();
         Critics {
+            target_drop,
+            norm,
             names,
             opts: nets.iter().map(|q| Adam::new(q.num_params(), lr)).collect(),
             targets: nets.clone(),
             nets,
             target_q: vec![vec![0.0; batch]; n],
+            chosen: vec![true; n],
+            order: (0..n).collect(),
             scratch: (0..n)
-                .map(|_| Scratch { dq: vec![0.0; batch], da: vec![0.0; batch * act_dim], loss: 0.0 })
+                .map(|_| Scratch {
+                    drop: drops.next().expect("one stream per critic"),
+                    dq: vec![0.0; batch],
+                    da: vec![0.0; batch * act_dim],
+                    loss: 0.0,
+                })
                 .collect(),
             losses: vec![0.0; n],
             argmin: vec![0; batch],
@@ -96,20 +193,47 @@ impl Critics {
         self.names
     }
 
-    /// Step 1: `out[r] = min_i Q_i'(input[r])` for the `b` rows of `input`.
+    /// Step 1: `out[r] = min_i Q_i'(input[r])` for the `b` rows of `input`, over the targets
+    /// chosen by [`Critics::choose_targets`] if it was called since the last minimum, else over
+    /// all of them.
     pub fn target_min(&mut self, input: &[f32], b: usize, out: &mut [f32]) {
         self.target_side().min(input, b, out)
     }
 
     fn target_side(&mut self) -> TargetSide<'_> {
-        TargetSide { targets: &mut self.targets, q: &mut self.target_q }
+        let Critics { targets, target_q, chosen, target_drop, .. } = self;
+        TargetSide { targets, q: target_q, chosen, drop: target_drop }
+    }
+
+    /// Whether the critics drop out (their dropout streams are then part of the agent's state).
+    pub fn drops_out(&self) -> bool {
+        self.norm.is_some_and(|h| h.dropout > 0.0)
+    }
+
+    /// REDQ's in-target minimisation: the next target minimum is over `m` (1..=N) of the
+    /// targets, drawn without replacement from `rng` (a partial Fisher-Yates shuffle of
+    /// `0..N`: `m` draws of `below`). The unchosen targets are not evaluated. No allocation.
+    pub fn choose_targets(&mut self, m: usize, rng: &mut Rng) {
+        let n = self.len();
+        assert!((1..=n).contains(&m), "choose_targets: {m} of {n} critics");
+        for (i, o) in self.order.iter_mut().enumerate() {
+            *o = i;
+        }
+        for i in 0..m {
+            let j = i + rng.below((n - i) as u64) as usize;
+            self.order.swap(i, j);
+        }
+        self.chosen.fill(false);
+        for &k in &self.order[..m] {
+            self.chosen[k] = true;
+        }
     }
 
     /// The critics' forward pass on `input` (`b` rows, for [`Critics::fit_forwarded`]) at once
     /// with `f`, which gets the target side (on two threads with a pool; the same values).
     pub fn forward_alongside(&mut self, input: &[f32], b: usize, f: impl FnOnce(TargetSide<'_>) + Send) {
-        let Critics { nets, targets, target_q, .. } = self;
-        let side = TargetSide { targets, q: target_q };
+        let Critics { nets, targets, target_q, chosen, target_drop, .. } = self;
+        let side = TargetSide { targets, q: target_q, chosen, drop: target_drop };
         par::join(
             move || f(side),
             || {
@@ -124,7 +248,7 @@ impl Critics {
     /// (`y.len()` rows). Returns the losses.
     pub fn fit(&mut self, input: &[f32], y: &[f32], max_grad_norm: f64) -> &[f64] {
         par::for_each_mut3(&mut self.nets, &mut self.opts, &mut self.scratch, &|_, q, opt, s| {
-            q.forward(input, y.len());
+            q.forward_dropout(input, y.len(), &mut s.drop);
             s.loss = fit_forwarded(q, opt, y, &mut s.dq, max_grad_norm)
         });
         self.collect_losses()
@@ -161,8 +285,8 @@ impl Critics {
     /// Step 3 (SAC): `min_i Q_i(input[r])` for the `b` rows of `input`, each critic's forward
     /// pass kept for [`Critics::input_grad_min`]. Of equal values the first critic's is taken.
     pub fn forward_min(&mut self, input: &[f32], b: usize) -> &[f32] {
-        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, _| {
-            q.forward(input, b);
+        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, s| {
+            q.forward_dropout(input, b, &mut s.drop);
         });
         let (argmin, min) = (&mut self.argmin[..b], &mut self.min[..b]);
         let first = self.nets[0].output();
@@ -204,6 +328,48 @@ impl Critics {
         da
     }
 
+    /// Step 3 (REDQ): `(1/N) sum_i Q_i(input[r])` for the `b` rows of `input` (summed in the
+    /// critics' order, then scaled), each critic's forward pass kept for
+    /// [`Critics::input_grad_mean`].
+    pub fn forward_mean(&mut self, input: &[f32], b: usize) -> &[f32] {
+        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, s| {
+            q.forward_dropout(input, b, &mut s.drop);
+        });
+        let mean = &mut self.min[..b];
+        mean.copy_from_slice(&self.nets[0].output()[..b]);
+        for q in &self.nets[1..] {
+            for (m, &v) in mean.iter_mut().zip(q.output()) {
+                *m += v;
+            }
+        }
+        let inv_n = 1.0 / self.nets.len() as f32;
+        for m in mean.iter_mut() {
+            *m *= inv_n;
+        }
+        &self.min[..b]
+    }
+
+    /// Step 3 (REDQ): dQ/d(input columns `cols`) of the last [`Critics::forward_mean`], the
+    /// loss's gradient being `grad` on each row's mean: the sum over the critics of each one's
+    /// input gradient for `grad / N` on every row (`b x cols.len()`).
+    pub fn input_grad_mean(&mut self, grad: f32, cols: Range<usize>) -> &[f32] {
+        let b = self.nets[0].batch();
+        let m = b * cols.len();
+        let share = grad / self.nets.len() as f32;
+        par::for_each_mut(&mut self.nets, &mut self.scratch, &|_, q, s| {
+            s.dq[..b].fill(share);
+            s.da[..m].copy_from_slice(q.input_grad_cols(&s.dq[..b], cols.clone()));
+        });
+        let (first, rest) = self.scratch.split_at_mut(1);
+        let da = &mut first[0].da[..m];
+        for s in rest {
+            for (x, y) in da.iter_mut().zip(&s.da[..m]) {
+                *x += y;
+            }
+        }
+        da
+    }
+
     /// Step 3 (TD3, DDPG): `Q_1(input[r])` for the `b` rows of `input`, its forward pass kept
     /// for [`Critics::input_grad_first`].
     pub fn forward_first(&mut self, input: &[f32], b: usize) -> &[f32] {
@@ -230,19 +396,37 @@ impl Critics {
 pub struct TargetSide<'a> {
     targets: &'a mut [Mlp<f32>],
     q: &'a mut [Vec<f32>],
+    chosen: &'a mut [bool],
+    drop: &'a mut [Rng],
 }
 
 impl TargetSide<'_> {
-    /// `out[r] = min_i Q_i'(input[r])` for the `b` rows of `input`.
+    /// `out[r] = min_i Q_i'(input[r])` for the `b` rows of `input`, over the chosen targets
+    /// (in their order; then every target is chosen again).
     pub fn min(&mut self, input: &[f32], b: usize, out: &mut [f32]) {
-        par::for_each_mut(self.targets, self.q, &|_, t, q| q[..b].copy_from_slice(t.predict(input, b)));
+        let chosen = &*self.chosen;
+        par::for_each_mut3(self.targets, self.q, self.drop, &|k, t, q, drop| {
+            // DroQ: the targets drop out too (a training pass, from their own streams).
+            let dropout = t.hidden_norm().is_some_and(|h| h.dropout > 0.0);
+            match (chosen[k], dropout) {
+                (false, _) => {}
+                (true, true) => q[..b].copy_from_slice(t.forward_dropout(input, b, drop)),
+                (true, false) => q[..b].copy_from_slice(t.predict(input, b)),
+            }
+        });
         let out = &mut out[..b];
-        out.copy_from_slice(&self.q[0][..b]);
-        for q in &self.q[1..] {
-            for (y, &q) in out.iter_mut().zip(&q[..b]) {
-                *y = y.min(q);
+        let mut first = true;
+        for (q, _) in self.q.iter().zip(chosen).filter(|(_, &c)| c) {
+            if first {
+                out.copy_from_slice(&q[..b]);
+                first = false;
+            } else {
+                for (y, &q) in out.iter_mut().zip(&q[..b]) {
+                    *y = y.min(q);
+                }
             }
         }
+        self.chosen.fill(true);
     }
 }
 
@@ -326,6 +510,77 @@ mod tests {
         for k in 0..3 {
             assert_ne!(c.targets[k].params(), &old[k][..], "target {k} moved");
             assert!(gap(&c, k) < before[k] * 0.6, "target {k}: {} -> {}", before[k], gap(&c, k));
+        }
+    }
+
+    #[test]
+    fn a_drawn_subset_of_targets_makes_the_minimum_and_the_others_are_not_evaluated() {
+        let (b, od, ad) = (8, 3, 2);
+        let names = &ENSEMBLE[..10];
+        let mut c = Critics::new(names, &[od + ad, 16, 1], 1e-3, &mut Rng::new(3), b, ad);
+        let mut rng = Rng::new(9);
+        let input = uniform(&mut rng, b * (od + ad));
+        let each: Vec<Vec<f32>> = c.targets.iter_mut().map(|t| t.predict(&input, b).to_vec()).collect();
+        let mut seen = [0usize; 10];
+        let mut draws = Rng::new(11);
+        for round in 0..200 {
+            for q in c.target_q.iter_mut() {
+                q.fill(f32::NAN);
+            }
+            c.choose_targets(2, &mut draws);
+            let chosen: Vec<usize> = (0..10).filter(|&k| c.chosen[k]).collect();
+            assert_eq!(chosen.len(), 2, "round {round}: {chosen:?}");
+            let mut y = vec![0.0; b];
+            c.target_min(&input, b, &mut y);
+            for r in 0..b {
+                assert_eq!(y[r], each[chosen[0]][r].min(each[chosen[1]][r]), "round {round} row {r}");
+            }
+            for k in (0..10).filter(|k| !chosen.contains(k)) {
+                assert!(c.target_q[k].iter().all(|v| v.is_nan()), "target {k} was evaluated");
+            }
+            // The next minimum, without a draw, is over every target again.
+            assert!(c.chosen.iter().all(|&x| x));
+            chosen.iter().for_each(|&k| seen[k] += 1);
+        }
+        // 400 draws over 10 critics: each drawn (expected 40, binomial sd 5.7).
+        assert!(seen.iter().all(|&n| (15..=65).contains(&n)), "{seen:?}");
+        let mut y = vec![0.0; b];
+        c.target_min(&input, b, &mut y);
+        for r in 0..b {
+            let all = each.iter().map(|q| q[r]).fold(f32::INFINITY, f32::min);
+            assert_eq!(y[r], all, "row {r}");
+        }
+        // The same draws from the same stream.
+        let (mut d1, mut d2) = (Rng::new(4), Rng::new(4));
+        for _ in 0..20 {
+            c.choose_targets(3, &mut d1);
+            let first = c.chosen.clone();
+            c.choose_targets(3, &mut d2);
+            assert_eq!(first, c.chosen);
+        }
+    }
+
+    #[test]
+    fn the_actor_side_of_the_mean_goes_through_every_critic_equally() {
+        // The linear critics of the test below: Q_k = s_k + (k + 1) a_0 - k a_1.
+        let (b, od, ad) = (4, 3, 2);
+        let mut c = Critics::new(THREE, &[od + ad, 1], 1e-3, &mut Rng::new(1), b, ad);
+        for (k, q) in c.nets.iter_mut().enumerate() {
+            let p = q.params_mut();
+            p.fill(0.0);
+            (p[k], p[3], p[4]) = (1.0, (k + 1) as f32, -(k as f32));
+        }
+        let input: Vec<f32> = (0..b * (od + ad)).map(|i| (i % 7) as f32 * 0.5 - 1.0).collect();
+        let mean = c.forward_mean(&input, b).to_vec();
+        for r in 0..b {
+            let x = &input[r * (od + ad)..(r + 1) * (od + ad)];
+            let sum: f32 = (0..3).map(|k| x[k] + (k + 1) as f32 * x[3] - k as f32 * x[4]).sum();
+            assert!((mean[r] - sum / 3.0).abs() < 1e-6, "row {r}: {} vs {}", mean[r], sum / 3.0);
+        }
+        // d mean / d a = (1/3) sum_k [(k + 1), -k] = [2, -1], times the loss gradient.
+        let da = c.input_grad_mean(-0.5, od..od + ad).to_vec();
+        for r in 0..b {
+            assert!((da[r * ad] + 1.0).abs() < 1e-6 && (da[r * ad + 1] - 0.5).abs() < 1e-6, "{da:?}");
         }
     }
 

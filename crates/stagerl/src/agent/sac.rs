@@ -1,33 +1,56 @@
 //! Soft Actor-Critic with automatic entropy tuning (Haarnoja et al. 2018), as in CleanRL and
-//! Stable-Baselines3.
+//! Stable-Baselines3, and its ensemble variants REDQ (Chen et al., ICLR 2021) and DroQ (Hiraoka
+//! et al., ICLR 2022: dropout and layer normalisation in the critics and their targets).
 //!
 //! Networks: a tanh-squashed Gaussian actor `obs -> [mean | s]` (log-std `l = -5 + 3.5 (tanh s + 1)`,
-//! in [-5, 2]), twin critics `Q1, Q2: [obs | act] -> 1` and their Polyak-averaged targets (a
-//! [`Critics`] ensemble of two).
+//! in [-5, 2]), `N = n_critics` critics `Q_i: [obs | act] -> 1` (2, SAC's twins, by default) and
+//! their Polyak-averaged targets (a [`Critics`] ensemble).
 //!
 //! One update on a batch `(s, a, r, s', d)`:
-//! 1. critic target `y = r + gamma (1 - d) (min(Q1', Q2')(s', a') - alpha log pi(a'|s'))`,
-//!    `a' ~ pi(.|s')`; each critic minimises `mean (Q_i(s, a) - y)^2`;
-//! 2. actor minimises `mean (alpha log pi(a~|s) - min(Q1, Q2)(s, a~))`, `a~ ~ pi(.|s)`,
-//!    reparameterised, so the gradient flows through dQ/da and the squashed Gaussian;
+//! 1. critic target `y = r + gamma (1 - d) (min_{i in M} Q_i'(s', a') - alpha log pi(a'|s'))`,
+//!    `a' ~ pi(.|s')`, `M` all the critics (SAC) or, with `critic_subset = m < N`, `m` of them
+//!    drawn without replacement for this update (REDQ's in-target minimisation); each critic
+//!    minimises `mean (Q_i(s, a) - y)^2`;
+//! 2. actor minimises `mean (alpha log pi(a~|s) - Q(s, a~))`, `a~ ~ pi(.|s)`, reparameterised,
+//!    so the gradient flows through dQ/da and the squashed Gaussian; `Q` is `min_i Q_i` (SAC) or
+//!    `(1/N) sum_i Q_i` (`actor_q = "mean"`, REDQ's and DroQ's);
 //! 3. `log alpha` minimises `-log alpha * mean(log pi(a~|s) + H_target)`, `H_target = -act_dim`
 //!    (times `target_entropy_per_dim`);
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
 //!
-//! Its own settings: `[agent.sac]`, [`SacConfig`] (the entropy coefficient).
+//! REDQ is `n_critics = 10`, `critic_subset = 2` with `agent.updates_per_step = 20`; DroQ is
+//! `critic_dropout = 0.01`, `critic_layer_norm = true`, `actor_q = "mean"` with
+//! `agent.updates_per_step = 20` (each critic's hidden layers `relu(LN(dropout(x W^T + b)))`,
+//! [`crate::nn::HiddenNorm`]; the critics, their targets and the actor's critics all drop out,
+//! each from its own stream).
+//!
+//! Its own settings: `[agent.sac]`, [`SacConfig`] (the entropy coefficient, the ensemble).
 
 use serde::{Deserialize, Serialize};
 
-use super::critics::{self, Critics, TWIN};
+use super::critics::{self, Critics, DROPOUT_RNG, ENSEMBLE};
 use super::parts::learned_parts;
 use super::{sizes, step, Agent, AgentConfig, Algo, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
 use crate::base::rng::Rng;
 use crate::base::validate::{finite, positive};
-use crate::nn::{concat_cols, Activation, Adam, LogStdBound, Mlp, SquashedGaussian};
-use crate::Result;
+use crate::nn::{concat_cols, Activation, Adam, HiddenNorm, LogStdBound, Mlp, SquashedGaussian};
+use crate::{Error, Result};
 
-/// `[agent.sac]`: SAC's entropy coefficient.
+/// Most critics of an ensemble (`agent.sac.n_critics`).
+pub const MAX_CRITICS: usize = ENSEMBLE.len();
+
+/// What the actor maximises of the critics' values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ActorQ {
+    /// The smallest of the critics' values, per row (SAC's `min(Q1, Q2)`).
+    Min,
+    /// The mean of every critic's value (REDQ's and DroQ's).
+    Mean,
+}
+
+/// `[agent.sac]`: SAC's entropy coefficient and its critic ensemble.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SacConfig {
@@ -39,11 +62,51 @@ pub struct SacConfig {
     pub target_entropy_per_dim: f64,
     /// Fix alpha at `init_alpha` instead of tuning it.
     pub fixed_alpha: bool,
+    /// Critics in the ensemble, 1..=20 (SAC: 2; REDQ: 10). Checkpoint names `q1` .. `qN`.
+    #[serde(skip_serializing_if = "is_two")]
+    pub n_critics: usize,
+    /// Critics whose minimum makes each update's target, drawn anew per update (REDQ: 2 of 10);
+    /// unset: all of them (SAC).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub critic_subset: Option<usize>,
+    /// What the actor maximises: `"min"` (the critics' smallest value, SAC's) or `"mean"` (their
+    /// mean, REDQ's); unset: `"mean"` when `critic_subset` is below `n_critics` (REDQ), else `"min"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub actor_q: Option<ActorQ>,
+    /// Dropout probability after each critic's hidden layers, in [0, 1) (DroQ: 0.01); 0: none.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub critic_dropout: f64,
+    /// Layer normalisation (learned scale and bias) after each critic's hidden layers, after
+    /// dropout (DroQ's).
+    #[serde(skip_serializing_if = "is_false")]
+    pub critic_layer_norm: bool,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+fn is_two(n: &usize) -> bool {
+    *n == 2
 }
 
 impl Default for SacConfig {
     fn default() -> Self {
-        SacConfig { alpha_lr: 3e-4, init_alpha: 1.0, target_entropy_per_dim: -1.0, fixed_alpha: false }
+        SacConfig {
+            alpha_lr: 3e-4,
+            init_alpha: 1.0,
+            target_entropy_per_dim: -1.0,
+            fixed_alpha: false,
+            n_critics: 2,
+            critic_subset: None,
+            actor_q: None,
+            critic_dropout: 0.0,
+            critic_layer_norm: false,
+        }
     }
 }
 
@@ -52,7 +115,49 @@ impl SacConfig {
     pub fn validate(&self) -> Result<()> {
         positive("agent.sac.alpha_lr", self.alpha_lr)?;
         positive("agent.sac.init_alpha", self.init_alpha)?;
-        finite("agent.sac.target_entropy_per_dim", self.target_entropy_per_dim)
+        finite("agent.sac.target_entropy_per_dim", self.target_entropy_per_dim)?;
+        if !(1..=MAX_CRITICS).contains(&self.n_critics) {
+            return Err(Error::config(
+                "agent.sac.n_critics",
+                self.n_critics,
+                format!("an integer in 1..={MAX_CRITICS} (critics in the ensemble)"),
+            ));
+        }
+        if let Some(m) = self.critic_subset.filter(|m| !(1..=self.n_critics).contains(m)) {
+            return Err(Error::config(
+                "agent.sac.critic_subset",
+                m,
+                format!(
+                    "an integer in 1..={} (at most agent.sac.n_critics = {}), or unset for all of them",
+                    self.n_critics, self.n_critics
+                ),
+            ));
+        }
+        if !(self.critic_dropout.is_finite() && (0.0..1.0).contains(&self.critic_dropout)) {
+            return Err(Error::config(
+                "agent.sac.critic_dropout",
+                self.critic_dropout,
+                "a probability in [0, 1) (0: no dropout; DroQ: 0.01)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The critics' dropout and layer normalisation, if any.
+    pub fn critic_norm(&self) -> Option<HiddenNorm> {
+        (self.critic_dropout > 0.0 || self.critic_layer_norm)
+            .then_some(HiddenNorm { dropout: self.critic_dropout, layer_norm: self.critic_layer_norm })
+    }
+
+    /// Critics whose minimum makes the target: `critic_subset`, else all.
+    pub fn subset(&self) -> usize {
+        self.critic_subset.unwrap_or(self.n_critics)
+    }
+
+    /// What the actor maximises: `actor_q`, else the mean for REDQ (a subset below all the
+    /// critics) and the minimum otherwise.
+    pub fn actor_q(&self) -> ActorQ {
+        self.actor_q.unwrap_or(if self.subset() < self.n_critics { ActorQ::Mean } else { ActorQ::Min })
     }
 }
 
@@ -65,8 +170,11 @@ pub struct Sac {
     act_dim: usize,
     actor: Mlp<f32>,
     head: SquashedGaussian<f32>,
-    /// The twin critics `q1`, `q2`, their targets and optimisers.
+    /// The critics `q1` .. `qN`, their targets and optimisers.
     critics: Critics,
+    /// Critics in each update's target (`N`: all, no draw).
+    subset: usize,
+    actor_q: ActorQ,
     actor_opt: Adam<f32>,
     log_alpha: [f32; 1],
     alpha_opt: Adam<f32>,
@@ -92,7 +200,9 @@ impl Sac {
         );
         let (b, own) = (cfg.batch_size, cfg.sac());
         let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
-        let critics = Critics::new(TWIN, &critic_sizes, cfg.critic_lr(), &mut init, b, act_dim);
+        let names = &ENSEMBLE[..own.n_critics];
+        let norm = own.critic_norm();
+        let critics = Critics::with_norm(names, &critic_sizes, cfg.critic_lr(), &mut init, (b, act_dim), norm);
         Sac {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
             log_alpha: [own.init_alpha.ln() as f32],
@@ -100,6 +210,8 @@ impl Sac {
             target_entropy: (own.target_entropy_per_dim * act_dim as f64) as f32,
             head: SquashedGaussian::new(act_dim, LOG_STD),
             rng: Rng::derived(seed, 0x5AC1),
+            subset: own.subset(),
+            actor_q: own.actor_q(),
             eps: vec![0.0; b * act_dim],
             critic_in: vec![0.0; b * (obs_dim + act_dim)],
             next_act: vec![0.0; b * act_dim],
@@ -162,6 +274,9 @@ impl OffPolicy for Sac {
         self.next_act[..b * ad].copy_from_slice(a_next);
         self.next_logp[..b].copy_from_slice(logp_next);
         concat_cols(&batch.next_obs, od, &self.next_act[..b * ad], ad, b, &mut self.critic_in);
+        if self.subset < self.critics.len() {
+            self.critics.choose_targets(self.subset, &mut self.rng);
+        }
         self.critics.target_min(&self.critic_in, b, &mut self.y);
         for i in 0..b {
             let soft_v = self.y[i] - alpha * self.next_logp[i];
@@ -171,21 +286,28 @@ impl OffPolicy for Sac {
         let losses = self.critics.fit(&self.critic_in, &self.y[..b], self.cfg.max_grad_norm);
         let critic_loss = critics::mean(losses);
 
-        // 2. Actor, through the reparameterised sample and dQ/da of the smaller critic.
+        // 2. Actor, through the reparameterised sample and dQ/da of the smallest critic per row
+        //    (or of every critic, weighted 1/N, for their mean).
         let raw = self.actor.forward(&batch.obs, b);
         Self::fill_normal(&mut self.rng, &mut self.eps[..b * ad]);
         let (a, logp) = self.head.forward(raw, &self.eps[..b * ad], b);
         self.next_logp[..b].copy_from_slice(logp); // reuse: log pi(a~|s)
         concat_cols(&batch.obs, od, a, ad, b, &mut self.critic_in);
-        let qmin = self.critics.forward_min(&self.critic_in, b);
+        let q = match self.actor_q {
+            ActorQ::Min => self.critics.forward_min(&self.critic_in, b),
+            ActorQ::Mean => self.critics.forward_mean(&self.critic_in, b),
+        };
         let inv_b = 1.0 / b as f32;
         let mut actor_loss = 0.0f64;
         for i in 0..b {
-            actor_loss += f64::from(alpha * self.next_logp[i] - qmin[i]);
+            actor_loss += f64::from(alpha * self.next_logp[i] - q[i]);
             self.dlogp[i] = alpha * inv_b;
         }
         actor_loss /= b as f64;
-        let da = self.critics.input_grad_min(-inv_b, od..od + ad);
+        let da = match self.actor_q {
+            ActorQ::Min => self.critics.input_grad_min(-inv_b, od..od + ad),
+            ActorQ::Mean => self.critics.input_grad_mean(-inv_b, od..od + ad),
+        };
         let d_raw = self.head.backward(da, &self.dlogp[..b]);
         self.actor.zero_grad();
         self.actor.backward(d_raw);
@@ -226,4 +348,12 @@ learned_parts!(Sac, |s, f| {
     }
     f("alpha_opt", P::Adam(r!(s.alpha_opt)));
     f("agent_rng", P::State(r!(s.rng)));
+    // DroQ: the dropout streams (listed only when the critics drop out).
+    let drops = s.critics.drops_out();
+    for (name, c) in DROPOUT_RNG.iter().zip(each!(s.critics.scratch)).filter(|_| drops) {
+        f(name[0], P::State(r!(c.drop)));
+    }
+    for (name, t) in DROPOUT_RNG.iter().zip(each!(s.critics.target_drop)).filter(|_| drops) {
+        f(name[1], P::State(t));
+    }
 });

@@ -7,7 +7,7 @@
 //!
 //! A default is the schema's (serde's field defaults) or, for a field a run's `config.toml`
 //! leaves out while it has its default value (`observe_obstacles`, `task.sim`, ...), found by
-//! reading each candidate value (a choice's values, `false`, `0`, `[]`) into a config and keeping
+//! reading each candidate value (a choice's values, `false`, `0`, `1`, `2`, `[]`) into a config and keeping
 //! the one that gives the default config.
 
 use serde_json::Value;
@@ -219,7 +219,7 @@ fn found_default(path: &str, prop: &Value, choices: &[Value]) -> Option<Value> {
     let mut candidates = choices.to_vec();
     candidates.extend(match types.first().copied() {
         Some("boolean") => vec![Value::Bool(false), Value::Bool(true)],
-        Some("integer") => vec![Value::from(0)],
+        Some("integer") => vec![Value::from(0), Value::from(1), Value::from(2)],
         Some("number") => vec![Value::from(0.0)],
         Some("array") => vec![Value::Array(Vec::new())],
         _ => Vec::new(),

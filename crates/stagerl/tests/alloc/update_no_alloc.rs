@@ -5,13 +5,18 @@ use crate::common;
 
 use common::allocs;
 use stagerl::agent::replay::Batch;
-use stagerl::agent::{build_off_policy, AgentConfig, Algo};
+use stagerl::agent::{build_off_policy, AgentConfig, Algo, SacConfig};
 use stagerl::base::rng::Rng;
 
 /// As `stagerl bench update`: observations 16, actions 6, a random batch of 256.
 fn no_allocation_in(algo: Algo, hidden: usize, updates: usize) {
+    no_allocation_with(AgentConfig { algo, hidden: vec![hidden, hidden], ..AgentConfig::default() }, updates);
+}
+
+fn no_allocation_with(cfg: AgentConfig, updates: usize) {
     let (od, ad, b) = (16, 6, 256);
-    let cfg = AgentConfig { algo, hidden: vec![hidden, hidden], batch_size: b, ..AgentConfig::default() };
+    let (algo, hidden) = (cfg.algo, cfg.hidden[0]);
+    let cfg = AgentConfig { batch_size: b, ..cfg };
     let mut agent = build_off_policy(&cfg, od, ad, 0).unwrap();
     let mut rng = Rng::new(1);
     let mut batch = Batch::new(b, od, ad);
@@ -50,6 +55,16 @@ fn sac_updates_allocate_nothing() {
     no_allocation_in(Algo::Sac, 256, 3);
 }
 
+/// REDQ: ten critics, two drawn per target, the actor on their mean; DroQ: dropout and layer
+/// normalisation in the critics.
+#[test]
+fn redq_and_droq_updates_allocate_nothing() {
+    let sac = SacConfig { n_critics: 10, critic_subset: Some(2), ..SacConfig::default() };
+    no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 20);
+    let sac = SacConfig { critic_dropout: 0.01, critic_layer_norm: true, ..SacConfig::default() };
+    no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 20);
+}
+
 #[test]
 fn td3_updates_allocate_nothing() {
     no_allocation_in(Algo::Td3, 64, 20);
@@ -71,6 +86,10 @@ fn updates_on_two_threads_allocate_nothing() {
             no_allocation_in(algo, 64, 10);
         }
         no_allocation_in(Algo::Sac, 256, 2);
+        let sac = SacConfig { n_critics: 10, critic_subset: Some(2), ..SacConfig::default() };
+        no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 10);
+        let sac = SacConfig { critic_dropout: 0.01, critic_layer_norm: true, ..SacConfig::default() };
+        no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 10);
     });
     assert!(stagerl::base::par::split_jobs() > split, "work went to the worker");
 }

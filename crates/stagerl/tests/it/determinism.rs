@@ -2,7 +2,7 @@
 //! time) and identical final networks, for every algorithm.
 
 use stagerl::agent::obs_norm::ObsNormConfig;
-use stagerl::agent::{Algo, PpoConfig};
+use stagerl::agent::{ActorQ, Algo, PpoConfig, SacConfig};
 use stagerl::agent::{HerConfig, HerStrategy};
 use stagerl::config::Config;
 use stagerl::io::checkpoint::Checkpoint;
@@ -148,6 +148,52 @@ fn threads_do_not_change_the_run() {
             assert_eq!(one.1.tensor(n).unwrap(), two.1.tensor(n).unwrap(), "{algo}: tensor {n}");
         }
     }
+}
+
+/// REDQ (SAC with ten critics, each target the minimum of two drawn per update, the actor on
+/// their mean) and DroQ (dropout and layer normalisation in two critics, the actor on their
+/// mean), at 4 updates per step: the same run for the same seed on 1 and 2 threads (the critics
+/// at once), the ensemble's parts in the checkpoint, another run than SAC's, and another run for
+/// another seed.
+#[test]
+fn redq_and_droq_runs_are_deterministic_on_any_thread_count_and_differ_from_sac() {
+    let pool = stagerl::base::par::Pool::new(2).unwrap();
+    let redq = SacConfig { n_critics: 10, critic_subset: Some(2), ..SacConfig::default() };
+    let droq = SacConfig {
+        critic_dropout: 0.01,
+        critic_layer_norm: true,
+        actor_q: Some(ActorQ::Mean),
+        ..SacConfig::default()
+    };
+    let (_, sac) = run(Algo::Sac, 5, "ens-sac");
+    let (sac_rows, _) = run(Algo::Sac, 5, "ens-sac");
+    for (name, own, parts) in [
+        ("redq", redq, vec!["q10.layer0.weight", "q10_target.layer2.bias"]),
+        ("droq", droq, vec!["q2.ln1.scale", "q2_target.ln0.bias", "q1_dropout_rng", "q2_target_dropout_rng"]),
+    ] {
+        let tweak = |cfg: &mut Config| {
+            cfg.agent.sac = Some(own);
+            cfg.agent.updates_per_step = 4;
+        };
+        let (a, ca) = run_cfg(Algo::Sac, 5, &format!("{name}-a"), tweak);
+        let (b, cb) =
+            stagerl::base::par::install(Some(&pool), || run_cfg(Algo::Sac, 5, &format!("{name}-b"), tweak));
+        assert_eq!(a, b, "{name}: episodes.csv differs between 1 and 2 threads");
+        let names: Vec<&str> = ca.tensor_names().collect();
+        for part in parts {
+            let there = names.contains(&part) || ca.json::<serde_json::Value>(part).is_ok();
+            assert!(there, "{name}: {part} in {names:?}");
+        }
+        assert!(!names.iter().any(|n| n.starts_with("q11")), "{names:?}");
+        for n in names {
+            assert_eq!(ca.tensor(n).unwrap(), cb.tensor(n).unwrap(), "{name}: tensor {n}");
+        }
+        let (c, _) = run_cfg(Algo::Sac, 6, &format!("{name}-c"), tweak);
+        assert_ne!(a, c, "{name}: another seed gives another run");
+        assert_ne!(a, sac_rows, "{name} is not SAC");
+    }
+    // Plain SAC saves no dropout stream.
+    assert!(sac.json::<serde_json::Value>("q1_dropout_rng").is_err());
 }
 
 /// The loop's collector is chosen from the agent: the off-policy one saves its replay buffer and
