@@ -337,7 +337,8 @@ impl<T: Scalar> Mlp<T> {
             Some(n) => {
                 let rng = rng.filter(|_| n.dropout > 0.0);
                 ws.dropped = rng.is_some();
-                let cache = NormCache { mask: &mut ws.mask, xhat: &mut ws.xhat, inv_std: &mut ws.inv_std, rng };
+                let cache =
+                    NormCache { mask: &mut ws.mask, xhat: &mut ws.xhat, inv_std: &mut ws.inv_std, rng };
                 net.forward_normed(&ws.input[..x.len()], batch, &mut ws.acts, Some(cache));
             }
         }
@@ -564,7 +565,12 @@ impl<T: Scalar> Mlp<T> {
     /// [`Mlp::backprop`] through normalised hidden layers, unfused: per layer from the last,
     /// the activation's derivative, layer normalisation's backward pass, the dropout mask, then
     /// the bias and weight gradients and dL/dx.
-    fn backprop_normed(&mut self, grad_out: &[T], param_grads: bool, input_cols: Option<Range<usize>>) -> &[T] {
+    fn backprop_normed(
+        &mut self,
+        grad_out: &[T],
+        param_grads: bool,
+        input_cols: Option<Range<usize>>,
+    ) -> &[T] {
         let hn = self.norm.expect("a normalised network");
         let batch = self.train.batch;
         let n_layers = self.layers.len();
@@ -598,7 +604,7 @@ impl<T: Scalar> Mlp<T> {
                 }
                 if ws.dropped {
                     for (v, &m) in g.iter_mut().zip(&ws.mask[l][..n_out]) {
-                        *v = *v * m;
+                        *v *= m;
                     }
                 }
             }

@@ -58,6 +58,7 @@
 
 mod activation;
 mod adam;
+mod batch_renorm;
 mod gaussian;
 mod linear;
 mod loss;
@@ -72,6 +73,7 @@ mod tests;
 
 pub use activation::Activation;
 pub use adam::Adam;
+pub use batch_renorm::{BatchRenorm, BatchRenormSettings, RunningStats};
 pub use gaussian::{LogStdBound, SquashedGaussian};
 pub use linear::Linear;
 pub use loss::{mse, mse_loss};

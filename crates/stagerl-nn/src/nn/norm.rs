@@ -32,7 +32,7 @@ pub fn dropout_forward<T: Scalar>(z: &mut [T], mask: &mut [T], p: f64, rng: &mut
     let keep = T::from_f64(1.0 / (1.0 - p));
     for (v, m) in z.iter_mut().zip(mask.iter_mut()) {
         *m = if rng.uniform() < p { T::ZERO } else { keep };
-        *v = *v * *m;
+        *v *= *m;
     }
 }
 
@@ -52,7 +52,7 @@ pub fn layer_norm_forward<T: Scalar>(
         for &v in row.iter() {
             mu += v;
         }
-        mu = mu * inv_h;
+        mu *= inv_h;
         let mut var = T::ZERO;
         for &v in row.iter() {
             var += (v - mu) * (v - mu);

@@ -637,7 +637,8 @@ fn dropout_and_layer_norm_values_and_gradients() {
         HiddenNorm { dropout: p, layer_norm: false },
     ] {
         let mut rng = Rng::new(3);
-        let mut net = Mlp::<f64>::with_norm(&sizes, Activation::Relu, Activation::Identity, Some(hn), &mut rng);
+        let mut net =
+            Mlp::<f64>::with_norm(&sizes, Activation::Relu, Activation::Identity, Some(hn), &mut rng);
         // Plain layers drawn as `Mlp::new` draws them; scales 1 and biases 0, then moved off them.
         let plain = Mlp::<f64>::new(&sizes, Activation::Relu, Activation::Identity, &mut Rng::new(3));
         assert_eq!(&net.params()[..plain.num_params()], plain.params());
@@ -656,7 +657,9 @@ fn dropout_and_layer_norm_values_and_gradients() {
         let mut draws = Rng::new(77);
         let masks: Vec<Vec<f64>> = sizes[1..3]
             .iter()
-            .map(|&h| (0..batch * h).map(|_| if draws.uniform() < p { 0.0 } else { 1.0 / (1.0 - p) }).collect())
+            .map(|&h| {
+                (0..batch * h).map(|_| if draws.uniform() < p { 0.0 } else { 1.0 / (1.0 - p) }).collect()
+            })
             .collect();
         let dropping = hn.dropout > 0.0;
         let y = net.forward_dropout(&x, batch, &mut Rng::new(77)).to_vec();
@@ -709,4 +712,104 @@ fn dropout_keeps_the_mean() {
     let mean = z.iter().sum::<f64>() / z.len() as f64;
     assert!((mean - 1.0).abs() < 0.01, "{mean}");
     assert!(mask.iter().all(|&m| m == 0.0 || m == 1.25));
+}
+
+/// Batch renormalisation written out independently (f64), with the corrections `r` and `d`
+/// given (the backward pass holds them constant) or computed from `x` itself.
+fn naive_renorm(
+    x: &[f64],
+    (batch, n): (usize, usize),
+    s: &BatchRenormSettings,
+    (ra_mean, ra_var, warmed): (&[f64], &[f64], bool),
+    rd: Option<&[(f64, f64)]>,
+    (scale, bias): (&[f64], &[f64]),
+) -> (Vec<f64>, Vec<(f64, f64)>) {
+    let mut y = vec![0.0; batch * n];
+    let mut used = Vec::new();
+    for j in 0..n {
+        let col: Vec<f64> = (0..batch).map(|b| x[b * n + j]).collect();
+        let mu = col.iter().sum::<f64>() / batch as f64;
+        let var = col.iter().map(|v| (v - mu).powi(2)).sum::<f64>() / batch as f64;
+        let ra_sd = (ra_var[j] + s.eps).sqrt();
+        let (r, d) = match rd {
+            Some(rd) => rd[j],
+            None => (
+                ((var + s.eps).sqrt() / ra_sd).max(1.0 / s.r_max).min(s.r_max),
+                ((mu - ra_mean[j]) / ra_sd).max(-s.d_max).min(s.d_max),
+            ),
+        };
+        used.push((r, d));
+        let (m, v) = if warmed { (mu - d * var.sqrt() / r, var / (r * r)) } else { (mu, var) };
+        for b in 0..batch {
+            y[b * n + j] = scale[j] * (col[b] - m) / (v + s.eps).sqrt() + bias[j];
+        }
+    }
+    (y, used)
+}
+
+/// Batch renormalisation: values against the independent formulas before and after the
+/// warm-up (with the corrections clipped and not), running statistics and the pass count,
+/// inference with the running statistics; gradients of the input, scale and bias against
+/// central differences with r and d held constant.
+#[test]
+fn batch_renorm_values_statistics_and_gradients() {
+    let (batch, n) = (6, 4);
+    let s = BatchRenormSettings { warmup_steps: 2, ..BatchRenormSettings::default() };
+    let mut rng = Rng::new(8);
+    let scale: Vec<f64> = (0..n).map(|_| 1.0 + 0.3 * rng.normal()).collect();
+    let bias = randn(&mut rng, n);
+    let mut layer = BatchRenorm::<f64>::new(n, s);
+    // Running statistics moved so that feature 0's r and d are clipped, the others not.
+    layer.stats.mean = vec![-40.0, 0.2, -0.1, 0.0];
+    layer.stats.var = vec![0.001, 1.5, 0.6, 1.0];
+    for pass in 0..4 {
+        let x: Vec<f64> = (0..batch * n).map(|i| rng.normal() * (1.0 + (i % n) as f64) + 0.5).collect();
+        let (ra_mean, ra_var, steps) = (layer.stats.mean.clone(), layer.stats.var.clone(), layer.stats.steps);
+        let warmed = steps >= s.warmup_steps;
+        assert_eq!(warmed, pass >= 2);
+        let mut y = vec![0.0; batch * n];
+        layer.forward_train(&x, batch, (&scale, &bias), &mut y);
+        let (expect, rd) =
+            naive_renorm(&x, (batch, n), &s, (&ra_mean, &ra_var, warmed), None, (&scale, &bias));
+        for (a, b) in y.iter().zip(&expect) {
+            assert!(close(*a, *b, 1e-12), "pass {pass}: {a} vs {b}");
+        }
+        if pass == 2 {
+            assert_eq!(rd[0], (3.0, 5.0), "feature 0 clipped");
+            assert!(rd[1].0 < 3.0 && rd[1].0 > 1.0 / 3.0 && rd[1].1.abs() < 5.0, "{:?}", rd[1]);
+        }
+        // Running statistics: momentum 0.99 towards the batch's mean and (biased) variance.
+        for j in 0..n {
+            let col: Vec<f64> = (0..batch).map(|b| x[b * n + j]).collect();
+            let mu = col.iter().sum::<f64>() / batch as f64;
+            let var = col.iter().map(|v| (v - mu).powi(2)).sum::<f64>() / batch as f64;
+            assert!(close(layer.stats.mean[j], 0.99 * ra_mean[j] + 0.01 * mu, 1e-14));
+            assert!(close(layer.stats.var[j], 0.99 * ra_var[j] + 0.01 * var, 1e-14));
+        }
+        assert_eq!(layer.stats.steps, steps + 1);
+        // Gradients with the corrections held at this pass's values.
+        let c = randn(&mut rng, batch * n);
+        let mut dx = vec![0.0; batch * n];
+        let (mut ds, mut db) = (vec![0.0; n], vec![0.0; n]);
+        layer.backward((&x, &c), batch, &scale, &mut dx, Some((&mut ds, &mut db)));
+        let stats = (&ra_mean[..], &ra_var[..], warmed);
+        let f = |xs: &[f64], sc: &[f64], bi: &[f64]| {
+            dot(&naive_renorm(xs, (batch, n), &s, stats, Some(&rd), (sc, bi)).0, &c)
+        };
+        assert_grads_close(&format!("pass {pass} dx"), &dx, &numeric_grad(&x, |xs| f(xs, &scale, &bias)));
+        assert_grads_close(&format!("pass {pass} dscale"), &ds, &numeric_grad(&scale, |sc| f(&x, sc, &bias)));
+        assert_grads_close(&format!("pass {pass} dbias"), &db, &numeric_grad(&bias, |bi| f(&x, &scale, bi)));
+    }
+    // Inference: the running statistics, nothing updated.
+    let x = randn(&mut rng, batch * n);
+    let before = layer.stats.clone();
+    let mut y = vec![0.0; batch * n];
+    layer.forward_eval(&x, batch, (&scale, &bias), &mut y);
+    for b in 0..batch {
+        for j in 0..n {
+            let e = scale[j] * (x[b * n + j] - before.mean[j]) / (before.var[j] + s.eps).sqrt() + bias[j];
+            assert!(close(y[b * n + j], e, 1e-12));
+        }
+    }
+    assert_eq!(layer.stats, before);
 }

@@ -418,8 +418,16 @@ mod tests {
             (sac(10, Some(0), None), "agent.sac.critic_subset", "1..=10"),
             (sac(2, Some(3), None), "agent.sac.critic_subset", "at most agent.sac.n_critics = 2"),
             (SacConfig { critic_dropout: 1.0, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
-            (SacConfig { critic_dropout: -0.1, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
-            (SacConfig { critic_dropout: f64::NAN, ..SacConfig::default() }, "agent.sac.critic_dropout", "[0, 1)"),
+            (
+                SacConfig { critic_dropout: -0.1, ..SacConfig::default() },
+                "agent.sac.critic_dropout",
+                "[0, 1)",
+            ),
+            (
+                SacConfig { critic_dropout: f64::NAN, ..SacConfig::default() },
+                "agent.sac.critic_dropout",
+                "[0, 1)",
+            ),
         ] {
             let e = bad.validate().unwrap_err().to_string();
             assert!(e.contains(field) && e.contains(allowed), "{e}");

@@ -202,7 +202,8 @@ impl Sac {
         let critic_sizes = sizes(obs_dim + act_dim, &cfg.hidden, 1);
         let names = &ENSEMBLE[..own.n_critics];
         let norm = own.critic_norm();
-        let critics = Critics::with_norm(names, &critic_sizes, cfg.critic_lr(), &mut init, (b, act_dim), norm);
+        let critics =
+            Critics::with_norm(names, &critic_sizes, cfg.critic_lr(), &mut init, (b, act_dim), norm);
         Sac {
             actor_opt: Adam::new(actor.num_params(), cfg.actor_lr()),
             log_alpha: [own.init_alpha.ln() as f32],

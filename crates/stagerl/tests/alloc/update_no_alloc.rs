@@ -87,9 +87,15 @@ fn updates_on_two_threads_allocate_nothing() {
         }
         no_allocation_in(Algo::Sac, 256, 2);
         let sac = SacConfig { n_critics: 10, critic_subset: Some(2), ..SacConfig::default() };
-        no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 10);
+        no_allocation_with(
+            AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() },
+            10,
+        );
         let sac = SacConfig { critic_dropout: 0.01, critic_layer_norm: true, ..SacConfig::default() };
-        no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 10);
+        no_allocation_with(
+            AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() },
+            10,
+        );
     });
     assert!(stagerl::base::par::split_jobs() > split, "work went to the worker");
 }
