@@ -115,14 +115,27 @@ def test_ctrl_c_saves_the_run_and_raises_keyboard_interrupt(tmp_path):
         f"stagerl.train({TINY!r}, out={str(out)!r}, episodes=100000, eval_trials=0)\n"
     )
     child = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if (out / "episodes.csv").exists() and len((out / "episodes.csv").read_text().splitlines()) > 50:
-            break
+
+    def lines():
+        csv = out / "episodes.csv"
+        return len(csv.read_text().splitlines()) if csv.exists() else None
+
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and (lines() or 0) <= 50 and child.poll() is None:
         time.sleep(0.01)
+    if (lines() or 0) <= 50:
+        child.kill()
+        _, err = child.communicate()
+        pytest.fail(f"the run did not reach 50 episodes (episodes.csv lines: {lines()}, exit {child.returncode}): {err}")
     sent = time.monotonic()
     child.send_signal(signal.SIGINT)
-    _, err = child.communicate(timeout=30)
+    try:
+        _, err = child.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        at = lines()
+        child.kill()
+        _, err = child.communicate()
+        pytest.fail(f"no exit 30 s after SIGINT (episodes.csv lines then: {at}, at the signal: > 50): {err}")
     assert time.monotonic() - sent < 5
     assert child.returncode != 0 and "KeyboardInterrupt" in err, err
     assert os.path.isfile(out / "checkpoints" / "latest.safetensors")
