@@ -377,6 +377,7 @@ pub fn reproduce(
         return Err(bad_arg("jobs", 0, "at least 1"));
     }
     let (spec, text) = sweep::Preset::resolve(preset).map_err(to_py)?;
+    spec.check_shared().map_err(to_py)?;
     let (index, count) =
         sweep::resolve_shard(task_index, task_count, &|name| std::env::var(name).ok()).map_err(to_py)?;
     let runs = sweep::shard(spec.runs(), index, count).map_err(to_py)?;

@@ -29,6 +29,7 @@ pub fn run(args: Args) -> Result<()> {
         bail!("--jobs 0: need at least 1");
     }
     let (preset, text) = Preset::resolve(&args.preset)?;
+    preset.check_shared()?;
     let (index, count) =
         sweep::resolve_shard(args.task_index, args.task_count, &|name| std::env::var(name).ok())?;
     let runs = sweep::shard(preset.runs(), index, count)?;

@@ -278,3 +278,22 @@ fn smoke_preset_then_report_writes_every_file() {
     );
     std::fs::remove_dir_all(&root).ok();
 }
+
+/// A sweep on an arm that is not six-jointed, without its per-joint settings: one message naming
+/// both fields, before any run starts (no run directory, no preset.toml).
+#[test]
+fn a_sweep_on_an_arm_without_its_settings_fails_once_before_any_run() {
+    let root = scratch("repro-arm");
+    let preset = root.join("p.toml");
+    std::fs::write(&preset, format!("{PRESET}[robot]\nurdf = \"panda\"\n")).unwrap();
+    let out_dir = root.join("out");
+    let out = bin()
+        .args(["reproduce", "--preset", preset.to_str().unwrap(), "--out", out_dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(err.matches("task.home_pose_rad and task.target_joint_range_rad").count(), 1, "{err}");
+    assert!(err.contains("7 joints") && err.contains("stagerl robot --robot URDF"), "{err}");
+    assert!(!out_dir.exists(), "nothing written");
+}

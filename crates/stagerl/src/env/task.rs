@@ -317,6 +317,18 @@ impl TaskConfig {
     /// [`crate::config::Config::resolve`]).
     pub(crate) fn resolve_checked(&self, chain: &Chain) -> Result<ResolvedTask> {
         let n = chain.dof();
+        // Both unset on an arm that is not six-jointed: one message naming both.
+        if n != 6 && self.home_pose_rad.is_none() && self.target_joint_range_rad.is_none() {
+            return Err(Error::config(
+                "task.home_pose_rad and task.target_joint_range_rad",
+                "(unset)",
+                format!(
+                    "set both, one value per joint: their defaults are for a six-joint arm, this one has {n} \
+                     joints (`stagerl robot --robot URDF` suggests values; with `--config-out FILE` it \
+                     writes a config that trains on the arm)"
+                ),
+            ));
+        }
         let per_joint = |field: &str, given: &Option<Vec<f64>>, default: &[f64; 6]| -> Result<Vec<f64>> {
             match given {
                 Some(v) if v.len() != n => Err(Error::config(
@@ -330,7 +342,8 @@ impl TaskConfig {
                     field,
                     "(unset)",
                     format!(
-                        "set it: the default {default:?} is for a six-joint arm, this one has {n} joints"
+                        "set it: the default {default:?} is for a six-joint arm, this one has {n} joints \
+                         (`stagerl robot --robot URDF` suggests a value)"
                     ),
                 )),
             }

@@ -815,3 +815,24 @@ fn the_dynamic_simulation_needs_every_moving_link_s_inertia() {
     let e = e.unwrap_err().to_string();
     assert!(e.contains("link `b`") && e.contains("inertial"), "{e}");
 }
+
+/// An arm that is not six-jointed without a home pose or a target range: one message naming
+/// both fields (and where suggested values come from); with one of them set, the other.
+#[test]
+fn a_seven_joint_arm_without_its_per_joint_settings_names_all_of_them_at_once() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/robots/panda.urdf");
+    let chain = Chain::from_urdf_file(std::path::Path::new(path), None).unwrap();
+    let e = TaskConfig::default().resolve(&chain).unwrap_err().to_string();
+    assert!(
+        e.contains("task.home_pose_rad and task.target_joint_range_rad")
+            && e.contains("this one has 7 joints")
+            && e.contains("stagerl robot --robot URDF"),
+        "{e}"
+    );
+    let home = TaskConfig { home_pose_rad: Some(PANDA_HOME.to_vec()), ..TaskConfig::default() };
+    let e = home.resolve(&chain).unwrap_err().to_string();
+    assert!(e.contains("`task.target_joint_range_rad`") && !e.contains("home_pose_rad"), "{e}");
+    let range = TaskConfig { target_joint_range_rad: Some(vec![0.1; 7]), ..TaskConfig::default() };
+    let e = range.resolve(&chain).unwrap_err().to_string();
+    assert!(e.contains("`task.home_pose_rad`") && !e.contains("target_joint_range"), "{e}");
+}

@@ -237,6 +237,16 @@ impl Preset {
         Ok(())
     }
 
+    /// The arm and the task every run shares, resolved once before any run starts: an error
+    /// there (a URDF that does not load, per-joint settings an arm that is not six-jointed
+    /// lacks) is reported once, not once per run.
+    pub fn check_shared(&self) -> Result<()> {
+        match self.runs().first() {
+            Some(run) => run.config.resolve().map(|_| ()),
+            None => Ok(()),
+        }
+    }
+
     /// Every run of the sweep, in order.
     pub fn runs(&self) -> Vec<RunSpec> {
         // Checked by `validate`, which every constructor runs.
