@@ -40,6 +40,11 @@ her = { strategy = "future", k = 4 }
 [agent.ddpg]
 [agent.td3]
 [agent.sac]
+n_critics = 10
+critic_subset = 2
+actor_q = "min"
+critic_dropout = 0.01
+critic_layer_norm = true
 [agent.ppo]
 norm_obs = { clip = 10.0 }
 [train]
