@@ -420,9 +420,21 @@ fn our_cells(g: &GroupSummary) -> [String; 8] {
         ms(&g.eval_reward, 1.0, 3),
         ms(&g.eval_steps, 1.0, 1),
         pct(&g.success_rate),
-        pct(&g.collision_rate),
+        collision_cell(g.success_rate.is_some(), &g.collision_rate),
     ]
 }
+
+/// The collision-rate cell: "not checked" for evaluations without a collision count (an arm
+/// without collision shapes, or evaluations recorded before contacts were), never a silent 0 %.
+fn collision_cell(evaluated: bool, rate: &Option<MeanStd>) -> String {
+    if evaluated && rate.is_none() {
+        NOT_CHECKED.into()
+    } else {
+        pct(rate)
+    }
+}
+
+const NOT_CHECKED: &str = "not checked";
 
 /// The paper's cells (it reports no collisions: the last is always a dash).
 fn paper_cells(p: &PaperRow) -> [String; 8] {
@@ -513,8 +525,8 @@ fn intro_markdown(s: &mut String, groups: &[GroupSummary], criterion: &Convergen
          addition; else the final one); the final checkpoint, the paper's protocol (\"the trained model\"), \
          is evaluated on the same targets in \"Best and final checkpoint\" below. Collision rate (our addition; \
          the paper has no collision measure): the fraction of evaluation trials in which the arm touched the \
-         floor, itself or an obstacle at the end of some step; a dash for evaluations recorded before contacts \
-         were.\n",
+         floor, itself or an obstacle at the end of some step; \"not checked\" where no contact was looked for \
+         (an arm without collision shapes, or evaluations recorded before contacts were).\n",
         groups.len(),
         paper::PAPER_RUNS,
         paper::PAPER_EPISODES,
@@ -686,7 +698,10 @@ fn per_run_markdown(s: &mut String, groups: &[GroupSummary]) {
                 opt(e.map(|e| e.mean_reward), 1.0, 3),
                 opt(e.and_then(|e| e.mean_steps), 1.0, 1),
                 e.map_or_else(|| DASH.into(), |e| format!("{:.1} % of {}", 100.0 * e.success_rate, e.trials)),
-                opt(e.and_then(|e| e.collision_rate), 100.0, 1),
+                e.map_or_else(|| DASH.into(), |e| match e.collision_rate {
+                    Some(c) => format!("{:.1}", 100.0 * c),
+                    None => NOT_CHECKED.into(),
+                }),
             );
         }
     }
