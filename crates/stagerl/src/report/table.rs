@@ -698,10 +698,13 @@ fn per_run_markdown(s: &mut String, groups: &[GroupSummary]) {
                 opt(e.map(|e| e.mean_reward), 1.0, 3),
                 opt(e.and_then(|e| e.mean_steps), 1.0, 1),
                 e.map_or_else(|| DASH.into(), |e| format!("{:.1} % of {}", 100.0 * e.success_rate, e.trials)),
-                e.map_or_else(|| DASH.into(), |e| match e.collision_rate {
-                    Some(c) => format!("{:.1}", 100.0 * c),
-                    None => NOT_CHECKED.into(),
-                }),
+                e.map_or_else(
+                    || DASH.into(),
+                    |e| match e.collision_rate {
+                        Some(c) => format!("{:.1}", 100.0 * c),
+                        None => NOT_CHECKED.into(),
+                    }
+                ),
             );
         }
     }
