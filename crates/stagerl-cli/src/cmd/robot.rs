@@ -7,10 +7,11 @@ use stagerl::sim::collision::{ArmCollider, Checks};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
-#[command(
-    after_help = "Example:\n  stagerl robot --robot arm.urdf --package-path ~/ws/src --config-out arm.toml"
-)]
+#[command(after_help = "Example:\n  stagerl robot arm.urdf --package-path ~/ws/src --config-out arm.toml")]
 pub struct Args {
+    /// The URDF file to look at (the same as `--robot FILE`; `ur5` or `panda` for a bundled arm).
+    #[arg(value_name = "URDF", conflicts_with = "robot")]
+    urdf: Option<String>,
     #[command(flatten)]
     robot: super::RobotArgs,
     /// Write a config that trains on this arm as it is (robot and task sections; the rest the
@@ -24,7 +25,10 @@ const TARGET_MIN_Z_M: f64 = 0.05;
 /// Poses drawn to judge a home pose and a target range.
 const DRAWS: usize = 400;
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(mut args: Args) -> Result<()> {
+    if let Some(urdf) = args.urdf.take() {
+        args.robot.robot = urdf;
+    }
     let chain = args.robot.load()?;
     let mut collider = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
     print_chain(&chain, &collider)?;

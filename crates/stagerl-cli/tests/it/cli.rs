@@ -208,7 +208,8 @@ fn robot_prints_the_arm_and_writes_a_config_that_trains() {
     );
     std::fs::write(&path, urdf).unwrap();
     let (cfg, pkgs) = (dir.join("arm.toml"), dir.join("pkgs"));
-    let args = ["robot", "--robot", path.to_str().unwrap(), "--package-path", pkgs.to_str().unwrap()];
+    // The URDF as the positional argument (`stagerl robot URDF`), the same as `--robot URDF`.
+    let args = ["robot", path.to_str().unwrap(), "--package-path", pkgs.to_str().unwrap()];
     let out = stagerl(&[&args[..], &["--config-out", cfg.to_str().unwrap()]].concat(), "");
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(out.status.success(), "{}", stderr(&out));
@@ -224,6 +225,8 @@ fn robot_prints_the_arm_and_writes_a_config_that_trains() {
     }
     let written = std::fs::read_to_string(&cfg).unwrap();
     assert!(written.contains("[task]") && written.contains("package_paths"), "{written}");
+    let both = stagerl(&["robot", path.to_str().unwrap(), "--robot", "ur5"], "");
+    assert!(!both.status.success() && stderr(&both).contains("cannot be used with"), "{}", stderr(&both));
     let run = dir.join("run");
     let out = stagerl(
         &[

@@ -294,6 +294,6 @@ fn a_sweep_on_an_arm_without_its_settings_fails_once_before_any_run() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert_eq!(err.matches("task.home_pose_rad and task.target_joint_range_rad").count(), 1, "{err}");
-    assert!(err.contains("7 joints") && err.contains("stagerl robot --robot URDF"), "{err}");
+    assert!(err.contains("7 joints") && err.contains("stagerl robot URDF"), "{err}");
     assert!(!out_dir.exists(), "nothing written");
 }

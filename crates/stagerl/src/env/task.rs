@@ -324,7 +324,7 @@ impl TaskConfig {
                 "(unset)",
                 format!(
                     "set both, one value per joint: their defaults are for a six-joint arm, this one has {n} \
-                     joints (`stagerl robot --robot URDF` suggests values; with `--config-out FILE` it \
+                     joints (`stagerl robot URDF` suggests values; with `--config-out FILE` it \
                      writes a config that trains on the arm)"
                 ),
             ));
@@ -343,7 +343,7 @@ impl TaskConfig {
                     "(unset)",
                     format!(
                         "set it: the default {default:?} is for a six-joint arm, this one has {n} joints \
-                         (`stagerl robot --robot URDF` suggests a value)"
+                         (`stagerl robot URDF` suggests a value)"
                     ),
                 )),
             }
