@@ -317,6 +317,54 @@ impl TaskConfig {
     /// [`crate::config::Config::resolve`]).
     pub(crate) fn resolve_checked(&self, chain: &Chain) -> Result<ResolvedTask> {
         let n = chain.dof();
+        let (home, range) = self.joint_vectors(chain)?;
+        let mut resolved = ResolvedTask {
+            dt_s: self.dt_s,
+            max_steps: self.max_steps,
+            home_pose: home,
+            target_joint_range: range,
+            target_min_z_m: self.target_min_z_m,
+            observation: self.observation,
+            obs_delta_scale: self.obs_delta_scale,
+            target_acceptance: 0.0,
+            obstacles: self.obstacles.clone(),
+            collision: self.collision.unwrap_or_default(),
+            on_collision: self.on_collision,
+            random_obstacles: self.random_obstacles.clone(),
+            observe_obstacles: self.observe_obstacles,
+            obstacle_observation: self.obstacle_observation,
+            obstacle_range_m: self.obstacle_range_m,
+            sim: self.sim,
+        };
+        // Estimate how often a draw passes the height test; refuse a distribution the arm
+        // cannot (or almost never) reach.
+        let draws = 2000;
+        let mut rng = Rng::new(0x7A26E7);
+        let mut q = vec![0.0; n];
+        let (mut accepted, mut best_z) = (0usize, f64::NEG_INFINITY);
+        for _ in 0..draws {
+            let p = resolved.draw_target_candidate(chain, &mut rng, &mut q);
+            best_z = best_z.max(p.z);
+            accepted += usize::from(p.z > self.target_min_z_m);
+        }
+        resolved.target_acceptance = accepted as f64 / draws as f64;
+        if resolved.target_acceptance < 0.001 {
+            return Err(Error::config(
+                "task.target_min_z_m",
+                self.target_min_z_m,
+                format!(
+                    "a height the arm reaches from task.home_pose_rad within task.target_joint_range_rad: \
+                     {accepted} of {draws} draws passed, the highest was z = {best_z:.4} m"
+                ),
+            ));
+        }
+        Ok(resolved)
+    }
+
+    /// The home pose and the target joint range for `chain` (the defaults on a six-joint arm),
+    /// checked against its limits.
+    fn joint_vectors(&self, chain: &Chain) -> Result<(Vec<f64>, Vec<f64>)> {
+        let n = chain.dof();
         // Both unset on an arm that is not six-jointed: one message naming both.
         if n != 6 && self.home_pose_rad.is_none() && self.target_joint_range_rad.is_none() {
             return Err(Error::config(
@@ -378,47 +426,7 @@ impl TaskConfig {
                 ));
             }
         }
-        let mut resolved = ResolvedTask {
-            dt_s: self.dt_s,
-            max_steps: self.max_steps,
-            home_pose: home,
-            target_joint_range: range,
-            target_min_z_m: self.target_min_z_m,
-            observation: self.observation,
-            obs_delta_scale: self.obs_delta_scale,
-            target_acceptance: 0.0,
-            obstacles: self.obstacles.clone(),
-            collision: self.collision.unwrap_or_default(),
-            on_collision: self.on_collision,
-            random_obstacles: self.random_obstacles.clone(),
-            observe_obstacles: self.observe_obstacles,
-            obstacle_observation: self.obstacle_observation,
-            obstacle_range_m: self.obstacle_range_m,
-            sim: self.sim,
-        };
-        // Estimate how often a draw passes the height test; refuse a distribution the arm
-        // cannot (or almost never) reach.
-        let draws = 2000;
-        let mut rng = Rng::new(0x7A26E7);
-        let mut q = vec![0.0; n];
-        let (mut accepted, mut best_z) = (0usize, f64::NEG_INFINITY);
-        for _ in 0..draws {
-            let p = resolved.draw_target_candidate(chain, &mut rng, &mut q);
-            best_z = best_z.max(p.z);
-            accepted += usize::from(p.z > self.target_min_z_m);
-        }
-        resolved.target_acceptance = accepted as f64 / draws as f64;
-        if resolved.target_acceptance < 0.001 {
-            return Err(Error::config(
-                "task.target_min_z_m",
-                self.target_min_z_m,
-                format!(
-                    "a height the arm reaches from task.home_pose_rad within task.target_joint_range_rad: \
-                     {accepted} of {draws} draws passed, the highest was z = {best_z:.4} m"
-                ),
-            ));
-        }
-        Ok(resolved)
+        Ok((home, range))
     }
 }
 

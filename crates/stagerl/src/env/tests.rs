@@ -826,7 +826,7 @@ fn a_seven_joint_arm_without_its_per_joint_settings_names_all_of_them_at_once() 
     assert!(
         e.contains("task.home_pose_rad and task.target_joint_range_rad")
             && e.contains("this one has 7 joints")
-            && e.contains("stagerl robot --robot URDF"),
+            && e.contains("stagerl robot URDF"),
         "{e}"
     );
     let home = TaskConfig { home_pose_rad: Some(PANDA_HOME.to_vec()), ..TaskConfig::default() };
