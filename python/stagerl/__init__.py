@@ -20,12 +20,12 @@ Units: metres, radians, seconds; quaternions are (x, y, z, w).
 from . import _core
 from . import envs, kinematics, policies, rewards, training, vector
 from .envs import ReachEnv, register_envs
-from .kinematics import Chain
+from .kinematics import Chain, CollisionChecker
 from .policies import Policy, plan
 from .training import Run, report, reproduce, train
 from .vector import ReachVectorEnv
 
 __version__ = _core.__version__
-__all__ = ["ReachEnv", "ReachVectorEnv", "Chain", "Policy", "plan", "train", "Run", "report", "reproduce", "training", "policies", "envs", "kinematics", "rewards", "vector", "register_envs", "__version__"]
+__all__ = ["ReachEnv", "ReachVectorEnv", "Chain", "CollisionChecker", "Policy", "plan", "train", "Run", "report", "reproduce", "training", "policies", "envs", "kinematics", "rewards", "vector", "register_envs", "__version__"]
 
 register_envs()

@@ -5,11 +5,14 @@ URDF's only leaf). ``chain.fk(q)`` takes ``q`` of shape (N, dof) or (dof,) (radi
 prismatic joints) and returns positions (N, 3) in metres and quaternions (N, 4) as (x, y, z, w)
 with w >= 0, in the root link's frame. ``chain.jacobian(q)`` returns the geometric Jacobians
 (N, 6, dof) (rows vx, vy, vz, wx, wy, wz in the base frame), with the same positions and
-quaternions.
+quaternions. ``chain.checker(obstacles=None, floor=True, self_collision=True)`` returns a
+``CollisionChecker`` whose ``check(q)`` gives, per row, whether the arm is in contact and its
+clearance in metres, with the environment's own checks over the same geometry.
 """
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
@@ -46,3 +49,55 @@ class Chain:
     def jacobian(self, q):
         """Jacobians (N, 6, dof), positions (N, 3) and quaternions (N, 4)."""
         return self._core.jacobian(_rows("q", q, self.dof))
+
+    def checker(self, obstacles=None, floor=True, self_collision=True):
+        """A :class:`CollisionChecker` of this chain among ``obstacles``."""
+        return CollisionChecker(self, obstacles, floor=floor, self_collision=self_collision)
+
+
+def _plain(value):
+    """numpy arrays and scalars in an obstacle list as plain lists and floats (for JSON)."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{value!r} is not a number or a list of numbers")
+
+
+def obstacles_json(obstacles):
+    """A list of obstacle dicts in ``[[task.obstacles]]``'s schema as the JSON the core reads;
+    ValueError naming the argument when it is not such a list."""
+    if isinstance(obstacles, (str, bytes, dict)) or not hasattr(obstacles, "__iter__"):
+        raise ValueError(f"`obstacles` = {obstacles!r} is invalid: a list of obstacle dicts")
+    try:
+        return json.dumps(list(obstacles), default=_plain, allow_nan=False)
+    except TypeError as e:
+        raise ValueError(f"`obstacles` is invalid: {e}") from None
+    except ValueError:
+        raise ValueError("`obstacles` is invalid: a value is NaN or infinite (every size and coordinate must be finite)") from None
+
+
+class CollisionChecker:
+    """The environment's collision checks of a chain among obstacles, from Python.
+
+    ``obstacles``: a list of dicts in ``[[task.obstacles]]``'s schema
+    (``{"shape": "sphere", "radius_m": r, "position_m": [x, y, z]}`` or
+    ``{"shape": "cuboid", "half_extents_m": [..], "position_m": [..], "rotation_xyzw": [x, y, z, w]}``),
+    metres, base frame. ``floor``: the arm's moving shapes against z = 0; ``self_collision``: the
+    arm against itself (links two or more joints apart).
+    """
+
+    def __init__(self, chain, obstacles=None, floor=True, self_collision=True):
+        if not isinstance(chain, Chain):
+            raise ValueError(f"`chain` = {chain!r} is invalid: a stagerl.kinematics.Chain")
+        for name, v in (("floor", floor), ("self_collision", self_collision)):
+            if not isinstance(v, bool):
+                raise ValueError(f"`{name}` = {v!r} is invalid: True or False")
+        text = None if obstacles is None else obstacles_json(obstacles)
+        self.dof = chain.dof
+        self._core = chain._core.checker(text, floor, self_collision)
+
+    def check(self, q):
+        """For each row of ``q`` (N, dof) or one pose (dof,): in contact (N,) bool, and the
+        clearance (N,) in metres (negative: a penetration's depth)."""
+        return self._core.check(_rows("q", q, self.dof))

@@ -65,3 +65,54 @@ def test_bad_inputs(call, exc, words):
         call()
     for w in words:
         assert w in str(e.value), (w, str(e.value))
+
+
+def test_collision_checker_agrees_with_the_cli_and_measures_distance(stagerl_bin):
+    """Floor and self checks: the clearance of `stagerl fk --collisions` (the CLI's own path);
+    a sphere moved away along the line from the arm's closest point gains exactly that distance."""
+    import json
+    import subprocess
+
+    from stagerl import CollisionChecker
+
+    chain = Chain()
+    rng = np.random.default_rng(3)
+    qs = rng.uniform(-2.0, 2.0, (20, 6))
+    hit, clear = chain.checker().check(qs)
+    lines = "".join(json.dumps({"joints": list(q)}) + "\n" for q in qs)
+    out = subprocess.run([stagerl_bin, "fk", "--collisions"], input=lines, capture_output=True, text=True, check=True)
+    for i, line in enumerate(out.stdout.splitlines()):
+        row = json.loads(line)
+        assert hit[i] == bool(row["contacts"]), (i, row)
+        assert abs(clear[i] - row["clearance_m"]) < 1e-9, (i, clear[i], row["clearance_m"])
+    # A sphere only (no floor, no self): at the tip it touches. Away from the arm, at clearance c,
+    # growing its radius by c - 1 mm keeps it clear and by c + 1 mm makes a contact, and a larger
+    # radius lowers the clearance by exactly as much (distance and overlap tests agree).
+    q = np.array([0.0, -1.2, 1.0, 0.0, 0.0, 0.0])
+    tip = chain.fk(q)[0][0]
+    ball = lambda r, c=tip + [0.3, 0.2, 0.4]: [{"shape": "sphere", "radius_m": r, "position_m": c}]  # noqa: E731
+    only = dict(floor=False, self_collision=False)
+    assert CollisionChecker(chain, ball(0.05, tip), **only).check(q)[0][0]
+    hit0, c0 = chain.checker(ball(0.05), **only).check(q)
+    assert not hit0[0] and c0[0] > 0.1
+    hit1, c1 = chain.checker(ball(0.05 + c0[0] - 1e-3), **only).check(q)
+    hit2, _ = chain.checker(ball(0.05 + c0[0] + 1e-3), **only).check(q)
+    assert not hit1[0] and hit2[0]
+    np.testing.assert_allclose(c1[0], 1e-3, atol=1e-6)
+
+
+def test_collision_checker_refuses_bad_scenes(root):
+    chain = Chain()
+    with pytest.raises(ValueError, match=r"obstacles\[0\]\.radius_m"):
+        chain.checker([{"shape": "sphere", "radius_m": -1.0, "position_m": [1, 0, 0]}])
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        chain.checker([{"shape": "sphere", "radius_m": float("nan"), "position_m": [1, 0, 0]}])
+    with pytest.raises(ValueError, match="unknown field"):
+        chain.checker([{"shape": "sphere", "radius_m": 0.1, "position_m": [1, 0, 0], "colour": "red"}])
+    with pytest.raises(ValueError, match="list of obstacle dicts"):
+        chain.checker({"shape": "sphere"})
+    with pytest.raises(ValueError, match=r"q\.shape|one value per joint"):
+        chain.checker().check(np.zeros((2, 5)))
+    bare = Chain(str(root / "crates" / "stagerl" / "tests" / "robot_test_arm.urdf"), "tool")
+    with pytest.raises(ValueError, match="no collision shapes|has none"):
+        bare.checker()

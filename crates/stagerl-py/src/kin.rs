@@ -80,6 +80,20 @@ impl Chain {
         self.chain.velocity_limits().to_vec()
     }
 
+    /// A collision checker of this chain among `obstacles` (a JSON list in `[[task.obstacles]]`'s
+    /// schema), with the floor and self checks as asked.
+    #[pyo3(signature = (obstacles=None, floor=true, self_collision=true))]
+    fn checker(
+        &self,
+        obstacles: Option<&str>,
+        floor: bool,
+        self_collision: bool,
+    ) -> PyResult<crate::checker::CollisionChecker> {
+        guard("checker", || {
+            crate::checker::CollisionChecker::build(&self.chain, obstacles, floor, self_collision)
+        })
+    }
+
     /// Tip positions (N, 3) in metres and orientations (N, 4) as (x, y, z, w), w >= 0.
     fn fk<'py>(&self, py: Python<'py>, q: PyReadonlyArray2<'py, f64>) -> PyResult<(Arr2<'py>, Arr2<'py>)> {
         let (n, q) = self.rows(&q)?;
@@ -125,6 +139,6 @@ impl Chain {
     }
 }
 
-fn row_err(i: usize, e: stagerl::Error) -> PyErr {
+pub(crate) fn row_err(i: usize, e: stagerl::Error) -> PyErr {
     pyo3::exceptions::PyValueError::new_err(format!("q row {i}: {e}"))
 }

@@ -16,6 +16,7 @@
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
+mod checker;
 mod env;
 mod kin;
 mod policy;
@@ -80,6 +81,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("STEP_KEYS", env::STEP_KEYS.to_vec())?;
     m.add_class::<env::ReachCore>()?;
     m.add_class::<kin::Chain>()?;
+    m.add_class::<checker::CollisionChecker>()?;
     m.add_class::<vec::VecCore>()?;
     m.add_class::<policy::PolicyCore>()?;
     m.add_function(wrap_pyfunction!(policy::plan, m)?)?;
