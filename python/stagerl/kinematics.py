@@ -101,3 +101,8 @@ class CollisionChecker:
         """For each row of ``q`` (N, dof) or one pose (dof,): in contact (N,) bool, and the
         clearance (N,) in metres (negative: a penetration's depth)."""
         return self._core.check(_rows("q", q, self.dof))
+
+    def collides(self, q):
+        """Whether the arm at one pose ``q`` (dof values, radians) touches anything checked: the
+        environment's per-step test, faster than :meth:`check` (no clearance)."""
+        return self._core.collides([float(v) for v in q])

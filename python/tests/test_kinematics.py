@@ -85,6 +85,7 @@ def test_collision_checker_agrees_with_the_cli_and_measures_distance(stagerl_bin
         row = json.loads(line)
         assert hit[i] == bool(row["contacts"]), (i, row)
         assert abs(clear[i] - row["clearance_m"]) < 1e-9, (i, clear[i], row["clearance_m"])
+    assert [chain.checker().collides(q) for q in qs] == list(hit)
     # A sphere only (no floor, no self): at the tip it touches. Away from the arm, at clearance c,
     # growing its radius by c - 1 mm keeps it clear and by c + 1 mm makes a contact, and a larger
     # radius lowers the clearance by exactly as much (distance and overlap tests agree).

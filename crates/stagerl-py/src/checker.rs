@@ -89,4 +89,20 @@ impl CollisionChecker {
         })?;
         Ok((PyArray1::from_vec(py, hit), PyArray1::from_vec(py, clear)))
     }
+
+    /// Whether the arm at one pose `q` (dof values) touches anything checked: the environment's
+    /// per-step test (bounding spheres first, stops at the first contact), without the clearance.
+    fn collides(&mut self, q: Vec<f64>) -> PyResult<bool> {
+        if q.len() != self.chain.dof() {
+            return Err(bad_arg(
+                "q",
+                format!("{} values", q.len()),
+                &format!("{} values, one per joint", self.chain.dof()),
+            ));
+        }
+        guard("collides", || {
+            self.chain.try_fk(&q).map_err(|e| crate::kin::row_err(0, e))?;
+            Ok(self.collider.check(&self.chain, &q).is_some())
+        })
+    }
 }
