@@ -26,10 +26,15 @@ pub struct Args {
     /// Start pose Q1,...,QN, radians (default: the task's home pose).
     #[arg(long, allow_hyphen_values = true, conflicts_with = "targets")]
     start: Option<String>,
-    /// Batch mode: JSON lines {"target":[x,y,z]} or {"target":[..],"start":[..]} from FILE, or
-    /// from standard input with `-`; one JSON line out per input.
+    /// Batch mode: JSON lines {"target":[x,y,z]}, with optional "start":[..] (radians) and
+    /// "obstacles":[{"shape":"sphere","radius_m":r,"position_m":[x,y,z]}, ..] (added to
+    /// --scene), from FILE, or from standard input with `-`; one JSON line out per input.
     #[arg(long)]
     targets: Option<PathBuf>,
+    /// A fixed scene for every plan: a TOML file of `[[obstacles]]` tables in the schema of
+    /// `[[task.obstacles]]`; a request line's own "obstacles" add to it.
+    #[arg(long)]
+    scene: Option<PathBuf>,
     /// Step limit of a plan (default: the task's max_steps), 1 to 1 000 000.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     max_steps: Option<u32>,
@@ -66,6 +71,13 @@ pub fn run(args: Args) -> Result<()> {
         stagerl::run::dir::check_output_path(view, "--view", &inputs)?;
     }
     let mut planner = planner(&args)?;
+    if let Some(path) = &args.scene {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading --scene {}", path.display()))?;
+        let name = path.display().to_string();
+        let scene = stagerl::env::request::parse_scene(&text, &name)?;
+        planner.set_scene(scene, &format!("--scene {name}: obstacles"))?;
+    }
     let mut view = args.view.as_ref().map(|_| View::for_planner(&view_title(&args), &planner));
     if let Some(path) = &args.targets {
         if args.format == Some(Format::Csv) {

@@ -128,8 +128,13 @@ fn csv_and_jsonl_carry_the_same_numbers() {
         let csv_out = run(&args("csv"));
         let csv = stdout_of(&csv_out);
         let stderr = String::from_utf8(csv_out.stderr).unwrap();
-        let summary_line: Value = serde_json::from_str(stderr.trim()).unwrap();
-        assert_eq!(summary_line["summary"], summary);
+        let mut summary_line: Value = serde_json::from_str(stderr.trim()).unwrap();
+        let (mut summary, mut csv_summary) = (summary, summary_line["summary"].take());
+        // Everything but the wall time agrees.
+        assert!(summary["plan_time_s"].as_f64().unwrap() > 0.0);
+        summary["plan_time_s"] = Value::Null;
+        csv_summary["plan_time_s"] = Value::Null;
+        assert_eq!(csv_summary, summary);
         let mut lines = csv.lines();
         let header: Vec<&str> = lines.next().unwrap().split(',').collect();
         assert_eq!(header[..4], ["step", "t_s", "q0", "q1"]);
@@ -169,7 +174,13 @@ fn batch_mode_equals_single_plans() {
         std::fs::write(&file, &input).unwrap();
         let from_stdin = stdout_of(&with_stdin(&[&base[..], &["--targets", "-"]].concat(), &input));
         let from_file = stdout_of(&run(&[&base[..], &["--targets", file.to_str().unwrap()]].concat()));
-        assert_eq!(from_stdin, from_file);
+        // Everything but the wall time agrees.
+        let untimed = |text: &str| -> Vec<Value> {
+            let mut v: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+            v.iter_mut().for_each(|p| p["plan_time_s"] = Value::Null);
+            v
+        };
+        assert_eq!(untimed(&from_stdin), untimed(&from_file));
         let lines: Vec<Value> = from_stdin.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
         assert_eq!(lines.len(), requests.len());
         for ((t, s), b) in requests.iter().zip(&lines) {
@@ -180,7 +191,8 @@ fn batch_mode_equals_single_plans() {
                 args.extend(["--start", s.as_str()]);
             }
             let (rows, summary) = check_jsonl(&stdout_of(&run(&args)));
-            for k in ["reached", "steps", "final_distance", "episode_reward"] {
+            for k in ["reached", "steps", "final_distance", "episode_reward", "collision", "min_clearance_m"]
+            {
                 assert_eq!(b[k], summary[k], "{k}");
             }
             let q: Vec<Value> = rows.iter().map(|r| r["q"].clone()).collect();
@@ -188,7 +200,7 @@ fn batch_mode_equals_single_plans() {
             assert_eq!(b["q"], Value::Array(q));
             assert_eq!(b["ee_pos"], Value::Array(ee));
             let keys: Vec<&str> = b.as_object().unwrap().keys().map(String::as_str).collect();
-            assert_eq!(keys.len(), 6, "{keys:?}");
+            assert_eq!(keys.len(), 9, "{keys:?}");
         }
     }
 }
@@ -330,4 +342,52 @@ fn a_batch_view_beyond_its_limit_says_what_it_left_out() {
     let o = with_stdin(&forced, "{\"target\":[0.4,0.2,0.3]}\n");
     assert!(o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("the view holds"));
     std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn scenes_per_request_and_from_a_file_are_reported_and_bad_ones_named_by_line() {
+    let dir = scratch("plan-scene");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("scene.toml");
+    std::fs::write(
+        &scene,
+        "[[obstacles]]\nshape = \"sphere\"\nradius_m = 0.05\nposition_m = [-0.4, -0.4, 0.6]\n",
+    )
+    .unwrap();
+    let scene_arg = scene.to_str().unwrap();
+    let lines = concat!(
+        "{\"target\":[0.4,0.2,0.3]}\n",
+        "{\"target\":[0.4,0.2,0.3],\"obstacles\":[{\"shape\":\"cuboid\",\"half_extents_m\":[0.05,0.05,0.05],",
+        "\"position_m\":[-0.4,0.4,0.6],\"rotation_xyzw\":[0,0,0,1]}]}\n"
+    );
+    let args = ["plan", "--controller", "jacobian", "--targets", "-", "--scene", scene_arg];
+    let out = stdout_of(&with_stdin(&args, lines));
+    let plans: Vec<Value> = out.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(plans.len(), 2);
+    for p in &plans {
+        assert_eq!(p["collision"], false, "{p}");
+        assert!(p["min_clearance_m"].as_f64().unwrap() > 0.05 && p["plan_time_s"].as_f64().unwrap() > 0.0);
+    }
+    // The line's box adds to the scene's ball: it is the nearer of the two to some of the path.
+    assert!(plans[1]["min_clearance_m"].as_f64() <= plans[0]["min_clearance_m"].as_f64());
+    // Without a scene, nothing to be near.
+    let free = stdout_of(&with_stdin(&args[..5], "{\"target\":[0.4,0.2,0.3]}\n"));
+    let free: Value = serde_json::from_str(free.trim()).unwrap();
+    assert!(free["min_clearance_m"].is_null() && free["collision"] == false);
+    // Bad obstacles: the line and the field named, nothing planned after them.
+    let cases = [
+        ("{\"shape\":\"sphere\",\"radius_m\":-1,\"position_m\":[0,0,1]}", "`obstacles[0].radius_m` = -1"),
+        ("{\"shape\":\"sphere\",\"radius_m\":0.05,\"position_m\":[0.4,0.2,0.3]}", "encloses the target"),
+        ("{\"shape\":\"cuboid\",\"half_extents_m\":[0.1,0.1,0.1],\"position_m\":[0,0,0.1]}", "start pose"),
+        ("{\"shape\":\"cone\",\"radius_m\":0.1,\"position_m\":[0,0,1]}", "unknown variant `cone`"),
+    ];
+    for (o, want) in cases {
+        let input =
+            format!("{{\"target\":[0.4,0.2,0.3]}}\n{{\"target\":[0.4,0.2,0.3],\"obstacles\":[{o}]}}\n");
+        let e = failure(&with_stdin(&args, &input));
+        assert!(e.contains("line 2") && e.contains(want), "{e}");
+    }
+    std::fs::write(&scene, "[[obstacles]]\nshape = \"sphere\"\nradius_m = 0.05\n").unwrap();
+    let e = failure(&with_stdin(&args, lines));
+    assert!(e.contains(scene_arg) && e.contains("position_m"), "{e}");
 }

@@ -184,6 +184,10 @@ pub struct ArmCollider {
     frames: Vec<[f64; 12]>,
     world: Vec<[f64; 12]>,
     geo: Vec<Geo>,
+    /// Each joint's reach, metres ([`motion`]).
+    reach: Vec<f64>,
+    /// Scratch joint values of [`ArmCollider::check_motion`].
+    motion_q: Vec<f64>,
 }
 
 impl ArmCollider {
@@ -209,7 +213,10 @@ impl ArmCollider {
             }
         }
         let n = shapes.len();
+        let reach = motion::joint_reach(chain, &shapes);
         ArmCollider {
+            reach,
+            motion_q: vec![0.0; chain.dof()],
             shapes,
             obstacles: Vec::new(),
             pairs,
@@ -515,6 +522,8 @@ pub(crate) fn segment_segment_distance2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3]
     let d = sub(c1, c2);
     dot(d, d)
 }
+
+pub mod motion;
 
 #[cfg(test)]
 pub(crate) mod tests;

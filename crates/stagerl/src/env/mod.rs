@@ -11,6 +11,7 @@
 //! [`ReachEnv::step`] allocates nothing.
 
 mod observation;
+pub mod request;
 mod rollout;
 mod task;
 mod vec;
@@ -200,6 +201,9 @@ pub struct ReachEnv {
     /// The probability that an episode's first random obstacle is placed in the way
     /// ([`ReachEnv::set_obstacles_in_path`]; 0 unless set).
     obstacles_in_path: f64,
+    /// A request's obstacles ([`ReachEnv::set_request_obstacles`]): episodes have the task's
+    /// fixed obstacles and these, and no random ones. `None`: the task's scene.
+    request_obstacles: Option<Vec<crate::sim::scene::Obstacle>>,
 }
 
 /// The checks of an environment's parts: the reward's values and collision settings, and the
@@ -380,6 +384,7 @@ impl ReachEnv {
             far_obs,
             obstacles,
             obstacles_in_path: 0.0,
+            request_obstacles: None,
             chain,
             rng: Rng::new(seed),
             joint_vel: vec![0.0; n],
@@ -476,8 +481,24 @@ impl ReachEnv {
         Ok(self.begin_episode())
     }
 
+    /// From the next reset on, the scene of a request: the task's fixed obstacles and
+    /// `obstacles` (checked by the caller: [`request::check_obstacle_values`]), without the
+    /// task's random obstacles; `None` goes back to the task's scene. An observation with fewer
+    /// obstacle slots than obstacles holds the nearest ones to the end effector.
+    pub fn set_request_obstacles(&mut self, obstacles: Option<&[crate::sim::scene::Obstacle]>) {
+        self.request_obstacles = obstacles.map(<[_]>::to_vec);
+    }
+
     fn begin_episode(&mut self) -> &[f32] {
-        if let Some(random) = &self.task.random_obstacles {
+        if let Some(extra) = &self.request_obstacles {
+            self.obstacles.clear();
+            self.obstacles.extend(self.task.obstacles.iter().chain(extra).cloned());
+            self.arm.set_obstacles(&self.obstacles);
+        } else if self.task.random_obstacles.is_none() && self.obstacles.len() != self.task.obstacles.len() {
+            // Back from a request's scene to the task's.
+            self.obstacles.clone_from(&self.task.obstacles);
+            self.arm.set_obstacles(&self.obstacles);
+        } else if let Some(random) = &self.task.random_obstacles {
             let p = Placement {
                 chain: &self.chain,
                 q: &self.q,
@@ -575,9 +596,33 @@ impl ReachEnv {
 
     /// [`ObstacleObservation::Absolute`]'s slots, into `self.obs[slots]`.
     fn write_obstacles_absolute(&mut self, slots: Range<usize>) {
+        if self.obstacles.len() > slots.len() / task::OBSTACLE_OBS_LEN {
+            return self.write_obstacles_absolute_nearest(slots);
+        }
         let slots = &mut self.obs[slots];
         slots.fill(0.0);
         for (o, slot) in self.obstacles.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN)) {
+            let (p, h) = (o.position_m, o.half_size_m());
+            for k in 0..3 {
+                slot[k] = p[k] as f32;
+                slot[3 + k] = h[k] as f32;
+            }
+            slot[6] = f32::from(u8::from(o.shape == crate::sim::scene::ObstacleShape::Sphere));
+        }
+    }
+
+    /// [`ObstacleObservation::Absolute`]'s slots when a request has more obstacles than the
+    /// slots: the nearest to the end effector, nearest first.
+    fn write_obstacles_absolute_nearest(&mut self, slots: Range<usize>) {
+        let ee = self.ee.position;
+        self.nearest.clear();
+        self.nearest
+            .extend(self.obstacles.iter().enumerate().map(|(i, o)| (o.distance_to_point_m(ee.into()), i)));
+        self.nearest.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let slots = &mut self.obs[slots];
+        slots.fill(0.0);
+        for (&(_, i), slot) in self.nearest.iter().zip(slots.chunks_exact_mut(task::OBSTACLE_OBS_LEN)) {
+            let o = &self.obstacles[i];
             let (p, h) = (o.position_m, o.half_size_m());
             for k in 0..3 {
                 slot[k] = p[k] as f32;

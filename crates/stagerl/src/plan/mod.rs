@@ -25,10 +25,13 @@ use std::path::{Path, PathBuf};
 use crate::agent::Agent;
 use crate::base::rng::Rng;
 use crate::config::Config;
-use crate::env::{rollout, Flow, Observed, Outcome, ReachEnv, ResolvedTask, Scratch};
+use crate::env::request::{check_obstacle_values, check_scene_for_request};
+use crate::env::{check_joint_positions, rollout, Flow, Observed, Outcome, ReachEnv, ResolvedTask, Scratch};
 use crate::plan::controller::JacobianController;
 use crate::robot::Chain;
 use crate::run::dir::RunDir;
+use crate::sim::collision::ArmCollider;
+use crate::sim::scene::Obstacle;
 use crate::{Error, Result};
 
 /// What chooses the actions of a plan.
@@ -39,14 +42,17 @@ pub enum PlanPolicy {
     Jacobian(JacobianController),
 }
 
-/// One plan request (a line of batch input): a target, metres, and optionally a start pose,
-/// radians (default: the task's home pose).
+/// One plan request (a line of batch input): a target, metres, optionally a start pose,
+/// radians (default: the task's home pose), and optionally obstacles (the schema of
+/// `[[task.obstacles]]`), which add to the planner's fixed scene ([`Planner::set_scene`]).
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlanRequest {
     pub target: Vec<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obstacles: Option<Vec<Obstacle>>,
 }
 
 /// The outcome of a plan.
@@ -67,6 +73,18 @@ pub struct PlanSummary {
     /// Steps that ended with the arm in contact (floor, itself, an obstacle): 0 for a
     /// collision-free plan.
     pub collision_steps: u32,
+    /// Any contact (floor, itself, an obstacle, as the task checks them) anywhere along the
+    /// path: the start pose, and the linear joint motion of every step checked continuously
+    /// ([`ArmCollider::check_motion`]).
+    pub collision: bool,
+    /// The smallest distance between the arm's collision shapes and the scene's obstacles along
+    /// the path (metres, negative: a penetration's depth; within
+    /// [`crate::sim::collision::motion::CLEARANCE_TOLERANCE_M`]); the floor and the arm's own
+    /// pairs do not count. `None` (`null`) without obstacles or collision shapes.
+    pub min_clearance_m: Option<f64>,
+    /// Wall time from the checked request to the trajectory (planning and rollout; not the
+    /// collision report above), seconds.
+    pub plan_time_s: f64,
 }
 
 /// A planned trajectory: `rows()` states, stored by column.
@@ -106,13 +124,17 @@ pub struct PlanRow<'a> {
     pub reward: f64,
 }
 
-/// A plan as one line of batch output: the summary's first four fields and the trajectory.
+/// A plan as one line of batch output: the summary's first four fields, the collision report,
+/// the plan time and the trajectory.
 #[derive(Clone, Debug, Serialize)]
 pub struct BatchRecord<'a> {
     pub reached: bool,
     pub steps: u32,
     pub final_distance: f64,
     pub episode_reward: f64,
+    pub collision: bool,
+    pub min_clearance_m: Option<f64>,
+    pub plan_time_s: f64,
     pub q: Vec<&'a [f64]>,
     pub ee_pos: &'a [[f64; 3]],
 }
@@ -147,6 +169,9 @@ impl Plan {
                 path_length_m: 0.0,
                 joint_travel_rad: 0.0,
                 collision_steps: 0,
+                collision: false,
+                min_clearance_m: None,
+                plan_time_s: 0.0,
             },
             warning: None,
         };
@@ -201,6 +226,9 @@ impl Plan {
             steps: self.summary.steps,
             final_distance: self.summary.final_distance,
             episode_reward: self.summary.episode_reward,
+            collision: self.summary.collision,
+            min_clearance_m: self.summary.min_clearance_m,
+            plan_time_s: self.summary.plan_time_s,
             q: self.q.chunks_exact(self.dof).collect(),
             ee_pos: &self.ee_pos,
         }
@@ -288,6 +316,11 @@ pub struct Planner {
     scratch: Scratch,
     /// Where the policy was trained (for agents; the controller needs no training).
     region: Option<TargetRegion>,
+    /// The fixed scene of every request ([`Planner::set_scene`]) and its name in messages.
+    scene: Vec<Obstacle>,
+    scene_name: String,
+    /// The checker of the paths' collision report (`None`: an arm without collision shapes).
+    collider: Option<ArmCollider>,
 }
 
 impl Planner {
@@ -297,7 +330,17 @@ impl Planner {
             PlanPolicy::Agent(_) => Some(TargetRegion::of(env.task(), env.chain())),
             PlanPolicy::Jacobian(_) => None,
         };
-        Planner { scratch: Scratch::new(&env), env, policy, region }
+        let collider = (!env.chain().collision_shapes().is_empty())
+            .then(|| ArmCollider::new(env.chain(), env.task().collision));
+        Planner {
+            scratch: Scratch::new(&env),
+            env,
+            policy,
+            region,
+            scene: Vec::new(),
+            scene_name: "scene".into(),
+            collider,
+        }
     }
 
     /// The deterministic policy of a run directory's checkpoint (`checkpoint`, else the best
@@ -324,6 +367,21 @@ impl Planner {
         Ok(Planner::new(env, PlanPolicy::Jacobian(ctl)))
     }
 
+    /// The fixed scene of every later request (`stagerl plan --scene`): a request's own
+    /// obstacles add to it (the scene first). `name` names the list in messages (`--scene
+    /// s.toml obstacles`: `--scene s.toml obstacles[2].radius_m`). Errors: a bad obstacle.
+    pub fn set_scene(&mut self, obstacles: Vec<Obstacle>, name: &str) -> Result<()> {
+        check_obstacle_values(&obstacles, name)?;
+        self.scene = obstacles;
+        self.scene_name = name.into();
+        Ok(())
+    }
+
+    /// The fixed scene ([`Planner::set_scene`]).
+    pub fn scene(&self) -> &[Obstacle] {
+        &self.scene
+    }
+
     /// The environment plans run on.
     pub fn env(&self) -> &ReachEnv {
         &self.env
@@ -335,19 +393,68 @@ impl Planner {
         self.env.check_target(target)
     }
 
-    /// Plan from `start` (radians; default: the home pose) to `target` (metres).
+    /// Plan from `start` (radians; default: the home pose) to `target` (metres) in the fixed
+    /// scene.
     pub fn plan(&mut self, target: &[f64], start: Option<&[f64]>) -> Result<Plan> {
+        self.plan_among(target, start, None)
+    }
+
+    /// Plan one request.
+    pub fn plan_request(&mut self, r: &PlanRequest) -> Result<Plan> {
+        self.plan_among(&r.target, r.start.as_deref(), r.obstacles.as_deref())
+    }
+
+    /// Plan from `start` (radians; default: the home pose) to `target` (metres) among the
+    /// task's fixed obstacles, the fixed scene and `obstacles` (named `obstacles[i]` in
+    /// messages). With neither a scene nor `obstacles`, the task's scene as it is (its random
+    /// obstacles drawn). The request is checked first ([`crate::env::request`]).
+    pub fn plan_among(
+        &mut self,
+        target: &[f64],
+        start: Option<&[f64]>,
+        obstacles: Option<&[Obstacle]>,
+    ) -> Result<Plan> {
         let t = self.check_target(target)?;
-        let home;
-        let start = match start {
-            Some(s) => s,
-            None => {
-                home = self.env.task().home_pose.clone();
-                &home
-            }
+        let start: Vec<f64> = start.map_or_else(|| self.env.task().home_pose.clone(), <[f64]>::to_vec);
+        check_joint_positions(self.env.chain(), &start)?;
+        if let Some(o) = obstacles {
+            check_obstacle_values(o, "obstacles")?;
+        }
+        let given = obstacles.is_some() || !self.scene.is_empty();
+        let extra: Vec<Obstacle> = self.scene.iter().chain(obstacles.unwrap_or_default()).cloned().collect();
+        self.check_scene(&extra, &start, t)?;
+        self.env.set_request_obstacles(given.then_some(&extra[..]));
+        let timer = std::time::Instant::now();
+        self.env.reset_to(&start, t)?;
+        let mut plan = self.roll_out()?;
+        plan.summary.plan_time_s = timer.elapsed().as_secs_f64();
+        self.report_collisions(&mut plan);
+        let warnings: Vec<String> =
+            [self.region.as_ref().and_then(|r| r.outside(&t)), self.observation_warning(given)]
+                .into_iter()
+                .flatten()
+                .collect();
+        plan.warning = (!warnings.is_empty()).then(|| warnings.join("; "));
+        Ok(plan)
+    }
+
+    /// [`check_scene_for_request`] of the task's fixed obstacles and `extra` (the scene's,
+    /// then the request's).
+    fn check_scene(&mut self, extra: &[Obstacle], start: &[f64], t: Vector3<f64>) -> Result<()> {
+        let Some(c) = &mut self.collider else { return Ok(()) };
+        let fixed = &self.env.task().obstacles;
+        let all: Vec<Obstacle> = fixed.iter().chain(extra).cloned().collect();
+        let (nf, ns) = (fixed.len(), self.scene.len());
+        let named = |i: usize| match i {
+            i if i < nf => format!("task.obstacles[{i}]"),
+            i if i < nf + ns => format!("{}[{}]", self.scene_name, i - nf),
+            i => format!("obstacles[{}]", i - nf - ns),
         };
-        self.env.reset_to(start, t)?;
-        let warning = self.region.as_ref().and_then(|r| r.outside(&t));
+        check_scene_for_request(self.env.chain(), c, &all, named, start, t)
+    }
+
+    /// Roll the policy out from the environment's reset state, every state recorded.
+    fn roll_out(&mut self) -> Result<Plan> {
         let mut plan = Plan::start(&self.env, self.env.task().max_steps as usize + 1);
         let outcome = {
             let record = |tr: &crate::env::Transition<'_>| {
@@ -372,13 +479,51 @@ impl Planner {
         plan.summary.final_distance = self.env.distance();
         plan.summary.episode_reward = reward;
         plan.summary.collision_steps = self.env.collision_steps();
-        plan.warning = warning;
         Ok(plan)
     }
 
-    /// Plan one request.
-    pub fn plan_request(&mut self, r: &PlanRequest) -> Result<Plan> {
-        self.plan(&r.target, r.start.as_deref())
+    /// The continuous collision report of `plan` among the episode's obstacles: `collision`
+    /// and `min_clearance_m`.
+    fn report_collisions(&mut self, plan: &mut Plan) {
+        let Some(c) = &mut self.collider else { return };
+        let chain = self.env.chain();
+        c.set_obstacles(self.env.obstacles());
+        let n = plan.dof;
+        let row = |k: usize| &plan.q[k * n..(k + 1) * n];
+        let mut collision = plan.summary.collision_steps > 0 || c.check(chain, row(0)).is_some();
+        let mut clearance = c.motion_clearance_m(chain, row(0), row(0));
+        for k in 1..plan.rows() {
+            collision = collision || c.check_motion(chain, row(k - 1), row(k)).is_some();
+            if let Some(d) = c.motion_clearance_m(chain, row(k - 1), row(k)) {
+                clearance = Some(clearance.map_or(d, |m| m.min(d)));
+            }
+        }
+        plan.summary.collision = collision;
+        plan.summary.min_clearance_m = clearance;
+    }
+
+    /// What a policy that observes obstacles misses of the scene, if anything.
+    fn observation_warning(&self, given: bool) -> Option<String> {
+        if !matches!(self.policy, PlanPolicy::Agent(_)) {
+            return None;
+        }
+        let task = self.env.task();
+        let n = self.env.obstacles().len();
+        if task.observe_obstacles {
+            let slots = task.obstacle_slots();
+            (n > slots).then(|| {
+                format!(
+                    "the policy observes {slots} obstacle(s) and the scene has {n}: it sees the {slots} \
+                     nearest to the end effector at each step"
+                )
+            })
+        } else {
+            (given && n > 0).then(|| {
+                "the policy was trained without observing obstacles (task.observe_obstacles = false): \
+                 it does not see the scene's obstacles (collision and min_clearance_m report what it did)"
+                    .to_string()
+            })
+        }
     }
 }
 

@@ -186,3 +186,115 @@ fn csv_and_rows_carry_the_same_numbers() {
         assert!(v.iter().zip(&expect).all(|(a, b)| a.to_bits() == b.to_bits()), "row {k}");
     }
 }
+
+fn ball(r: f64, p: [f64; 3]) -> Obstacle {
+    Obstacle::sphere(r, p)
+}
+
+#[test]
+fn request_lines_carry_obstacles_and_bad_ones_are_refused_by_field() {
+    let line = r#"{"target":[0.4,0.2,0.3],"obstacles":[{"shape":"sphere","radius_m":0.05,"position_m":[0.3,-0.3,0.4]},{"shape":"cuboid","half_extents_m":[0.1,0.02,0.05],"position_m":[-0.3,0.3,0.2],"rotation_xyzw":[0,0,0.7071067811865476,0.7071067811865476]}]}"#;
+    let r: PlanRequest = serde_json::from_str(line).unwrap();
+    let o = r.obstacles.as_ref().unwrap();
+    assert_eq!(o.len(), 2);
+    assert_eq!(o[1].half_extents_m, Some([0.1, 0.02, 0.05]));
+    let unknown =
+        r#"{"target":[0.4,0.2,0.3],"obstacles":[{"shape":"sphere","radius":0.05,"position_m":[0,0,1]}]}"#;
+    assert!(serde_json::from_str::<PlanRequest>(unknown).is_err());
+    let mut p = jacobian();
+    let t = [0.4, 0.2, 0.3];
+    let refused = |p: &mut Planner, o: Obstacle| {
+        p.plan_among(&t, None, Some(&[ball(0.05, [0.3, -0.3, 0.9]), o])).unwrap_err().to_string()
+    };
+    let e = refused(&mut p, ball(-0.1, [0.3, 0.3, 0.3]));
+    assert!(e.contains("`obstacles[1].radius_m` = -0.1") && e.contains("(0, 100]"), "{e}");
+    let e = refused(&mut p, ball(0.0, [0.3, 0.3, 0.3]));
+    assert!(e.contains("`obstacles[1].radius_m` = 0"), "{e}");
+    let e = refused(&mut p, ball(0.1, [f64::NAN, 0.3, 0.3]));
+    assert!(e.contains("`obstacles[1].position_m`"), "{e}");
+    let e = refused(&mut p, Obstacle::cuboid([0.1, 0.1, 0.1], [0.3, 0.3, 0.6], Some([0.0, 0.0, 0.5, 0.5])));
+    assert!(e.contains("`obstacles[1].rotation_xyzw`") && e.contains("unit quaternion"), "{e}");
+    let e = refused(&mut p, Obstacle::cuboid([0.1, -0.1, 0.1], [0.3, 0.3, 0.6], None));
+    assert!(e.contains("`obstacles[1].half_extents_m`"), "{e}");
+    let e = refused(&mut p, ball(0.02, [0.41, 0.2, 0.3]));
+    assert!(e.contains("`obstacles[1]`") && e.contains("encloses the target"), "{e}");
+    let tool = p.env().chain().fk(&p.env().task().home_pose).position;
+    let e = refused(&mut p, ball(0.02, [tool.x, tool.y, tool.z]));
+    assert!(e.contains("`obstacles[1]`") && e.contains("start pose"), "{e}");
+    // A start pose in contact with the floor.
+    let low = [0.0, 0.3, 1.5, 0.0, 0.0, 0.0];
+    assert!(p.env().chain().fk(&low).position.z < 0.0);
+    let e = p.plan_among(&t, Some(&low), Some(&[])).unwrap_err().to_string();
+    assert!(e.contains("already in contact") && e.contains("floor"), "{e}");
+    // The scene's errors name it.
+    let e = p
+        .set_scene(vec![ball(f64::INFINITY, [0.0; 3])], "--scene s.toml: obstacles")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`--scene s.toml: obstacles[0].radius_m` = inf"), "{e}");
+    let e = crate::env::request::parse_scene("[[obstacles]]\nshape = \"ball\"\n", "s.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("scene file s.toml") && e.contains("ball"), "{e}");
+    let s = crate::env::request::parse_scene(
+        "[[obstacles]]\nshape = \"sphere\"\nradius_m = 0.05\nposition_m = [0.3, -0.3, 0.9]\n",
+        "s.toml",
+    )
+    .unwrap();
+    assert_eq!(s, [ball(0.05, [0.3, -0.3, 0.9])]);
+}
+
+#[test]
+fn a_line_adds_to_the_scene_and_the_report_sees_contacts_along_the_path() {
+    let mut p = jacobian();
+    let t = [0.4, 0.2, 0.3];
+    let free = p.plan(&t, None).unwrap();
+    assert!(!free.summary.collision && free.summary.min_clearance_m.is_none());
+    assert!(free.summary.plan_time_s > 0.0);
+    // A ball across the straight way, where the Jacobian controller goes through it.
+    let mid = free.ee_pos[free.rows() / 3];
+    let blocking = ball(0.04, mid);
+    let far = ball(0.05, [-0.4, -0.4, 0.6]);
+    p.set_scene(vec![far.clone()], "scene").unwrap();
+    let hit = p.plan_among(&t, None, Some(std::slice::from_ref(&blocking))).unwrap();
+    assert_eq!(p.env().obstacles(), [far.clone(), blocking.clone()]);
+    assert!(hit.summary.collision && hit.summary.min_clearance_m.unwrap() < 0.0, "{:?}", hit.summary);
+    let again = p.plan_among(&t, None, Some(std::slice::from_ref(&blocking))).unwrap();
+    assert_eq!(again.q, hit.q);
+    assert_eq!(
+        (again.summary.collision, again.summary.min_clearance_m),
+        (hit.summary.collision, hit.summary.min_clearance_m)
+    );
+    // Without a line's obstacles: the scene alone, clear of the path.
+    let clear = p.plan(&t, None).unwrap();
+    assert_eq!(p.env().obstacles(), [far]);
+    assert_eq!(clear.q, free.q);
+    let m = clear.summary.min_clearance_m.unwrap();
+    assert!(!clear.summary.collision && m > 0.05, "{m}");
+}
+
+#[test]
+fn a_policy_that_observes_obstacles_sees_the_nearest_of_a_larger_scene() {
+    let mut cfg = Config::default();
+    cfg.task.observe_obstacles = true;
+    cfg.task.random_obstacles =
+        Some(crate::sim::scene::RandomObstacles { count: [1, 1], ..Default::default() });
+    let env = ReachEnv::from_config(&cfg, 0).unwrap();
+    let acfg = AgentConfig { algo: Algo::Sac, hidden: vec![16, 16], ..AgentConfig::default() };
+    let agent = build(&acfg, env.obs_dim(), env.act_dim(), 5).unwrap();
+    let mut p = Planner::new(env, PlanPolicy::Agent(agent));
+    let scene = [ball(0.05, [0.5, -0.5, 0.6]), ball(0.05, [-0.5, 0.5, 0.6]), ball(0.05, [0.0, 0.6, 0.1])];
+    let plan = p.plan_among(&[0.4, 0.2, 0.3], None, Some(&scene)).unwrap();
+    let w = plan.warning.unwrap_or_default();
+    assert!(w.contains("observes 1 obstacle(s) and the scene has 3"), "{w}");
+    let env = p.env();
+    let ee: [f64; 3] = env.ee_pose().position.into();
+    let nearest =
+        scene.iter().min_by(|a, b| a.distance_to_point_m(ee).total_cmp(&b.distance_to_point_m(ee))).unwrap();
+    let slot = &env.observation()[crate::env::ObservationLayout::of(env.task()).obstacles()];
+    assert_eq!(&slot[..3], nearest.position_m.map(|v| v as f32));
+    // Planning without a scene again: the task's random obstacle, and no warning.
+    let plan = p.plan(&[0.4, 0.2, 0.3], None).unwrap();
+    let w = plan.warning.unwrap_or_default();
+    assert!(!w.contains("observes") && p.env().obstacles().len() == 1, "{w}");
+}

@@ -210,7 +210,8 @@ pub fn view_of_run(run: &RunDir, checkpoint: Option<&Path>, source: &ViewSource)
                 )));
             }
             let targets = eval_targets(&cfg, *count, *seed)?;
-            let requests = targets.into_iter().map(|t| PlanRequest { target: t.to_vec(), start: None });
+            let requests =
+                targets.into_iter().map(|t| PlanRequest { target: t.to_vec(), start: None, obstacles: None });
             requests.enumerate().map(|(i, r)| (i + 1, r)).collect()
         }
         ViewSource::Requests { text, origin } => parse_requests(text, origin)?,
