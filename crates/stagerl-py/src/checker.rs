@@ -6,7 +6,7 @@
 use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use stagerl::sim::collision::{ArmCollider, Checks};
-use stagerl::sim::scene::{Obstacle, MAX_OBSTACLES};
+use stagerl::sim::scene::Obstacle;
 
 use crate::{bad_arg, guard, to_py};
 
@@ -26,16 +26,7 @@ pub(crate) fn parse_obstacles(json: &str) -> PyResult<Vec<Obstacle>> {
             "a list of obstacles as in [[task.obstacles]] ({{\"shape\": \"sphere\", \"radius_m\": r, \"position_m\": [x, y, z]}} or {{\"shape\": \"cuboid\", \"half_extents_m\": [..], \"position_m\": [..], \"rotation_xyzw\": [..]}}): {e}"
         ))
     })?;
-    if obstacles.len() > MAX_OBSTACLES {
-        return Err(bad_arg(
-            "obstacles",
-            format!("{} obstacles", obstacles.len()),
-            &format!("at most {MAX_OBSTACLES}"),
-        ));
-    }
-    for (i, o) in obstacles.iter().enumerate() {
-        o.validate(&format!("obstacles[{i}]")).map_err(to_py)?;
-    }
+    stagerl::env::request::check_obstacle_values(&obstacles, "obstacles").map_err(to_py)?;
     Ok(obstacles)
 }
 
