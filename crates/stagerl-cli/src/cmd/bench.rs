@@ -16,6 +16,9 @@ pub enum Bench {
     /// Plans per second in batch mode (`stagerl plan --targets`: parsing, planning and JSON
     /// output included), one thread, on targets of the task's distribution.
     Plan(PlanArgs),
+    /// Every planner on fixed, seeded problem sets among obstacles (free, one in the way, 3 and
+    /// 6 random, a narrow gap): success, collisions, path length, joint travel, plan time.
+    Obstacles(super::bench_obstacles::ObstaclesArgs),
 }
 
 #[derive(clap::Args)]
@@ -103,6 +106,7 @@ pub fn run(b: Bench) -> Result<()> {
             stagerl::base::par::install(Some(&pool), || train(a))
         }
         Bench::Plan(a) => plan(a),
+        Bench::Obstacles(a) => super::bench_obstacles::run(a),
     }
 }
 

@@ -1,4 +1,5 @@
 pub mod bench;
+pub mod bench_obstacles;
 pub mod config;
 pub mod demo;
 pub mod eval;

@@ -2,6 +2,7 @@
 
 mod agent_config_cli;
 mod bad_inputs_cli;
+mod bench_obstacles;
 mod cli;
 mod common;
 mod concurrency;

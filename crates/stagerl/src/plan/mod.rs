@@ -15,6 +15,7 @@
 //! [`Plan::warning`].
 
 pub mod controller;
+pub mod problems;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};

@@ -1,0 +1,195 @@
+//! `stagerl bench obstacles`: every planner on the same fixed, seeded problem sets
+//! ([`stagerl::plan::problems`]), one thread: success (reached with no contact anywhere along the
+//! path, checked continuously), collision rate, path length, joint travel and plan time (median
+//! and 95th percentile).
+
+use anyhow::{Context, Result};
+use stagerl::config::Config;
+use stagerl::plan::problems::{draw_problems, Problem, ProblemSet};
+use stagerl::plan::{Plan, Planner};
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+#[command(
+    after_help = "Example:\n  stagerl bench obstacles --problems 200 --run runs/sac-obstacles --problems-out problems.jsonl"
+)]
+pub struct ObstaclesArgs {
+    /// Problems per set, 1 to 100 000.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    problems: u32,
+    /// The problem sets (comma-separated; default: all).
+    #[arg(long, value_delimiter = ',', value_parser = ["free", "in-the-way", "random-3", "random-6", "narrow-gap"])]
+    sets: Vec<String>,
+    /// Seed of the problem sets.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// The arm and task (a training config; default: the UR5 and the default task). Its own
+    /// obstacles are not used.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// A trained run whose policy joins the table (`policy`); its arm is used.
+    #[arg(long)]
+    run: Option<PathBuf>,
+    /// Write the problems as JSON lines (`set`, `id`, `robot`, `start_rad`, `target_m`,
+    /// `obstacles`), the input of scripts/bench/ompl_rrt_connect.py.
+    #[arg(long, value_name = "FILE")]
+    problems_out: Option<PathBuf>,
+    /// Write one JSON line per planner and problem (`planner`, `set`, `id`, `success`,
+    /// `collision`, `reached`, `path_length_m`, `joint_travel_rad`, `plan_time_s`).
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+    /// Replace --problems-out and --out files that exist and hold something else.
+    #[arg(long)]
+    force: bool,
+}
+
+/// One planner's figures on one set.
+struct Row {
+    planner: &'static str,
+    set: ProblemSet,
+    plans: usize,
+    success: usize,
+    collision: usize,
+    path_length_m: Vec<f64>,
+    joint_travel_rad: Vec<f64>,
+    plan_time_s: Vec<f64>,
+}
+
+pub fn run(a: ObstaclesArgs) -> Result<()> {
+    let cfg = match (&a.run, &a.config) {
+        (Some(run), _) => stagerl::run::dir::RunDir::new(run).load_config()?,
+        (None, Some(path)) => Config::load(path)?,
+        (None, None) => Config::default(),
+    };
+    let sets: Vec<ProblemSet> = if a.sets.is_empty() {
+        ProblemSet::ALL.to_vec()
+    } else {
+        a.sets.iter().filter_map(|s| ProblemSet::from_name(s)).collect()
+    };
+    let mut planners: Vec<(&'static str, Planner)> = vec![("jacobian", Planner::jacobian(&cfg, None)?)];
+    if let Some(run) = &a.run {
+        let (_, p) = Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None)?;
+        planners.push(("policy", p));
+    }
+    // Checked before the work; written whole at the end (atomically, never over another file
+    // without --force).
+    for path in [&a.problems_out, &a.out].into_iter().flatten() {
+        stagerl::io::check_output_kind(path)?;
+    }
+    let mut problems_out = a.problems_out.as_ref().map(|_| Vec::<u8>::new());
+    let mut out = a.out.as_ref().map(|_| Vec::<u8>::new());
+    let mut rows = Vec::new();
+    for &set in &sets {
+        // Solvability is not checked yet: no reference planner is built in (said in the output).
+        let (problems, _) = draw_problems(&cfg, set, a.problems as usize, a.seed, &mut |_| true)
+            .with_context(|| format!("drawing the problem set `{}`", set.name()))?;
+        if let Some(f) = problems_out.as_mut() {
+            for p in &problems {
+                write_problem(f, &cfg, p)?;
+            }
+        }
+        for (name, planner) in &mut planners {
+            let mut row = Row {
+                planner: name,
+                set,
+                plans: 0,
+                success: 0,
+                collision: 0,
+                path_length_m: Vec::new(),
+                joint_travel_rad: Vec::new(),
+                plan_time_s: Vec::new(),
+            };
+            for p in &problems {
+                let plan = planner
+                    .plan_among(&p.target_m, Some(&p.start_rad), Some(&p.obstacles))
+                    .with_context(|| format!("{name} on {} problem {}", set.name(), p.id))?;
+                let success = record(&mut row, &plan);
+                if let Some(f) = out.as_mut() {
+                    let s = &plan.summary;
+                    let line = serde_json::json!({
+                        "planner": name, "set": set.name(), "id": p.id, "success": success,
+                        "collision": s.collision, "reached": s.reached, "path_length_m": s.path_length_m,
+                        "joint_travel_rad": s.joint_travel_rad, "plan_time_s": s.plan_time_s,
+                    });
+                    writeln!(f, "{line}")?;
+                }
+            }
+            rows.push(row);
+        }
+    }
+    for (path, bytes) in [(&a.problems_out, problems_out), (&a.out, out)] {
+        if let (Some(path), Some(bytes)) = (path, bytes) {
+            stagerl::io::write_new(path, &bytes, a.force)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+    }
+    print_table(&rows, a.problems, a.seed)
+}
+
+/// Add a plan to its row; whether it succeeded (reached with no contact along the path).
+fn record(row: &mut Row, plan: &Plan) -> bool {
+    let s = &plan.summary;
+    let success = s.reached && !s.collision;
+    row.plans += 1;
+    row.success += usize::from(success);
+    row.collision += usize::from(s.collision);
+    row.plan_time_s.push(s.plan_time_s);
+    if success {
+        row.path_length_m.push(s.path_length_m);
+        row.joint_travel_rad.push(s.joint_travel_rad);
+    }
+    success
+}
+
+fn write_problem(f: &mut impl Write, cfg: &Config, p: &Problem) -> Result<()> {
+    let line = serde_json::json!({
+        "set": p.set.name(), "id": p.id, "robot": cfg.robot.urdf, "tip": cfg.robot.tip,
+        "start_rad": p.start_rad, "target_m": p.target_m, "obstacles": p.obstacles,
+    });
+    writeln!(f, "{line}")?;
+    Ok(())
+}
+
+/// The `q`-quantile of `v` (sorted in place), NaN when empty.
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn print_table(rows: &[Row], problems: u32, seed: u64) -> Result<()> {
+    outln!(
+        "obstacles: {problems} problems per set, seed {seed}, one thread; success = reached with no contact \
+         along the path (checked continuously); path length and joint travel over successes; \
+         solvability of the problems not checked (no reference planner built in)"
+    )?;
+    outln!("| planner | set | success % | collision % | path length m | joint travel rad | plan time median ms | p95 ms |")?;
+    outln!("|---|---|---|---|---|---|---|---|")?;
+    for r in rows {
+        let n = r.plans.max(1) as f64;
+        let mut t = r.plan_time_s.clone();
+        outln!(
+            "| {} | {} | {:.1} | {:.1} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            r.planner,
+            r.set.name(),
+            100.0 * r.success as f64 / n,
+            100.0 * r.collision as f64 / n,
+            mean(&r.path_length_m),
+            mean(&r.joint_travel_rad),
+            1e3 * quantile(&mut t, 0.5),
+            1e3 * quantile(&mut t, 0.95),
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,92 @@
+//! `stagerl bench obstacles` end to end: the table has a row per planner and set, the problem
+//! file replays through `stagerl plan` with the same verdicts, and the per-plan file agrees with
+//! the table.
+
+use crate::common::{bin, run, scratch};
+use serde_json::Value;
+use std::io::Write;
+use std::process::Stdio;
+
+#[test]
+fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
+    let dir = scratch("bench-obstacles");
+    let (problems_path, plans_path) = (dir.join("problems.jsonl"), dir.join("plans.jsonl"));
+    let out = run(&[
+        "bench",
+        "obstacles",
+        "--problems",
+        "8",
+        "--sets",
+        "free,in-the-way,narrow-gap",
+        "--problems-out",
+        problems_path.to_str().unwrap(),
+        "--out",
+        plans_path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let table = String::from_utf8_lossy(&out.stdout).into_owned();
+    for set in ["free", "in-the-way", "narrow-gap"] {
+        assert!(table.contains(&format!("| jacobian | {set} |")), "{table}");
+    }
+    assert!(!table.contains("random-3"), "{table}");
+    let problems: Vec<Value> = std::fs::read_to_string(&problems_path)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let plans: Vec<Value> = std::fs::read_to_string(&plans_path)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!((problems.len(), plans.len()), (24, 24));
+    // The free set: the Jacobian controller reaches every target without contact.
+    let free: Vec<&Value> = plans.iter().filter(|p| p["set"] == "free").collect();
+    assert!(free.iter().all(|p| p["success"] == true && p["collision"] == false), "{free:?}");
+    assert!(table.contains("| jacobian | free | 100.0 | 0.0 |"), "{table}");
+    // Each problem replayed through `stagerl plan --controller jacobian` gives the same verdict.
+    let mut input = String::new();
+    for p in &problems {
+        input.push_str(&serde_json::json!({"target": p["target_m"], "start": p["start_rad"], "obstacles": p["obstacles"]}).to_string());
+        input.push('\n');
+    }
+    let mut child = bin()
+        .args(["plan", "--controller", "jacobian", "--targets", "-"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+    let replay = child.wait_with_output().unwrap();
+    assert!(replay.status.success(), "{}", String::from_utf8_lossy(&replay.stderr));
+    let replayed: Vec<Value> =
+        String::from_utf8_lossy(&replay.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(replayed.len(), 24);
+    for (p, r) in plans.iter().zip(&replayed) {
+        assert_eq!(p["collision"], r["collision"], "{p} / {r}");
+        assert_eq!(p["reached"], r["reached"], "{p} / {r}");
+    }
+    // Run again: the per-plan file (plan times differ) is not overwritten without --force.
+    let p2 = dir.join("p2.jsonl");
+    let again = |force: bool| {
+        let mut args = vec!["bench", "obstacles", "--problems", "2", "--sets", "free"];
+        args.extend(["--problems-out", p2.to_str().unwrap(), "--out", plans_path.to_str().unwrap()]);
+        if force {
+            args.push("--force");
+        }
+        run(&args)
+    };
+    let refused = again(false);
+    assert!(
+        !refused.status.success() && String::from_utf8_lossy(&refused.stderr).contains("--force"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 24, "overwritten");
+    assert!(again(true).status.success());
+    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 2);
+    // An in-the-way problem blocks the straight line: the controller touches its obstacle.
+    assert!(plans.iter().filter(|p| p["set"] == "in-the-way").any(|p| p["collision"] == true));
+    std::fs::remove_dir_all(&dir).ok();
+}
