@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 
 mod env;
 mod kin;
+mod obstacles;
 mod policy;
 mod raster;
 mod render;

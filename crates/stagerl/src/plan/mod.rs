@@ -479,7 +479,7 @@ impl Planner {
             i if i < nf + ns => format!("{}[{}]", self.scene_name, i - nf),
             i => format!("obstacles[{}]", i - nf - ns),
         };
-        check_scene_for_request(self.env.chain(), c, &all, named, start, t)
+        check_scene_for_request(self.env.chain(), c, &all, named, start, Some(t))
     }
 
     /// Roll the policy out from the environment's reset state, every state recorded.
