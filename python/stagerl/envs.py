@@ -182,8 +182,14 @@ class ReachEnv(gym.Env):
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None) -> tuple[np.ndarray, dict]:
         """Start an episode: ``(observation, {"distance": metres, "is_success": bool})``; ``seed``
-        reseeds ``np_random``, ``options={"target": [x, y, z], "start": [q1, ...]}`` sets the
-        target (metres) and the start pose (radians). The path drawn by :meth:`render` restarts."""
+        reseeds ``np_random``, ``options={"target": [x, y, z], "start": [q1, ...], "obstacles":
+        [...]}`` sets the target (metres), the start pose (radians) and the scene: a list of dicts
+        in the schema of ``[[task.obstacles]]`` (``{"shape": "sphere", "radius_m": r,
+        "position_m": [x, y, z]}``, ``{"shape": "cuboid", "half_extents_m": [..], "position_m":
+        [..], "rotation_xyzw": [..]}``), which replaces the task's random obstacles (its fixed
+        ones stay) and is checked as ``stagerl plan`` checks a request's, with the same
+        ``ValueError`` messages. Every key is optional; a reset without ``obstacles`` goes back
+        to the task's scene. The path drawn by :meth:`render` restarts."""
         super().reset(seed=seed)
         if options:
             obs, distance = self._reset_to(options)
@@ -192,9 +198,15 @@ class ReachEnv(gym.Env):
         return obs, {"distance": distance, "is_success": distance < self._beta_m}
 
     def _reset_to(self, options: dict):
-        allowed = "a dict with `target` (3 numbers, metres) and optionally `start` (one number per joint, radians)"
-        if not isinstance(options, dict) or "target" not in options or set(options) - {"target", "start"}:
+        allowed = ("a dict with optional `target` (3 numbers, metres), `start` (one number per joint, radians; "
+                   "with a target) and `obstacles` (a list of dicts)")
+        if not isinstance(options, dict) or set(options) - {"target", "start", "obstacles"}:
             raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
+        if "start" in options and "target" not in options:
+            raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
+        obstacles = options.get("obstacles")
+        if "target" not in options:
+            return self._core.reset(draw_seed(self.np_random), obstacles)
         try:
             target = np.asarray(options["target"], dtype=np.float64).tolist()
             start = options.get("start")
@@ -203,7 +215,7 @@ class ReachEnv(gym.Env):
             raise ValueError(f"`options` = {options!r} is invalid: {allowed}") from None
         if not isinstance(target, list) or (start is not None and not isinstance(start, list)):
             raise ValueError(f"`options` = {options!r} is invalid: {allowed}")
-        return self._core.reset_to(target, start)
+        return self._core.reset_to(target, start, obstacles)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         """One step with ``action`` (one value per joint in [-1, 1]): ``(observation, reward,

@@ -12,7 +12,6 @@ clearance in metres, with the environment's own checks over the same geometry.
 
 from __future__ import annotations
 
-import json
 import os
 
 import numpy as np
@@ -55,28 +54,6 @@ class Chain:
         return CollisionChecker(self, obstacles, floor=floor, self_collision=self_collision)
 
 
-def _plain(value):
-    """numpy arrays and scalars in an obstacle list as plain lists and floats (for JSON)."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"{value!r} is not a number or a list of numbers")
-
-
-def obstacles_json(obstacles):
-    """A list of obstacle dicts in ``[[task.obstacles]]``'s schema as the JSON the core reads;
-    ValueError naming the argument when it is not such a list."""
-    if isinstance(obstacles, (str, bytes, dict)) or not hasattr(obstacles, "__iter__"):
-        raise ValueError(f"`obstacles` = {obstacles!r} is invalid: a list of obstacle dicts")
-    try:
-        return json.dumps(list(obstacles), default=_plain, allow_nan=False)
-    except TypeError as e:
-        raise ValueError(f"`obstacles` is invalid: {e}") from None
-    except ValueError:
-        raise ValueError("`obstacles` is invalid: a value is NaN or infinite (every size and coordinate must be finite)") from None
-
-
 class CollisionChecker:
     """The environment's collision checks of a chain among obstacles, from Python.
 
@@ -93,9 +70,8 @@ class CollisionChecker:
         for name, v in (("floor", floor), ("self_collision", self_collision)):
             if not isinstance(v, bool):
                 raise ValueError(f"`{name}` = {v!r} is invalid: True or False")
-        text = None if obstacles is None else obstacles_json(obstacles)
         self.dof = chain.dof
-        self._core = chain._core.checker(text, floor, self_collision)
+        self._core = chain._core.checker(_obstacle_list(obstacles), floor, self_collision)
 
     def check(self, q):
         """For each row of ``q`` (N, dof) or one pose (dof,): in contact (N,) bool, and the
@@ -106,3 +82,13 @@ class CollisionChecker:
         """Whether the arm at one pose ``q`` (dof values, radians) touches anything checked: the
         environment's per-step test, faster than :meth:`check` (no clearance)."""
         return self._core.collides([float(v) for v in q])
+
+
+def _obstacle_list(obstacles):
+    """``obstacles`` as a list (a tuple or any sequence of dicts; numpy arrays inside are read as
+    numbers), or None."""
+    if obstacles is None or isinstance(obstacles, list):
+        return obstacles
+    if isinstance(obstacles, (str, bytes, dict)) or not hasattr(obstacles, "__iter__"):
+        raise ValueError(f"`obstacles` = {obstacles!r} is invalid: a list of dicts")
+    return list(obstacles)

@@ -106,11 +106,11 @@ def test_collision_checker_refuses_bad_scenes(root):
     chain = Chain()
     with pytest.raises(ValueError, match=r"obstacles\[0\]\.radius_m"):
         chain.checker([{"shape": "sphere", "radius_m": -1.0, "position_m": [1, 0, 0]}])
-    with pytest.raises(ValueError, match="NaN or infinite"):
+    with pytest.raises(ValueError, match=r"obstacles\[0\]\.radius_m"):
         chain.checker([{"shape": "sphere", "radius_m": float("nan"), "position_m": [1, 0, 0]}])
-    with pytest.raises(ValueError, match="unknown field"):
+    with pytest.raises(ValueError, match="a field `colour`"):
         chain.checker([{"shape": "sphere", "radius_m": 0.1, "position_m": [1, 0, 0], "colour": "red"}])
-    with pytest.raises(ValueError, match="list of obstacle dicts"):
+    with pytest.raises(ValueError, match="a list of dicts"):
         chain.checker({"shape": "sphere"})
     with pytest.raises(ValueError, match=r"q\.shape|one value per joint"):
         chain.checker().check(np.zeros((2, 5)))

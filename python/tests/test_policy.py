@@ -67,6 +67,7 @@ def test_plan_returns_the_cli_numbers(stagerl_bin, trained_run):
     for target, start in [(target, None), (target, [0.0, -1.0, 1.2, -1.5, -1.5, 0.0]), (outside, None)]:
         rows, summary, stderr = cli_plan(stagerl_bin, trained_run, target, start)
         plan = stagerl.plan(trained_run, target, start=start)
+        assert plan["summary"].pop("plan_time_s") > 0 and summary.pop("plan_time_s") > 0  # wall time
         assert plan["summary"] == summary
         assert len(plan["step"]) == len(rows) == summary["steps"] + 1
         for key in rows[0]:

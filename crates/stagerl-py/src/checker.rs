@@ -6,9 +6,8 @@
 use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use stagerl::sim::collision::{ArmCollider, Checks};
-use stagerl::sim::scene::Obstacle;
 
-use crate::{bad_arg, guard, to_py};
+use crate::{bad_arg, guard};
 
 /// A chain among obstacles, with the floor and self checks as asked.
 #[pyclass(module = "stagerl._core", name = "CollisionChecker")]
@@ -18,26 +17,14 @@ pub struct CollisionChecker {
     contacts: Vec<stagerl::sim::collision::Contact>,
 }
 
-/// The obstacles of a JSON list in `[[task.obstacles]]`'s schema, each checked (`obstacles[i].field`
-/// in errors).
-pub(crate) fn parse_obstacles(json: &str) -> PyResult<Vec<Obstacle>> {
-    let obstacles: Vec<Obstacle> = serde_json::from_str(json).map_err(|e| {
-        bad_arg("obstacles", json.chars().take(120).collect::<String>(), &format!(
-            "a list of obstacles as in [[task.obstacles]] ({{\"shape\": \"sphere\", \"radius_m\": r, \"position_m\": [x, y, z]}} or {{\"shape\": \"cuboid\", \"half_extents_m\": [..], \"position_m\": [..], \"rotation_xyzw\": [..]}}): {e}"
-        ))
-    })?;
-    stagerl::env::request::check_obstacle_values(&obstacles, "obstacles").map_err(to_py)?;
-    Ok(obstacles)
-}
-
 impl CollisionChecker {
     pub(crate) fn build(
         chain: &stagerl::robot::Chain,
-        obstacles_json: Option<&str>,
+        obstacles: Option<&Bound<'_, PyAny>>,
         floor: bool,
         self_collision: bool,
     ) -> PyResult<Self> {
-        let obstacles = obstacles_json.map(parse_obstacles).transpose()?.unwrap_or_default();
+        let obstacles = crate::obstacles::obstacles_of(obstacles)?.unwrap_or_default();
         let mut collider = ArmCollider::new(chain, Checks { floor, self_collision });
         if collider.is_empty() {
             return Err(bad_arg(

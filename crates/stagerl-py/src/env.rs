@@ -196,8 +196,17 @@ impl ReachCore {
         frame_array(py, rgb, w, h)
     }
 
-    /// Reseed the environment's random stream and start an episode; returns (obs, distance_m).
-    fn reset<'py>(&mut self, py: Python<'py>, seed: u64) -> PyResult<(Obs<'py>, f64)> {
+    /// Reseed the environment's random stream and start an episode (among `obstacles`, a list
+    /// of dicts, when given: see [`ReachCore::use_obstacles`]); returns (obs, distance_m).
+    #[pyo3(signature = (seed, obstacles=None))]
+    fn reset<'py>(
+        &mut self,
+        py: Python<'py>,
+        seed: u64,
+        obstacles: Option<Bound<'py, PyAny>>,
+    ) -> PyResult<(Obs<'py>, f64)> {
+        let home = self.env.task().home_pose.clone();
+        self.use_obstacles(obstacles.as_ref(), &home, None)?;
         let obs = guard("reset", || Ok(self.env.reset_with_seed(seed).to_vec()))?;
         self.restart_path();
         Ok((PyArray1::from_vec(py, obs), self.env.distance()))
@@ -205,12 +214,13 @@ impl ReachCore {
 
     /// Start an episode at joint positions `start` (radians; default: the home pose) with the
     /// given target (metres); the random stream is untouched. Returns (obs, distance_m).
-    #[pyo3(signature = (target, start=None))]
+    #[pyo3(signature = (target, start=None, obstacles=None))]
     fn reset_to<'py>(
         &mut self,
         py: Python<'py>,
         target: Vec<f64>,
         start: Option<Vec<f64>>,
+        obstacles: Option<Bound<'py, PyAny>>,
     ) -> PyResult<(Obs<'py>, f64)> {
         if target.len() != 3 {
             return Err(bad_arg("target", format!("{target:?}"), "3 values x, y, z in metres"));
@@ -218,6 +228,7 @@ impl ReachCore {
         // The check of `stagerl plan`: finite, above the floor, within the arm's reach.
         let t = self.env.check_target(&target).map_err(to_py)?;
         let start = start.unwrap_or_else(|| self.env.task().home_pose.clone());
+        self.use_obstacles(obstacles.as_ref(), &start, Some(t))?;
         let env = &mut self.env;
         let obs = guard("reset", || Ok(env.reset_to(&start, t).map_err(to_py)?.to_vec()))?;
         self.restart_path();
@@ -253,6 +264,36 @@ impl ReachCore {
 }
 
 impl ReachCore {
+    /// The scene of the next episodes: the task's fixed obstacles and `obstacles` (checked as
+    /// `stagerl plan` checks a request's: the same messages), or the task's own scene when
+    /// `None`.
+    fn use_obstacles(
+        &mut self,
+        obstacles: Option<&Bound<'_, PyAny>>,
+        start: &[f64],
+        target: Option<stagerl::nalgebra::Vector3<f64>>,
+    ) -> PyResult<()> {
+        let Some(extra) = crate::obstacles::obstacles_of(obstacles)? else {
+            self.env.set_request_obstacles(None);
+            return Ok(());
+        };
+        let env = &mut self.env;
+        guard("reset", || {
+            stagerl::env::check_joint_positions(env.chain(), start).map_err(to_py)?;
+            let all: Vec<_> = env.task().obstacles.iter().chain(&extra).cloned().collect();
+            let nf = env.task().obstacles.len();
+            let named = |i: usize| match i {
+                i if i < nf => format!("task.obstacles[{i}]"),
+                i => format!("obstacles[{}]", i - nf),
+            };
+            let mut c = stagerl::sim::collision::ArmCollider::new(env.chain(), env.task().collision);
+            stagerl::env::request::check_scene_for_request(env.chain(), &mut c, &all, named, start, target)
+                .map_err(to_py)?;
+            env.set_request_obstacles(Some(&extra));
+            Ok(())
+        })
+    }
+
     /// A new episode began: its path starts at the end effector (when rendering).
     fn restart_path(&mut self) {
         if let Some(r) = self.render.as_deref_mut() {

@@ -80,12 +80,12 @@ impl Chain {
         self.chain.velocity_limits().to_vec()
     }
 
-    /// A collision checker of this chain among `obstacles` (a JSON list in `[[task.obstacles]]`'s
-    /// schema), with the floor and self checks as asked.
+    /// A collision checker of this chain among `obstacles` (a list of dicts in
+    /// `[[task.obstacles]]`'s schema), with the floor and self checks as asked.
     #[pyo3(signature = (obstacles=None, floor=true, self_collision=true))]
     fn checker(
         &self,
-        obstacles: Option<&str>,
+        obstacles: Option<&Bound<'_, PyAny>>,
         floor: bool,
         self_collision: bool,
     ) -> PyResult<crate::checker::CollisionChecker> {

@@ -19,6 +19,7 @@ use pyo3::prelude::*;
 mod checker;
 mod env;
 mod kin;
+mod obstacles;
 mod policy;
 mod raster;
 mod render;

@@ -100,7 +100,7 @@ impl PolicyCore {
 /// The trajectory `stagerl plan` writes for the run's policy: (a dict of arrays keyed like its
 /// JSON lines, the summary line's fields as JSON, the warning or None).
 #[pyfunction]
-#[pyo3(signature = (run_dir, target, start=None, checkpoint=None, max_steps=None))]
+#[pyo3(signature = (run_dir, target, start=None, checkpoint=None, max_steps=None, obstacles=None))]
 pub fn plan<'py>(
     py: Python<'py>,
     run_dir: &str,
@@ -108,12 +108,14 @@ pub fn plan<'py>(
     start: Option<Vec<f64>>,
     checkpoint: Option<&str>,
     max_steps: Option<u32>,
+    obstacles: Option<Bound<'py, PyAny>>,
 ) -> PyResult<(Bound<'py, PyDict>, String, Option<String>)> {
+    let obstacles = crate::obstacles::obstacles_of(obstacles.as_ref())?;
     let plan = guard("plan", || {
         let run = RunDir::new(Path::new(run_dir));
         let (_, mut planner) =
             Planner::from_run(&run, checkpoint.map(Path::new), max_steps).map_err(to_py)?;
-        planner.plan(&target, start.as_deref()).map_err(to_py)
+        planner.plan_among(&target, start.as_deref(), obstacles.as_deref()).map_err(to_py)
     })?;
     let (rows, dof) = (plan.rows(), plan.dof);
     let d = PyDict::new(py);

@@ -19,6 +19,31 @@ pub enum Bench {
     /// Every planner on fixed, seeded problem sets among obstacles (free, one in the way, 3 and
     /// 6 random, a narrow gap): success, collisions, path length, joint travel, plan time.
     Obstacles(super::bench_obstacles::ObstaclesArgs),
+    /// RRT-Connect on seeded problems with one obstacle across the straight line (the set of
+    /// `stagerl eval --obstacles-in-path 1`): solved, contacts, plan time (median, p95), one thread.
+    #[command(name = "rrt-connect")]
+    RrtConnect(RrtArgs),
+}
+
+#[derive(clap::Args)]
+#[command(after_help = "Example:\n  stagerl bench rrt-connect --problems 200 --seed 0")]
+pub struct RrtArgs {
+    /// Problems (episodes of evaluation seed --problem-seed), 1 to 100 000.
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    problems: u32,
+    /// The evaluation seed the problems are drawn with.
+    #[arg(long, default_value_t = 42)]
+    problem_seed: u64,
+    /// RRT-Connect's seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Wall-time budget per plan, seconds.
+    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_BUDGET_S)]
+    planner_budget_s: f64,
+    /// Most tree extensions per plan, 1 to 100 000 000.
+    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_ITERATIONS,
+          value_parser = clap::value_parser!(u32).range(1..=100_000_000))]
+    planner_iterations: u32,
 }
 
 #[derive(clap::Args)]
@@ -107,7 +132,62 @@ pub fn run(b: Bench) -> Result<()> {
         }
         Bench::Plan(a) => plan(a),
         Bench::Obstacles(a) => super::bench_obstacles::run(a),
+        Bench::RrtConnect(a) => rrt_connect(a),
     }
+}
+
+/// The `q`-quantile of sorted `v` (nearest rank).
+fn quantile(v: &[f64], q: f64) -> f64 {
+    v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
+}
+
+fn rrt_connect(a: RrtArgs) -> Result<()> {
+    use stagerl::plan::rrt_connect::RrtConnect;
+    use stagerl::plan::{problems, Planner};
+    let cfg = Config::default();
+    let set = problems::obstacle_in_path(&cfg, a.problems as usize, a.problem_seed)?;
+    let rrt = RrtConnect {
+        seed: a.seed,
+        budget_s: a.planner_budget_s,
+        max_iterations: a.planner_iterations,
+        ..RrtConnect::default()
+    };
+    let mut planner = Planner::rrt_connect(&cfg, None, rrt)?;
+    let mut jacobian = Planner::jacobian(&cfg, None)?;
+    let (mut solved, mut contacts, mut blocked, mut times) = (0u32, 0u32, 0u32, Vec::new());
+    let mut clearance = f64::INFINITY;
+    for p in &set {
+        let straight = jacobian.plan_among(&p.target, None, Some(&p.obstacles))?;
+        blocked += u32::from(straight.summary.collision);
+        let plan = planner.plan_among(&p.target, None, Some(&p.obstacles))?;
+        solved += u32::from(plan.summary.reached);
+        contacts += u32::from(plan.summary.collision);
+        if plan.summary.reached {
+            clearance = clearance.min(plan.summary.min_clearance_m.unwrap_or(f64::INFINITY));
+        }
+        times.push(plan.summary.plan_time_s);
+    }
+    times.sort_by(f64::total_cmp);
+    let (median, p95) = (quantile(&times, 0.5), quantile(&times, 0.95));
+    let n = a.problems;
+    outln!(
+        "rrt-connect: {solved}/{n} solved, {contacts} with a contact, median plan time {:.2} ms, p95 {:.2} ms, max {:.2} ms \
+         (one obstacle across the straight line, problem seed {}, planner seed {}, one thread; the Jacobian controller \
+         touches the obstacle in {blocked}/{n}; least clearance of a solved path {clearance:.4} m)",
+        median * 1e3,
+        p95 * 1e3,
+        times.last().copied().unwrap_or(0.0) * 1e3,
+        a.problem_seed,
+        a.seed
+    )?;
+    outln!(
+        "{}",
+        serde_json::json!({
+            "problems": n, "solved": solved, "contacts": contacts, "median_plan_time_s": median,
+            "p95_plan_time_s": p95, "jacobian_contacts": blocked
+        })
+    )?;
+    Ok(())
 }
 
 fn env(a: EnvArgs) -> Result<()> {

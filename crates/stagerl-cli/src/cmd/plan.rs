@@ -1,4 +1,5 @@
 use anyhow::{bail, Context, Result};
+use stagerl::plan::rrt_connect::RrtConnect;
 use stagerl::plan::Planner;
 use stagerl::run::dir::RunDir;
 use stagerl::view::View;
@@ -7,19 +8,36 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 #[command(
-    after_help = "Examples:\n  stagerl plan --run runs/sac-sar --target 0.4,0.2,0.5\n  stagerl plan --controller jacobian --target 0.4,0.2,0.5 --format csv"
+    after_help = "Examples:\n  stagerl plan --run runs/sac-sar --target 0.4,0.2,0.5\n  stagerl plan --controller jacobian --target 0.4,0.2,0.5 --format csv\n  stagerl plan --planner rrt-connect --targets requests.jsonl --scene table.toml --seed 7"
 )]
 pub struct Args {
     /// The run directory whose policy plans (holds config.toml and checkpoints/).
-    #[arg(long, required_unless_present = "controller")]
+    #[arg(long, required_unless_present_any = ["controller", "planner"])]
     run: Option<PathBuf>,
     /// Checkpoint to plan with (default: the run's best, else final, else latest).
     #[arg(long, conflicts_with = "controller")]
     checkpoint: Option<PathBuf>,
     /// Plan with a scripted controller instead of a trained policy (on the arm and task of
-    /// --run if given, else the default UR5 task).
-    #[arg(long, value_enum)]
+    /// --run if given, else the default UR5 task); the same as --planner jacobian.
+    #[arg(long, value_enum, conflicts_with = "planner")]
     controller: Option<Controller>,
+    /// Who plans: `policy` (the trained policy of --run; the default when --run is given),
+    /// `jacobian` (the damped-least-squares controller) or `rrt-connect` (the sampling-based
+    /// reference planner: collision-free, within the speed limits). The scripted planners use
+    /// the arm and task of --run if given, else the default UR5 task.
+    #[arg(long, value_enum)]
+    planner: Option<PlannerKind>,
+    /// RRT-Connect's random seed (recorded in each plan's "rrt_connect" object); every plan
+    /// starts from it, so a request gives the same path wherever it stands in a batch.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// RRT-Connect's wall-time budget per plan, seconds (0 < s <= 3600); an unsolved plan says why.
+    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_BUDGET_S)]
+    planner_budget_s: f64,
+    /// RRT-Connect's most tree extensions per plan, 1 to 100 000 000.
+    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_ITERATIONS,
+          value_parser = clap::value_parser!(u32).range(1..=100_000_000))]
+    planner_iterations: u32,
     /// Target X,Y,Z, metres, base frame.
     #[arg(long, allow_hyphen_values = true, required_unless_present = "targets", conflicts_with = "targets")]
     target: Option<String>,
@@ -56,6 +74,16 @@ pub struct Args {
 pub enum Controller {
     /// The damped-least-squares Jacobian controller.
     Jacobian,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlannerKind {
+    /// The trained policy of --run.
+    Policy,
+    /// The damped-least-squares Jacobian controller.
+    Jacobian,
+    /// RRT-Connect in joint space, with shortcutting.
+    RrtConnect,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -124,11 +152,21 @@ pub fn run(args: Args) -> Result<()> {
     write_view(&args, view.as_ref())
 }
 
+/// The planner the flags choose (`--controller jacobian` is `--planner jacobian`).
+fn kind(args: &Args) -> Option<PlannerKind> {
+    match (args.planner, args.controller) {
+        (Some(k), _) => Some(k),
+        (None, Some(Controller::Jacobian)) => Some(PlannerKind::Jacobian),
+        (None, None) => args.run.as_ref().map(|_| PlannerKind::Policy),
+    }
+}
+
 fn view_title(args: &Args) -> String {
-    match (&args.run, args.controller) {
-        (_, Some(Controller::Jacobian)) => "Jacobian controller".into(),
-        (Some(run), None) => format!("plans of {}", run.display()),
-        (None, None) => String::new(),
+    match (&args.run, kind(args)) {
+        (_, Some(PlannerKind::Jacobian)) => "Jacobian controller".into(),
+        (_, Some(PlannerKind::RrtConnect)) => "RRT-Connect".into(),
+        (Some(run), _) => format!("plans of {}", run.display()),
+        (None, _) => String::new(),
     }
 }
 
@@ -153,13 +191,27 @@ fn planner(args: &Args) -> Result<Planner> {
         Some(r) => Some(r.load_config().with_context(|| format!("reading the run in {}", r.root.display()))?),
         None => None,
     };
-    match (args.controller, &run) {
-        (Some(Controller::Jacobian), _) => Ok(Planner::jacobian(&cfg.unwrap_or_default(), args.max_steps)?),
-        (None, Some(run)) => {
+    if args.checkpoint.is_some() && kind(args) != Some(PlannerKind::Policy) {
+        bail!("--checkpoint is for --planner policy (a trained run's policy)");
+    }
+    match (kind(args), &run) {
+        (Some(PlannerKind::Jacobian), _) => Ok(Planner::jacobian(&cfg.unwrap_or_default(), args.max_steps)?),
+        (Some(PlannerKind::RrtConnect), _) => {
+            let rrt = RrtConnect {
+                seed: args.seed,
+                budget_s: args.planner_budget_s,
+                max_iterations: args.planner_iterations,
+                ..RrtConnect::default()
+            };
+            Ok(Planner::rrt_connect(&cfg.unwrap_or_default(), args.max_steps, rrt)?)
+        }
+        (Some(PlannerKind::Policy) | None, Some(run)) => {
             let (_, planner) = Planner::from_run(run, args.checkpoint.as_deref(), args.max_steps)?;
             Ok(planner)
         }
-        (None, None) => bail!("give --run DIR (a trained run) or --controller jacobian"),
+        (_, None) => {
+            bail!("give --run DIR (a trained run) for --planner policy, or --planner jacobian|rrt-connect")
+        }
     }
 }
 

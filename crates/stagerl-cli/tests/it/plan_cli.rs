@@ -391,3 +391,53 @@ fn scenes_per_request_and_from_a_file_are_reported_and_bad_ones_named_by_line() 
     let e = failure(&with_stdin(&args, lines));
     assert!(e.contains(scene_arg) && e.contains("position_m"), "{e}");
 }
+
+#[test]
+fn rrt_connect_plans_round_an_obstacle_deterministically_and_the_bench_runs() {
+    // A ball across the straight way of the Jacobian controller.
+    let target = "{\"target\":[-0.4,0.1,0.35]";
+    // Halfway between the home pose's end effector and the target.
+    let ball = "[{\"shape\":\"sphere\",\"radius_m\":0.04,\"position_m\":[-0.4435,-0.0046,0.391]}]";
+    let line = format!("{target},\"obstacles\":{ball}}}\n");
+    let blocked = stdout_of(&with_stdin(&["plan", "--controller", "jacobian", "--targets", "-"], &line));
+    let blocked: Value = serde_json::from_str(blocked.trim()).unwrap();
+    assert_eq!(blocked["collision"], true, "{blocked}");
+    let args = ["plan", "--planner", "rrt-connect", "--targets", "-", "--seed", "4"];
+    let a = stdout_of(&with_stdin(&args, &line));
+    let b = stdout_of(&with_stdin(&args, &line));
+    let (a, b): (Value, Value) =
+        (serde_json::from_str(a.trim()).unwrap(), serde_json::from_str(b.trim()).unwrap());
+    assert_eq!(
+        (a["reached"].clone(), a["collision"].clone()),
+        (Value::Bool(true), Value::Bool(false)),
+        "{a}"
+    );
+    assert!(a["min_clearance_m"].as_f64().unwrap() > 0.0);
+    assert_eq!(a["q"], b["q"]);
+    assert_eq!(a["rrt_connect"], b["rrt_connect"]);
+    assert_eq!(a["rrt_connect"]["seed"], 4);
+    for k in ["iterations", "tree_nodes", "shortcuts", "ik_attempts"] {
+        assert!(a["rrt_connect"][k].is_u64(), "{k}: {a}");
+    }
+    // --controller and --planner are one choice; budgets are checked.
+    let both =
+        run(&["plan", "--controller", "jacobian", "--planner", "rrt-connect", "--target", "0.4,0.2,0.3"]);
+    assert_eq!(both.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&both.stderr).contains("cannot be used with"));
+    let e = failure(&run(&[
+        "plan",
+        "--planner",
+        "rrt-connect",
+        "--planner-budget-s",
+        "0",
+        "--target",
+        "0.4,0.2,0.3",
+    ]));
+    assert!(e.contains("--planner-budget-s") && e.contains("(0, 3600]"), "{e}");
+    let e = failure(&run(&["plan", "--planner", "policy", "--target", "0.4,0.2,0.3"]));
+    assert!(e.contains("--run"), "{e}");
+    let out = stdout_of(&run(&["bench", "rrt-connect", "--problems", "10"]));
+    let last: Value = serde_json::from_str(out.lines().last().unwrap()).unwrap();
+    assert_eq!((last["problems"].as_u64(), last["contacts"].as_u64()), (Some(10), Some(0)), "{out}");
+    assert!(last["solved"].as_u64().unwrap() >= 9, "{out}");
+}

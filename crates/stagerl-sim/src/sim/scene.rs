@@ -65,6 +65,15 @@ impl Obstacle {
         }
     }
 
+    /// The obstacle grown by `margin_m` metres: a sphere's radius, a box's half extents (a
+    /// superset of every point within the margin).
+    pub fn grown(&self, margin_m: f64) -> Obstacle {
+        let mut o = self.clone();
+        o.radius_m = o.radius_m.map(|r| r + margin_m);
+        o.half_extents_m = o.half_extents_m.map(|h| h.map(|v| v + margin_m));
+        o
+    }
+
     /// Its primitive (of a validated obstacle).
     pub fn primitive(&self) -> Shape {
         match self.shape {

@@ -41,7 +41,8 @@ pub fn check_obstacle_values(obstacles: &[Obstacle], field: &str) -> Result<()> 
     Ok(())
 }
 
-/// Check a scene against a request: no obstacle encloses `target` or touches the arm at `start`,
+/// Check a scene against a request: no obstacle encloses `target` (when given) or touches the
+/// arm at `start`,
 /// and `start` is in no other contact of the checker `c`'s checks (whose obstacles it leaves
 /// cleared). `named` gives each obstacle's field name.
 pub fn check_scene_for_request(
@@ -50,10 +51,11 @@ pub fn check_scene_for_request(
     obstacles: &[Obstacle],
     named: impl Fn(usize) -> String,
     start: &[f64],
-    target: Vector3<f64>,
+    target: Option<Vector3<f64>>,
 ) -> Result<()> {
-    let t: [f64; 3] = target.into();
     for (i, o) in obstacles.iter().enumerate() {
+        let Some(target) = target else { break };
+        let t: [f64; 3] = target.into();
         let d = o.distance_to_point_m(t);
         if d <= 0.0 {
             return Err(Error::InvalidInput(format!(

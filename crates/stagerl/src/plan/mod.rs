@@ -16,6 +16,7 @@
 
 pub mod controller;
 pub mod problems;
+pub mod rrt_connect;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -29,6 +30,7 @@ use crate::config::Config;
 use crate::env::request::{check_obstacle_values, check_scene_for_request};
 use crate::env::{check_joint_positions, rollout, Flow, Observed, Outcome, ReachEnv, ResolvedTask, Scratch};
 use crate::plan::controller::JacobianController;
+use crate::plan::rrt_connect::{RrtConnect, RrtStats};
 use crate::robot::Chain;
 use crate::run::dir::RunDir;
 use crate::sim::collision::ArmCollider;
@@ -41,6 +43,8 @@ pub enum PlanPolicy {
     Agent(Box<dyn Agent>),
     /// The scripted damped-least-squares controller.
     Jacobian(JacobianController),
+    /// The sampling-based reference planner ([`rrt_connect`]).
+    RrtConnect(RrtConnect),
 }
 
 /// One plan request (a line of batch input): a target, metres, optionally a start pose,
@@ -57,7 +61,7 @@ pub struct PlanRequest {
 }
 
 /// The outcome of a plan.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PlanSummary {
     /// The last step ended within beta of the target (the episode terminated).
     pub reached: bool,
@@ -86,6 +90,13 @@ pub struct PlanSummary {
     /// Wall time from the checked request to the trajectory (planning and rollout; not the
     /// collision report above), seconds.
     pub plan_time_s: f64,
+    /// Why the plan does not reach the target, when a planner knows (RRT-Connect: no
+    /// collision-free goal, the budget spent, a path longer than the step limit).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// RRT-Connect's statistics (that planner only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rrt_connect: Option<RrtStats>,
 }
 
 /// A planned trajectory: `rows()` states, stored by column.
@@ -136,6 +147,10 @@ pub struct BatchRecord<'a> {
     pub collision: bool,
     pub min_clearance_m: Option<f64>,
     pub plan_time_s: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<&'a str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rrt_connect: Option<RrtStats>,
     pub q: Vec<&'a [f64]>,
     pub ee_pos: &'a [[f64; 3]],
 }
@@ -173,6 +188,8 @@ impl Plan {
                 collision: false,
                 min_clearance_m: None,
                 plan_time_s: 0.0,
+                reason: None,
+                rrt_connect: None,
             },
             warning: None,
         };
@@ -230,6 +247,8 @@ impl Plan {
             collision: self.summary.collision,
             min_clearance_m: self.summary.min_clearance_m,
             plan_time_s: self.summary.plan_time_s,
+            reason: self.summary.reason.as_deref(),
+            rrt_connect: self.summary.rrt_connect,
             q: self.q.chunks_exact(self.dof).collect(),
             ee_pos: &self.ee_pos,
         }
@@ -320,8 +339,8 @@ pub struct Planner {
     /// The fixed scene of every request ([`Planner::set_scene`]) and its name in messages.
     scene: Vec<Obstacle>,
     scene_name: String,
-    /// The checker of the paths' collision report (`None`: an arm without collision shapes).
-    collider: Option<ArmCollider>,
+    /// The checker of RRT-Connect and of the paths' collision report.
+    collider: ArmCollider,
 }
 
 impl Planner {
@@ -329,10 +348,9 @@ impl Planner {
     pub fn new(env: ReachEnv, policy: PlanPolicy) -> Planner {
         let region = match policy {
             PlanPolicy::Agent(_) => Some(TargetRegion::of(env.task(), env.chain())),
-            PlanPolicy::Jacobian(_) => None,
+            PlanPolicy::Jacobian(_) | PlanPolicy::RrtConnect(_) => None,
         };
-        let collider = (!env.chain().collision_shapes().is_empty())
-            .then(|| ArmCollider::new(env.chain(), env.task().collision));
+        let collider = ArmCollider::new(env.chain(), env.task().collision);
         Planner {
             scratch: Scratch::new(&env),
             env,
@@ -366,6 +384,16 @@ impl Planner {
         let env = ReachEnv::from_config(&cfg, 0)?;
         let ctl = JacobianController::new(env.chain());
         Ok(Planner::new(env, PlanPolicy::Jacobian(ctl)))
+    }
+
+    /// RRT-Connect with settings `rrt` on the task and arm of `cfg`, with `max_steps`
+    /// (default: the config's `task.max_steps`) bounding the timed path.
+    pub fn rrt_connect(cfg: &Config, max_steps: Option<u32>, rrt: RrtConnect) -> Result<Planner> {
+        check_rrt_settings(&rrt)?;
+        let mut cfg = cfg.clone();
+        set_max_steps(&mut cfg, max_steps)?;
+        let env = ReachEnv::from_config(&cfg, 0)?;
+        Ok(Planner::new(env, PlanPolicy::RrtConnect(rrt)))
     }
 
     /// The fixed scene of every later request (`stagerl plan --scene`): a request's own
@@ -442,7 +470,7 @@ impl Planner {
     /// [`check_scene_for_request`] of the task's fixed obstacles and `extra` (the scene's,
     /// then the request's).
     fn check_scene(&mut self, extra: &[Obstacle], start: &[f64], t: Vector3<f64>) -> Result<()> {
-        let Some(c) = &mut self.collider else { return Ok(()) };
+        let c = &mut self.collider;
         let fixed = &self.env.task().obstacles;
         let all: Vec<Obstacle> = fixed.iter().chain(extra).cloned().collect();
         let (nf, ns) = (fixed.len(), self.scene.len());
@@ -451,12 +479,35 @@ impl Planner {
             i if i < nf + ns => format!("{}[{}]", self.scene_name, i - nf),
             i => format!("obstacles[{}]", i - nf - ns),
         };
-        check_scene_for_request(self.env.chain(), c, &all, named, start, t)
+        check_scene_for_request(self.env.chain(), c, &all, named, start, Some(t))
     }
 
     /// Roll the policy out from the environment's reset state, every state recorded.
     fn roll_out(&mut self) -> Result<Plan> {
         let mut plan = Plan::start(&self.env, self.env.task().max_steps as usize + 1);
+        let mut waypoints = Vec::new();
+        if let PlanPolicy::RrtConnect(rrt) = &self.policy {
+            let (env, c) = (&self.env, &mut self.collider);
+            let start = env.joint_positions().to_vec();
+            // The margin, less where the start pose is closer to an obstacle than twice it.
+            c.set_obstacles(env.obstacles());
+            let near = c.motion_clearance_m(env.chain(), &start, &start).unwrap_or(f64::INFINITY);
+            let margin = rrt_connect::MARGIN_M.min(0.5 * near.max(0.0));
+            let grown: Vec<Obstacle> = env.obstacles().iter().map(|o| o.grown(margin)).collect();
+            c.set_obstacles(&grown);
+            let (stats, path) = rrt.solve(env.chain(), c, &start, &env.target());
+            plan.summary.rrt_connect = Some(stats);
+            match path {
+                Ok(path) => {
+                    waypoints =
+                        rrt_connect::time_parameterise(&path, env.chain().velocity_limits(), env.task().dt_s)
+                }
+                Err(why) => {
+                    plan.summary.reason = Some(format!("RRT-Connect found no path: {why}"));
+                    return Ok(plan);
+                }
+            }
+        }
         let outcome = {
             let record = |tr: &crate::env::Transition<'_>| {
                 plan.record(tr.env, tr.step.total());
@@ -470,6 +521,9 @@ impl Planner {
                 PlanPolicy::Jacobian(ctl) => {
                     rollout(&mut self.env, &mut self.scratch, &mut Observed(ctl.policy(), record))?
                 }
+                PlanPolicy::RrtConnect(_) => {
+                    rollout(&mut self.env, &mut self.scratch, &mut Observed(track(&waypoints), record))?
+                }
             }
         };
         let Outcome::Finished { reward, last } = outcome else {
@@ -480,13 +534,24 @@ impl Planner {
         plan.summary.final_distance = self.env.distance();
         plan.summary.episode_reward = reward;
         plan.summary.collision_steps = self.env.collision_steps();
+        let needed = waypoints.len().saturating_sub(1);
+        if !plan.summary.reached && needed > plan.summary.steps as usize {
+            plan.summary.reason = Some(format!(
+                "the path needs {needed} control steps at the joints' speed limits, more than the step \
+                 limit of {} (raise --max-steps)",
+                plan.summary.steps
+            ));
+        }
         Ok(plan)
     }
 
     /// The continuous collision report of `plan` among the episode's obstacles: `collision`
     /// and `min_clearance_m`.
     fn report_collisions(&mut self, plan: &mut Plan) {
-        let Some(c) = &mut self.collider else { return };
+        let c = &mut self.collider;
+        if c.is_empty() {
+            return;
+        }
         let chain = self.env.chain();
         c.set_obstacles(self.env.obstacles());
         let n = plan.dof;
@@ -499,7 +564,8 @@ impl Planner {
                 clearance = Some(clearance.map_or(d, |m| m.min(d)));
             }
         }
-        plan.summary.collision = collision;
+        // A graze between two checked poses that the clearance's finer sampling saw.
+        plan.summary.collision = collision || clearance.is_some_and(|m| m < 0.0);
         plan.summary.min_clearance_m = clearance;
     }
 
@@ -526,6 +592,35 @@ impl Planner {
             })
         }
     }
+}
+
+/// A policy that follows `waypoints` (one per control step, the first the start): the action
+/// that takes the arm from where it is to the next waypoint, clipped to [-1, 1]; at rest past
+/// the last.
+fn track(waypoints: &[Vec<f64>]) -> impl FnMut(&ReachEnv, &mut [f32]) -> Result<()> + '_ {
+    move |env, action| {
+        let k = (env.steps() as usize + 1).min(waypoints.len().saturating_sub(1));
+        let (q, v, dt) = (env.joint_positions(), env.chain().velocity_limits(), env.task().dt_s);
+        for (i, a) in action.iter_mut().enumerate() {
+            let next = waypoints.get(k).map_or(q[i], |w| w[i]);
+            *a = ((next - q[i]) / (v[i] * dt)).clamp(-1.0, 1.0) as f32;
+        }
+        Ok(())
+    }
+}
+
+/// Check RRT-Connect's settings (`--planner-budget-s`, `--planner-iterations`).
+fn check_rrt_settings(r: &RrtConnect) -> Result<()> {
+    if !(r.budget_s.is_finite() && r.budget_s > 0.0 && r.budget_s <= 3600.0) {
+        return Err(Error::config("planner budget (--planner-budget-s)", r.budget_s, "seconds in (0, 3600]"));
+    }
+    if r.max_iterations == 0 {
+        return Err(Error::config("planner iterations (--planner-iterations)", 0, "1 or more"));
+    }
+    if !(r.step_rad.is_finite() && r.step_rad > 0.0) {
+        return Err(Error::config("RRT-Connect step_rad", r.step_rad, "a positive number of radians"));
+    }
+    Ok(())
 }
 
 fn set_max_steps(cfg: &mut Config, max_steps: Option<u32>) -> Result<()> {

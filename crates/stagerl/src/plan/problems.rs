@@ -211,5 +211,39 @@ fn narrow_gap(from: Vector3<f64>, to: Vector3<f64>) -> Option<Vec<Obstacle>> {
     Some(vec![side(1.0), side(-1.0)])
 }
 
+/// One problem of [`obstacle_in_path`]: the target (metres) and the scene, from the task's home
+/// pose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InPathProblem {
+    pub target: [f64; 3],
+    pub obstacles: Vec<Obstacle>,
+}
+
+/// `count` problems of `stagerl eval --obstacles-in-path 1`'s set (`stagerl bench rrt-connect`):
+/// the task of `cfg` with one random obstacle per episode (`[task.random_obstacles]` with
+/// `count = [1, 1]`, its other settings `cfg`'s or the defaults) placed in the way from the
+/// start pose's end effector to the target (`train.obstacles_in_path = 1`); problem `k` is
+/// episode `k` of evaluation seed `seed` (the first after `reset_with_seed(seed)`, then
+/// `reset()`). Unlike [`ProblemSet::InTheWay`], an obstacle whose placement in the way failed
+/// (it went anywhere) is kept, as the evaluation keeps it.
+pub fn obstacle_in_path(cfg: &Config, count: usize, seed: u64) -> Result<Vec<InPathProblem>> {
+    let mut cfg = cfg.clone();
+    let random = cfg.task.random_obstacles.take().unwrap_or_default();
+    cfg.task.random_obstacles = Some(RandomObstacles { count: [1, 1], ..random });
+    let mut env = ReachEnv::from_config(&cfg, 0)?;
+    env.set_obstacles_in_path(1.0)?;
+    let mut out = Vec::with_capacity(count);
+    for k in 0..count {
+        if k == 0 {
+            env.reset_with_seed(seed);
+        } else {
+            env.reset();
+        }
+        let t = env.target();
+        out.push(InPathProblem { target: [t.x, t.y, t.z], obstacles: env.obstacles().to_vec() });
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests;

@@ -61,7 +61,7 @@ fn check_plan(p: &Plan, planner: &Planner, target: &[f64; 3]) {
             path += (Vector3::from(r.ee_pos) - Vector3::from(prev.ee_pos)).norm();
         }
     }
-    let s = p.summary;
+    let s = &p.summary;
     assert_eq!(s.reached, s.final_distance < beta, "{s:?}");
     assert_eq!(s.final_distance, p.distance[rows - 1]);
     assert!((s.path_length_m - path).abs() <= 1e-12);
