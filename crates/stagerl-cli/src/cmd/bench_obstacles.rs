@@ -2,10 +2,16 @@
 //! ([`stagerl::plan::problems`]), one thread: success (reached with no contact anywhere along the
 //! path, checked continuously), collision rate, path length, joint travel and plan time (median
 //! and 95th percentile).
+//!
+//! Every problem is known to be solvable: RRT-Connect with a generous budget (`--solvable-budget-s`,
+//! its own seed) found a contact-free path to it, else the candidate was drawn again (counted in
+//! the output). That path's last pose is the problem's joint-space goal (`goal_rad` in
+//! `--problems-out`), which OMPL's RRTConnect is given (scripts/bench/ompl_rrt_connect.py).
 
 use anyhow::{Context, Result};
 use stagerl::config::Config;
 use stagerl::plan::problems::{draw_problems, Problem, ProblemSet};
+use stagerl::plan::rrt_connect::{RrtConnect, DEFAULT_ITERATIONS};
 use stagerl::plan::{Plan, Planner};
 use std::io::Write;
 use std::path::PathBuf;
@@ -39,10 +45,20 @@ pub struct ObstaclesArgs {
     /// `collision`, `reached`, `path_length_m`, `joint_travel_rad`, `plan_time_s`).
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
+    /// RRT-Connect's wall-time budget per plan in the table, seconds.
+    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_BUDGET_S)]
+    planner_budget_s: f64,
+    /// RRT-Connect's wall-time budget when it decides whether a candidate problem is solvable,
+    /// seconds (with 100 times the table's iterations).
+    #[arg(long, default_value_t = 5.0)]
+    solvable_budget_s: f64,
     /// Replace --problems-out and --out files that exist and hold something else.
     #[arg(long)]
     force: bool,
 }
+
+/// Mixed into `--seed` for the solvability judge's RRT-Connect (not the table's).
+const JUDGE_SEED: u64 = 0x5017_AB1E;
 
 /// One planner's figures on one set.
 struct Row {
@@ -67,7 +83,23 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
     } else {
         a.sets.iter().filter_map(|s| ProblemSet::from_name(s)).collect()
     };
-    let mut planners: Vec<(&'static str, Planner)> = vec![("jacobian", Planner::jacobian(&cfg, None)?)];
+    let rrt = |seed: u64, budget_s: f64, max_iterations: u32| RrtConnect {
+        seed,
+        budget_s,
+        max_iterations,
+        ..RrtConnect::default()
+    };
+    let table_rrt = rrt(a.seed, a.planner_budget_s, DEFAULT_ITERATIONS);
+    let mut judge = Planner::rrt_connect(
+        &cfg,
+        None,
+        rrt(a.seed ^ JUDGE_SEED, a.solvable_budget_s, 100 * DEFAULT_ITERATIONS),
+    )
+    .context("--solvable-budget-s")?;
+    let mut planners: Vec<(&'static str, Planner)> = vec![
+        ("jacobian", Planner::jacobian(&cfg, None)?),
+        ("rrt-connect", Planner::rrt_connect(&cfg, None, table_rrt).context("--planner-budget-s")?),
+    ];
     if let Some(run) = &a.run {
         let (_, p) = Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None)?;
         planners.push(("policy", p));
@@ -79,14 +111,28 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
     }
     let mut problems_out = a.problems_out.as_ref().map(|_| Vec::<u8>::new());
     let mut out = a.out.as_ref().map(|_| Vec::<u8>::new());
-    let mut rows = Vec::new();
+    let (mut rows, mut refused) = (Vec::new(), Vec::new());
     for &set in &sets {
-        // Solvability is not checked yet: no reference planner is built in (said in the output).
-        let (problems, _) = draw_problems(&cfg, set, a.problems as usize, a.seed, &mut |_| true)
+        // The goal of each problem's solving path, by the problem's index.
+        let mut goals: Vec<Vec<f64>> = Vec::new();
+        let mut solvable = |p: &Problem| -> bool {
+            let Ok(plan) = judge.plan_among(&p.target_m, Some(&p.start_rad), Some(&p.obstacles)) else {
+                return false;
+            };
+            let ok = plan.summary.reached && !plan.summary.collision;
+            if ok {
+                let dof = plan.dof;
+                goals.truncate(p.id);
+                goals.push(plan.q[plan.q.len() - dof..].to_vec());
+            }
+            ok
+        };
+        let (problems, n_refused) = draw_problems(&cfg, set, a.problems as usize, a.seed, &mut solvable)
             .with_context(|| format!("drawing the problem set `{}`", set.name()))?;
+        refused.push((set, n_refused));
         if let Some(f) = problems_out.as_mut() {
-            for p in &problems {
-                write_problem(f, &cfg, p)?;
+            for (p, goal) in problems.iter().zip(&goals) {
+                write_problem(f, &cfg, p, goal)?;
             }
         }
         for (name, planner) in &mut planners {
@@ -124,7 +170,7 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
                 .with_context(|| format!("writing {}", path.display()))?;
         }
     }
-    print_table(&rows, a.problems, a.seed)
+    print_table(&rows, &refused, &a)
 }
 
 /// Add a plan to its row; whether it succeeded (reached with no contact along the path).
@@ -142,10 +188,10 @@ fn record(row: &mut Row, plan: &Plan) -> bool {
     success
 }
 
-fn write_problem(f: &mut impl Write, cfg: &Config, p: &Problem) -> Result<()> {
+fn write_problem(f: &mut impl Write, cfg: &Config, p: &Problem, goal: &[f64]) -> Result<()> {
     let line = serde_json::json!({
         "set": p.set.name(), "id": p.id, "robot": cfg.robot.urdf, "tip": cfg.robot.tip,
-        "start_rad": p.start_rad, "target_m": p.target_m, "obstacles": p.obstacles,
+        "start_rad": p.start_rad, "goal_rad": goal, "target_m": p.target_m, "obstacles": p.obstacles,
     });
     writeln!(f, "{line}")?;
     Ok(())
@@ -168,11 +214,18 @@ fn mean(v: &[f64]) -> f64 {
     }
 }
 
-fn print_table(rows: &[Row], problems: u32, seed: u64) -> Result<()> {
+fn print_table(rows: &[Row], refused: &[(ProblemSet, usize)], a: &ObstaclesArgs) -> Result<()> {
+    let refused: Vec<String> = refused.iter().map(|(s, n)| format!("{} {n}", s.name())).collect();
     outln!(
-        "obstacles: {problems} problems per set, seed {seed}, one thread; success = reached with no contact \
-         along the path (checked continuously); path length and joint travel over successes; \
-         solvability of the problems not checked (no reference planner built in)"
+        "obstacles: {} problems per set, seed {}, one thread; success = reached with no contact along the \
+         path (checked continuously); path length and joint travel over successes; every problem solved \
+         by RRT-Connect within {} s (candidates it could not solve, drawn again: {}); rrt-connect's \
+         budget in the table {} s",
+        a.problems,
+        a.seed,
+        a.solvable_budget_s,
+        refused.join(", "),
+        a.planner_budget_s
     )?;
     outln!("| planner | set | success % | collision % | path length m | joint travel rad | plan time median ms | p95 ms |")?;
     outln!("|---|---|---|---|---|---|---|---|")?;

@@ -18,6 +18,8 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
         "8",
         "--sets",
         "free,in-the-way,narrow-gap",
+        "--solvable-budget-s",
+        "0.5",
         "--problems-out",
         problems_path.to_str().unwrap(),
         "--out",
@@ -27,7 +29,13 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
     let table = String::from_utf8_lossy(&out.stdout).into_owned();
     for set in ["free", "in-the-way", "narrow-gap"] {
         assert!(table.contains(&format!("| jacobian | {set} |")), "{table}");
+        // Every problem was solved by RRT-Connect when drawn; with its table budget it solves
+        // the free and in-the-way sets without a contact (none with a contact in any set).
+        assert!(table.contains(&format!("| rrt-connect | {set} |")), "{table}");
     }
+    assert!(table.contains("| rrt-connect | free | 100.0 | 0.0 |"), "{table}");
+    assert!(table.contains("| rrt-connect | in-the-way | 100.0 | 0.0 |"), "{table}");
+    assert!(table.contains("candidates it could not solve, drawn again: free 0, in-the-way "), "{table}");
     assert!(!table.contains("random-3"), "{table}");
     let problems: Vec<Value> = std::fs::read_to_string(&problems_path)
         .unwrap()
@@ -39,7 +47,11 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
-    assert_eq!((problems.len(), plans.len()), (24, 24));
+    assert_eq!((problems.len(), plans.len()), (24, 48));
+    // Each problem carries the goal RRT-Connect reached, one value per joint.
+    assert!(problems.iter().all(|p| p["goal_rad"].as_array().is_some_and(|g| g.len() == 6)));
+    assert!(plans.iter().filter(|p| p["planner"] == "rrt-connect").all(|p| p["collision"] == false));
+    let plans: Vec<Value> = plans.into_iter().filter(|p| p["planner"] == "jacobian").collect();
     // The free set: the Jacobian controller reaches every target without contact.
     let free: Vec<&Value> = plans.iter().filter(|p| p["set"] == "free").collect();
     assert!(free.iter().all(|p| p["success"] == true && p["collision"] == false), "{free:?}");
@@ -83,9 +95,9 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
         "{}",
         String::from_utf8_lossy(&refused.stderr)
     );
-    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 24, "overwritten");
+    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 48, "overwritten");
     assert!(again(true).status.success());
-    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 2);
+    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 4);
     // An in-the-way problem blocks the straight line: the controller touches its obstacle.
     assert!(plans.iter().filter(|p| p["set"] == "in-the-way").any(|p| p["collision"] == true));
     std::fs::remove_dir_all(&dir).ok();
