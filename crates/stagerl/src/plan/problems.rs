@@ -113,7 +113,11 @@ pub fn draw_problems(
     let mut cfg = cfg.clone();
     cfg.task.obstacles.clear();
     cfg.task.random_obstacles = set.random_obstacles();
+    // The problems do not depend on what a policy observes.
     cfg.task.observe_obstacles = false;
+    cfg.task.obstacle_observation = Default::default();
+    cfg.task.obstacle_range_m = None;
+    cfg.train.obstacles_in_path = 0.0;
     let index = ProblemSet::ALL.iter().position(|&s| s == set).unwrap_or(0) as u64;
     let mut env = ReachEnv::from_config(&cfg, 0)?;
     if set == ProblemSet::InTheWay {
