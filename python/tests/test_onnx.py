@@ -9,8 +9,9 @@ ONNX checker.
   targets that evaluation reached.
 
 Each algorithm is covered: DDPG and TD3 (the actor's tanh output), SAC (tanh of the
-mean half), PPO (the linear mean, clipped) and PPO with normalised observations (`norm_obs`:
-the model subtracts the running means and divides by the standard deviations first). The runs are tiny (trained here in a few seconds): parity needs no good policy, and
+mean half), PPO (the linear mean, clipped), and PPO, SAC and TD3 with normalised observations
+(`agent.ppo.norm_obs`, `agent.norm_obs`: the model subtracts the running means and divides by
+the standard deviations first). The runs are tiny (trained here in a few seconds): parity needs no good policy, and
 the rollout comparison holds for any success count; a larger success radius (beta = 0.05 m)
 makes some targets reached.
 """
@@ -44,12 +45,18 @@ def run_cli(stagerl_bin, *args, stdin=None):
     return p.stdout
 
 
-@pytest.fixture(scope="module", params=["ddpg", "td3", "sac", "ppo", "ppo-norm"])
+@pytest.fixture(scope="module", params=["ddpg", "td3", "sac", "ppo", "ppo-norm", "sac-norm", "td3-norm"])
 def exported(request, stagerl_bin, tmp_path_factory):
     """A tiny trained run of the algorithm, its exported model and the model's session."""
     d = tmp_path_factory.mktemp(f"onnx-{request.param}")
     algo, norm = request.param.split("-")[0], request.param.endswith("-norm")
-    (d / "tiny.toml").write_text(TINY + ("[agent.ppo]\nnorm_obs = { clip = 10.0 }\n" if norm else ""))
+    if not norm:
+        config = TINY
+    elif algo == "ppo":
+        config = TINY + "[agent.ppo]\nnorm_obs = { clip = 10.0 }\n"
+    else:  # the off-policy agents' setting
+        config = TINY.replace("[agent]\n", "[agent]\nnorm_obs = { clip = 10.0 }\n")
+    (d / "tiny.toml").write_text(config)
     run = d / "run"
     run_cli(stagerl_bin, "train", "--config", str(d / "tiny.toml"), "--algo", algo,
             "--episodes", "150", "--seed", "5", "--eval-trials", "10", "--out", str(run))

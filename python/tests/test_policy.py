@@ -191,6 +191,31 @@ def test_bad_reset_options():
     np.testing.assert_array_equal(obs[9:12], np.float32([0.3, 0.1, 0.4]))
 
 
+def test_a_normalised_sac_policy_applies_its_statistics(stagerl_bin, tmp_path):
+    """SAC with `agent.norm_obs` (the off-policy agents' running normalisation): the Policy
+    normalises with the checkpoint's statistics, then takes tanh of the actor's mean half."""
+    config = tmp_path / "sac.toml"
+    config.write_text('[agent]\nalgo = "sac"\nhidden = [16, 16]\nbatch_size = 32\nlearning_starts = 200\n'
+                      'norm_obs = { clip = 10.0 }\n[train]\nepisodes = 20\neval_every_episodes = 10\n')
+    run = tmp_path / "run"
+    done = subprocess.run([stagerl_bin, "train", "--config", str(config), "--out", str(run), "--eval-trials", "0"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    policy = stagerl.Policy.load(run)
+    tensors, _ = read_safetensors(policy.checkpoint)
+    spec, norm = policy.spec, policy.spec["observation"]["normalization"]
+    assert spec["format_version"] == 2 and norm["clip"] == 10.0 and spec["action"]["rule"] == "tanh_of_mean"
+    obs = np.stack([ReachEnv().reset(seed=s)[0] for s in range(32)]).astype(np.float32)
+    x = np.clip((obs - tensors[norm["mean"]]) / tensors[norm["std"]], np.float32(-10), np.float32(10))
+    assert x.dtype == np.float32 and np.abs(x - obs).max() > 0.1, "the statistics moved from (0, 1)"
+    x = x.astype(np.float64)
+    act = {"relu": lambda z: np.maximum(z, 0), "tanh": np.tanh, "identity": lambda z: z}
+    for layer in spec["actor"]["layers"]:
+        w, b = tensors[layer["weight"]].astype(np.float64), tensors[layer["bias"]].astype(np.float64)
+        x = act[layer["activation"]](x @ w.T + b)
+    np.testing.assert_allclose(policy(obs), np.tanh(x[:, :spec["action"]["dim"]]), atol=2e-5)
+
+
 def test_a_normalised_ppo_policy_applies_its_statistics(stagerl_bin, tmp_path):
     """PPO with `norm_obs`: the Policy normalises as the checkpoint's description says (the f32
     formula on the tensors it names), and that description is format 2."""

@@ -70,6 +70,15 @@ fn sigkill_then_resume_with_ppo_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-ppo", &config);
 }
 
+/// The same with SAC on normalised observations (`agent.norm_obs`): the running statistics,
+/// updated at every step collected, must survive the kills (and mid-episode checkpoints) too.
+#[test]
+fn sigkill_then_resume_with_sac_norm_obs_gives_the_uninterrupted_run() {
+    let config = CONFIG.replace("[agent]\n", "[agent]\nnorm_obs = { clip = 5.0 }\n");
+    assert!(config.contains("norm_obs"));
+    sigkills_then_resume("resume-kill-sac-norm", &config);
+}
+
 /// The same among random obstacles placed in the way half the time (`train.obstacles_in_path`,
 /// a side stream of the environment's): a checkpoint mid-episode holds the episode's obstacles,
 /// and the placements after a resume are those of the uninterrupted run.

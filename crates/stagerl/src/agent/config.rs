@@ -10,6 +10,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use super::ddpg::DdpgConfig;
+use super::obs_norm::ObsNormConfig;
 use super::ppo::PpoConfig;
 use super::sac::SacConfig;
 use super::td3::Td3Config;
@@ -125,6 +126,11 @@ pub struct AgentConfig {
     /// replay ([`crate::train::her`]); unset: off (the paper's agents).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub her: Option<HerConfig>,
+    /// `agent.norm_obs = { clip = 10.0 }`: running observation normalisation of the off-policy
+    /// agents (DDPG, TD3, SAC; PPO's is `agent.ppo.norm_obs`), as Stable-Baselines3's
+    /// `VecNormalize` with an off-policy algorithm ([`crate::agent::obs_norm`]); unset: off.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub norm_obs: Option<ObsNormConfig>,
 }
 
 impl Default for AgentConfig {
@@ -146,6 +152,7 @@ impl Default for AgentConfig {
             sac: None,
             ppo: None,
             her: None,
+            norm_obs: None,
         }
     }
 }
@@ -166,11 +173,12 @@ impl PartialEq for AgentConfig {
             && (self.ddpg(), self.td3(), self.sac(), self.ppo())
                 == (other.ddpg(), other.td3(), other.sac(), other.ppo())
             && self.her == other.her
+            && self.norm_obs == other.norm_obs
     }
 }
 
 /// Keys that moved from `[agent]` into an algorithm's section, and where they belong.
-const MOVED_KEYS: [(&str, &str); 22] = [
+const MOVED_KEYS: [(&str, &str); 21] = [
     ("noise", "[agent.ddpg] or [agent.td3]"),
     ("noise_sigma", "[agent.ddpg] or [agent.td3]"),
     ("ou_theta", "[agent.ddpg] or [agent.td3]"),
@@ -192,7 +200,6 @@ const MOVED_KEYS: [(&str, &str); 22] = [
     ("vf_coef", "[agent.ppo]"),
     ("norm_adv", "[agent.ppo]"),
     ("anneal_lr", "[agent.ppo]"),
-    ("norm_obs", "[agent.ppo]"),
 ];
 
 impl AgentConfig {
@@ -249,8 +256,9 @@ impl AgentConfig {
             Algo::Ppo => {
                 c.ppo = self.ppo;
                 // Relabelling needs a replay buffer: a preset's `[agent.her]` is for its
-                // off-policy agents.
+                // off-policy agents, and so is its `agent.norm_obs` (PPO's is its own).
                 c.her = None;
+                c.norm_obs = None;
             }
         }
         c
@@ -294,6 +302,13 @@ impl AgentConfig {
                 "agent.her",
                 "a hindsight relabelling setting",
                 "none with agent.algo = \"ppo\": relabelling rewrites a replay buffer, and PPO learns from fresh rollouts (use ddpg, td3 or sac)",
+            ));
+        }
+        if self.algo == Algo::Ppo && self.norm_obs.is_some() {
+            return Err(Error::config(
+                "agent.norm_obs",
+                "an observation normalisation setting",
+                "none with agent.algo = \"ppo\": PPO's is agent.ppo.norm_obs (agent.norm_obs is the off-policy agents')",
             ));
         }
         match self.sections().into_iter().find(|&a| a != self.algo) {
@@ -363,6 +378,9 @@ impl AgentConfig {
         }
         if let Some(h) = &self.her {
             h.validate()?;
+        }
+        if let Some(n) = &self.norm_obs {
+            n.validate("agent.norm_obs")?;
         }
         Ok(())
     }

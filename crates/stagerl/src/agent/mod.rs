@@ -64,7 +64,7 @@ pub trait Agent: Send + Learned {
     /// Deterministic action for one observation (evaluation, deployment), in [-1, 1].
     fn predict(&mut self, obs: &[f32], action: &mut [f32]);
     /// The running observation normalisation the actor's input goes through (PPO with
-    /// `norm_obs`), if any: [`Agent::predict`] applies it; an export must too.
+    /// `agent.ppo.norm_obs`, DDPG, TD3 and SAC with `agent.norm_obs`), if any: [`Agent::predict`] applies it; an export must too.
     fn obs_norm(&self) -> Option<&obs_norm::ObsNorm> {
         None
     }
@@ -101,6 +101,9 @@ pub trait Agent: Send + Learned {
 
 /// An off-policy agent: it learns from batches sampled from a replay buffer.
 pub trait OffPolicy: Agent {
+    /// An observation collected in training (`agent.norm_obs`: merged into the running
+    /// statistics before the agent, or the warm-up, acts on it; otherwise nothing).
+    fn observe(&mut self, obs: &[f32]);
     /// One gradient update on a sampled batch.
     fn update(&mut self, batch: &Batch) -> UpdateStats;
 }

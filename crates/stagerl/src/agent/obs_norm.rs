@@ -13,6 +13,19 @@
 //! `sqrt(sigma^2 + 1e-8)` rounded to f32 once ([`ObsNorm::mean`], [`ObsNorm::std`]), so that an
 //! exported graph (Sub, Div, Clip on those two tensors) gives the same bits as training,
 //! evaluation and planning. Evaluation and planning never update the statistics.
+//!
+//! PPO (`agent.ppo.norm_obs`) updates them on each batch of observations its policy acts on and
+//! keeps the normalised observations in its rollout. The off-policy agents (DDPG, TD3, SAC with
+//! `agent.norm_obs`, HER included; [`OffPolicyNorm`]) do as Stable-Baselines3's `VecNormalize`
+//! with an off-policy algorithm:
+//! - the statistics are updated from each observation as it is collected (every observation the
+//!   training episodes act on, the uniform warm-up steps included), never from replay samples;
+//! - the replay buffer stores raw observations; each update normalises its sampled batch (`s`
+//!   and `s'`) with the statistics of that moment, so that a hindsight-relabelled goal is
+//!   normalised as an observed one;
+//! - the actor and the critics (and their targets) read normalised observations only;
+//! - acting, evaluation, export and planning normalise with the statistics as they are (saved in
+//!   the checkpoint: frozen at evaluation).
 
 use serde::{Deserialize, Serialize};
 
@@ -161,6 +174,69 @@ impl ObsNorm {
             self.mean[j] = self.stats.mean[j] as f32;
             self.std[j] = (self.stats.var[j] + VAR_EPS).sqrt() as f32;
         }
+    }
+}
+
+/// The observation normalisation of an off-policy agent (see the module docs): the running
+/// normaliser and its scratch, preallocated to the batch size (no allocation per update).
+#[derive(Clone, Debug)]
+pub struct OffPolicyNorm {
+    pub norm: ObsNorm,
+    obs: Vec<f32>,
+    next_obs: Vec<f32>,
+    one: Vec<f32>,
+}
+
+impl OffPolicyNorm {
+    /// For observations of `dim` values and batches of up to `batch` rows.
+    pub fn new(dim: usize, cfg: &ObsNormConfig, batch: usize) -> OffPolicyNorm {
+        OffPolicyNorm {
+            norm: ObsNorm::new(dim, cfg),
+            obs: vec![0.0; batch * dim],
+            next_obs: vec![0.0; batch * dim],
+            one: vec![0.0; dim],
+        }
+    }
+
+    /// Merge one collected observation into the statistics.
+    pub fn observe(&mut self, obs: &[f32]) {
+        self.norm.update(obs, 1);
+    }
+
+    /// One observation, normalised (acting, evaluation).
+    pub fn one(&mut self, obs: &[f32]) -> &[f32] {
+        self.norm.apply(obs, &mut self.one);
+        &self.one
+    }
+
+    /// A batch's observations and next observations (`rows` rows each), normalised.
+    pub fn batch(&mut self, obs: &[f32], next_obs: &[f32], rows: usize) -> (&[f32], &[f32]) {
+        let n = rows * self.norm.mean.len();
+        self.norm.apply(&obs[..n], &mut self.obs[..n]);
+        self.norm.apply(&next_obs[..n], &mut self.next_obs[..n]);
+        (&self.obs[..n], &self.next_obs[..n])
+    }
+}
+
+/// An off-policy agent's observations: `raw` itself, or normalised by `norm` (the batch's `s`
+/// and `s'`, `rows` rows).
+pub fn batch_inputs<'a>(
+    norm: &'a mut Option<OffPolicyNorm>,
+    obs: &'a [f32],
+    next_obs: &'a [f32],
+    rows: usize,
+) -> (&'a [f32], &'a [f32]) {
+    match norm {
+        Some(n) => n.batch(obs, next_obs, rows),
+        None => (obs, next_obs),
+    }
+}
+
+/// One observation for an off-policy agent's actor: `obs` itself, or normalised by `norm`.
+pub fn one_input<'a>(norm: &'a mut Option<OffPolicyNorm>, obs: &'a [f32]) -> &'a [f32] {
+    match norm {
+        Some(n) => n.one(obs),
+        None => obs,
     }
 }
 

@@ -24,11 +24,16 @@
 //! [`crate::nn::HiddenNorm`]; the critics, their targets and the actor's critics all drop out,
 //! each from its own stream).
 //!
+//! With `agent.norm_obs`, the actor and the critics read observations normalised by running
+//! statistics ([`super::obs_norm`]: updated as observations are collected, applied to each
+//! sampled batch).
+//!
 //! Its own settings: `[agent.sac]`, [`SacConfig`] (the entropy coefficient, the ensemble).
 
 use serde::{Deserialize, Serialize};
 
 use super::critics::{self, Critics, DROPOUT_RNG, ENSEMBLE};
+use super::obs_norm::{batch_inputs, one_input, ObsNorm, OffPolicyNorm};
 use super::parts::learned_parts;
 use super::{sizes, step, Agent, AgentConfig, Algo, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
@@ -180,6 +185,8 @@ pub struct Sac {
     alpha_opt: Adam<f32>,
     target_entropy: f32,
     rng: Rng,
+    /// `agent.norm_obs`: the running observation normalisation.
+    norm: Option<OffPolicyNorm>,
     // Scratch, grown once to the batch size.
     eps: Vec<f32>,
     critic_in: Vec<f32>,
@@ -211,6 +218,7 @@ impl Sac {
             target_entropy: (own.target_entropy_per_dim * act_dim as f64) as f32,
             head: SquashedGaussian::new(act_dim, LOG_STD),
             rng: Rng::derived(seed, 0x5AC1),
+            norm: cfg.norm_obs.map(|n| OffPolicyNorm::new(obs_dim, &n, b)),
             subset: own.subset(),
             actor_q: own.actor_q(),
             eps: vec![0.0; b * act_dim],
@@ -249,7 +257,7 @@ impl Agent for Sac {
     }
 
     fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        let raw = self.actor.predict(obs, 1);
+        let raw = self.actor.predict(one_input(&mut self.norm, obs), 1);
         let eps = &mut self.eps[..self.act_dim];
         Self::fill_normal(&mut self.rng, eps);
         let (a, _) = self.head.forward(raw, eps, 1);
@@ -257,24 +265,35 @@ impl Agent for Sac {
     }
 
     fn predict(&mut self, obs: &[f32], action: &mut [f32]) {
-        let raw = self.actor.predict(obs, 1);
+        let raw = self.actor.predict(one_input(&mut self.norm, obs), 1);
         self.head.deterministic(raw, 1, action);
+    }
+
+    fn obs_norm(&self) -> Option<&ObsNorm> {
+        self.norm.as_ref().map(|n| &n.norm)
     }
 }
 
 impl OffPolicy for Sac {
+    fn observe(&mut self, obs: &[f32]) {
+        if let Some(n) = &mut self.norm {
+            n.observe(obs);
+        }
+    }
+
     fn update(&mut self, batch: &Batch) -> UpdateStats {
         let (b, od, ad) = (batch.size, self.obs_dim, self.act_dim);
         let alpha = self.alpha();
         let gamma = self.cfg.gamma as f32;
+        let (obs, next_obs) = batch_inputs(&mut self.norm, &batch.obs, &batch.next_obs, b);
 
         // 1. Critics.
-        let raw_next = self.actor.predict(&batch.next_obs, b);
+        let raw_next = self.actor.predict(next_obs, b);
         Self::fill_normal(&mut self.rng, &mut self.eps[..b * ad]);
         let (a_next, logp_next) = self.head.forward(raw_next, &self.eps[..b * ad], b);
         self.next_act[..b * ad].copy_from_slice(a_next);
         self.next_logp[..b].copy_from_slice(logp_next);
-        concat_cols(&batch.next_obs, od, &self.next_act[..b * ad], ad, b, &mut self.critic_in);
+        concat_cols(next_obs, od, &self.next_act[..b * ad], ad, b, &mut self.critic_in);
         if self.subset < self.critics.len() {
             self.critics.choose_targets(self.subset, &mut self.rng);
         }
@@ -283,17 +302,17 @@ impl OffPolicy for Sac {
             let soft_v = self.y[i] - alpha * self.next_logp[i];
             self.y[i] = batch.reward[i] + gamma * (1.0 - batch.terminal[i]) * soft_v;
         }
-        concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
+        concat_cols(obs, od, &batch.act, ad, b, &mut self.critic_in);
         let losses = self.critics.fit(&self.critic_in, &self.y[..b], self.cfg.max_grad_norm);
         let critic_loss = critics::mean(losses);
 
         // 2. Actor, through the reparameterised sample and dQ/da of the smallest critic per row
         //    (or of every critic, weighted 1/N, for their mean).
-        let raw = self.actor.forward(&batch.obs, b);
+        let raw = self.actor.forward(obs, b);
         Self::fill_normal(&mut self.rng, &mut self.eps[..b * ad]);
         let (a, logp) = self.head.forward(raw, &self.eps[..b * ad], b);
         self.next_logp[..b].copy_from_slice(logp); // reuse: log pi(a~|s)
-        concat_cols(&batch.obs, od, a, ad, b, &mut self.critic_in);
+        concat_cols(obs, od, a, ad, b, &mut self.critic_in);
         let q = match self.actor_q {
             ActorQ::Min => self.critics.forward_min(&self.critic_in, b),
             ActorQ::Mean => self.critics.forward_mean(&self.critic_in, b),
@@ -356,5 +375,11 @@ learned_parts!(Sac, |s, f| {
     }
     for (name, t) in DROPOUT_RNG.iter().zip(each!(s.critics.target_drop)).filter(|_| drops) {
         f(name[1], P::State(t));
+    }
+    // `agent.norm_obs`: the statistics (listed only when set).
+    if let Some(n) = r!(s.norm) {
+        f("obs_norm", P::State(r!(n.norm)));
+        f(super::obs_norm::MEAN_TENSOR, P::Tensor(r!(n.norm.mean)));
+        f(super::obs_norm::STD_TENSOR, P::Tensor(r!(n.norm.std)));
     }
 });

@@ -17,6 +17,10 @@
 //!
 //! Exploration: Gaussian or Ornstein-Uhlenbeck noise added to `mu(s)`, clipped to [-1, 1].
 //!
+//! With `agent.norm_obs`, the actor, the critics and their targets read observations
+//! normalised by running statistics ([`super::obs_norm`]: updated as observations are
+//! collected, applied to each sampled batch).
+//!
 //! Its own settings: `[agent.td3]`, [`Td3Config`] (exploration, policy delay, target policy
 //! smoothing).
 
@@ -26,6 +30,7 @@ use super::config::validate_noise;
 use super::critics::{self, Critics, TargetSide, TWIN};
 use super::ddpg::DdpgConfig;
 use super::noise::ActionNoise;
+use super::obs_norm::{batch_inputs, one_input, ObsNorm, OffPolicyNorm};
 use super::parts::learned_parts;
 use super::{sizes, step, Agent, AgentConfig, Algo, NoiseKind, OffPolicy, UpdateStats};
 use crate::agent::replay::Batch;
@@ -115,6 +120,8 @@ pub struct Td3 {
     noise: ActionNoise,
     rng: Rng,
     updates: u64,
+    /// `agent.norm_obs`: the running observation normalisation.
+    norm: Option<OffPolicyNorm>,
     /// `[s | a]` rows for the critics (the target side has its own, `critic_in_next`).
     critic_in: Vec<f32>,
     critic_in_next: Vec<f32>,
@@ -145,6 +152,7 @@ impl Td3 {
             noise: ActionNoise::new(kind, sigma, theta, act_dim),
             rng: Rng::derived(seed, family.salts.1),
             updates: 0,
+            norm: cfg.norm_obs.map(|n| OffPolicyNorm::new(obs_dim, &n, b)),
             critic_in: vec![0.0; b * (obs_dim + act_dim)],
             critic_in_next: vec![0.0; b * (obs_dim + act_dim)],
             a_next: vec![0.0; b * act_dim],
@@ -177,12 +185,16 @@ impl Agent for Td3 {
     }
 
     fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        action.copy_from_slice(self.actor.predict(obs, 1));
+        action.copy_from_slice(self.actor.predict(one_input(&mut self.norm, obs), 1));
         self.noise.perturb(&mut self.rng, action);
     }
 
     fn predict(&mut self, obs: &[f32], action: &mut [f32]) {
-        action.copy_from_slice(self.actor.predict(obs, 1));
+        action.copy_from_slice(self.actor.predict(one_input(&mut self.norm, obs), 1));
+    }
+
+    fn obs_norm(&self) -> Option<&ObsNorm> {
+        self.norm.as_ref().map(|n| &n.norm)
     }
 
     fn begin_episode(&mut self) {
@@ -191,15 +203,22 @@ impl Agent for Td3 {
 }
 
 impl OffPolicy for Td3 {
+    fn observe(&mut self, obs: &[f32]) {
+        if let Some(n) = &mut self.norm {
+            n.observe(obs);
+        }
+    }
+
     fn update(&mut self, batch: &Batch) -> UpdateStats {
         let b = batch.size;
         self.updates += 1;
         let actor_due = self.updates.is_multiple_of(u64::from(self.family.policy_delay));
         let (od, ad) = (self.obs_dim, self.act_dim);
+        let (obs, next_obs) = batch_inputs(&mut self.norm, &batch.obs, &batch.next_obs, b);
 
         // 1-2. The targets y (steps 1 and 2's target), while the critics' forward passes on
         // (s, a) run on a second thread (with a pool; the results do not depend on it).
-        concat_cols(&batch.obs, od, &batch.act, ad, b, &mut self.critic_in);
+        concat_cols(obs, od, &batch.act, ad, b, &mut self.critic_in);
         let mut targets = Targets {
             family: &self.family,
             gamma: self.cfg.gamma as f32,
@@ -210,7 +229,7 @@ impl OffPolicy for Td3 {
             critic_in: &mut self.critic_in_next,
             y: &mut self.y,
         };
-        let target_side = |critics: TargetSide<'_>| targets.compute(batch, od, ad, critics);
+        let target_side = |critics: TargetSide<'_>| targets.compute(batch, next_obs, od, ad, critics);
         self.critics.forward_alongside(&self.critic_in, b, target_side);
 
         // 2. Each critic minimises its error. A lone critic shares the step with the actor's
@@ -219,7 +238,7 @@ impl OffPolicy for Td3 {
         let actor = &mut self.actor;
         let actor_forward = || {
             if actor_due {
-                actor.forward(&batch.obs, b);
+                actor.forward(obs, b);
             }
         };
         let critic_loss = critics::mean(self.critics.fit_forwarded(&self.y[..b], n, actor_forward));
@@ -227,7 +246,7 @@ impl OffPolicy for Td3 {
         // 3. Delayed actor and targets.
         let mut actor_loss = None;
         if actor_due {
-            concat_cols(&batch.obs, od, actor.output(), ad, b, &mut self.critic_in);
+            concat_cols(obs, od, actor.output(), ad, b, &mut self.critic_in);
             let q = self.critics.forward_first(&self.critic_in, b);
             actor_loss = Some(-q.iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64);
             let da = self.critics.input_grad_first(-1.0 / b as f32, od..od + ad);
@@ -256,11 +275,19 @@ struct Targets<'a> {
 }
 
 impl Targets<'_> {
-    /// Steps 1 and 2's target: `y = r + gamma (1 - d) min_i Q_i'(s', a')`.
-    fn compute(&mut self, batch: &Batch, od: usize, ad: usize, mut critics: TargetSide<'_>) {
+    /// Steps 1 and 2's target: `y = r + gamma (1 - d) min_i Q_i'(s', a')`, `s'` as the networks
+    /// read it (`next_obs`: the batch's, normalised with `agent.norm_obs`).
+    fn compute(
+        &mut self,
+        batch: &Batch,
+        next_obs: &[f32],
+        od: usize,
+        ad: usize,
+        mut critics: TargetSide<'_>,
+    ) {
         let b = batch.size;
         // 1. Target action, smoothed for TD3.
-        let mu_next = self.actor.predict(&batch.next_obs, b);
+        let mu_next = self.actor.predict(next_obs, b);
         let a_next = match self.family.target_smoothing {
             Some((sigma, c)) => {
                 let z = &mut self.smoothing_noise[..b * ad];
@@ -273,7 +300,7 @@ impl Targets<'_> {
             }
             None => mu_next,
         };
-        concat_cols(&batch.next_obs, od, a_next, ad, b, self.critic_in);
+        concat_cols(next_obs, od, a_next, ad, b, self.critic_in);
 
         // 2. Towards the smallest target critic.
         let y = &mut self.y[..b];
@@ -301,4 +328,10 @@ learned_parts!(Td3, |s, f| {
     f("agent_rng", P::State(r!(s.rng)));
     f("agent_noise", P::State(r!(s.noise)));
     f("agent_updates", P::State(r!(s.updates)));
+    // `agent.norm_obs`: the statistics (listed only when set).
+    if let Some(n) = r!(s.norm) {
+        f("obs_norm", P::State(r!(n.norm)));
+        f(super::obs_norm::MEAN_TENSOR, P::Tensor(r!(n.norm.mean)));
+        f(super::obs_norm::STD_TENSOR, P::Tensor(r!(n.norm.std)));
+    }
 });

@@ -2,7 +2,7 @@
 //!
 //! Input `observation` (f32, `[batch, obs_dim]`, the standard layout of [`crate::run::policy`]),
 //! output `joint_velocity` (f32, `[batch, dof]`, rad/s; m/s for prismatic joints). The graph:
-//! for a normalised observation (PPO with `norm_obs`) `Sub` the means, `Div` by the standard
+//! for a normalised observation (`agent.ppo.norm_obs`, `agent.norm_obs`) `Sub` the means, `Div` by the standard
 //! deviations and `Clip`; per actor layer `Gemm(x, W, b, transB=1)` then `Relu` or `Tanh` (none for identity); for SAC
 //! `Slice` of the first `dof` outputs (the Gaussian's mean) and `Tanh`; then `Clip` to [-1, 1]
 //! (the environment's clamp) and `Mul` by the speed limits. The batch dimension is the symbolic

@@ -9,7 +9,7 @@
 //!    `obs_delta_scale * |target - end effector|` (1), then, when the run observes obstacles,
 //!    7 values per obstacle slot (`obstacle_<i>`, computed as `observation.obstacles` says:
 //!    [`ObstacleSlotsSpec`]); when `observation.normalization` is
-//!    present (PPO with `norm_obs`), each value is then normalised in f32,
+//!    present (`agent.ppo.norm_obs`, `agent.norm_obs`), each value is then normalised in f32,
 //!    `x' = clip((x - mean) / std, -clip, clip)`, with the tensors it names (shape `[dim]`);
 //! 2. the actor: for each entry of `actor.layers` in order, `x <- f(W x + b)` with `W` the tensor
 //!    named `weight` (shape `[out, in]`), `b` the tensor named `bias` and `f` its `activation`

@@ -287,6 +287,9 @@ impl Explorer<'_> {
 
 impl Driver for Explorer<'_> {
     fn act(&mut self, env: &ReachEnv, action: &mut [f32]) -> Result<()> {
+        // `agent.norm_obs`: every observation collected, the warm-up's included, joins the
+        // statistics (never the replay samples).
+        self.agent.observe(env.observation());
         if self.n.env_steps < self.cfg.learning_starts {
             for a in action.iter_mut() {
                 *a = self.state.warmup_rng.uniform_range(-1.0, 1.0) as f32;

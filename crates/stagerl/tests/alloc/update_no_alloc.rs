@@ -65,6 +65,19 @@ fn redq_and_droq_updates_allocate_nothing() {
     no_allocation_with(AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() }, 20);
 }
 
+/// With observation normalisation (`agent.norm_obs`): each update normalises its batch into
+/// buffers allocated once.
+#[test]
+fn normalised_updates_allocate_nothing() {
+    let norm_obs = Some(stagerl::agent::obs_norm::ObsNormConfig::default());
+    for algo in [Algo::Sac, Algo::Td3, Algo::Ddpg] {
+        no_allocation_with(
+            AgentConfig { algo, norm_obs, hidden: vec![64, 64], ..AgentConfig::default() },
+            20,
+        );
+    }
+}
+
 #[test]
 fn td3_updates_allocate_nothing() {
     no_allocation_in(Algo::Td3, 64, 20);

@@ -90,6 +90,9 @@ const CONFIGS: &[Cfg] = &[
     Cfg { toml: "[agent]\nalgo = \"ppo\"\n[agent.ppo]\nnorm_obs = { clip = nan }\n", expect: "agent.ppo.norm_obs.clip" },
     Cfg { toml: "[agent]\nalgo = \"ppo\"\n[agent.ppo]\nnorm_obs = { scale = 2.0 }\n", expect: "scale" },
     Cfg { toml: "[agent]\nalgo = \"ppo\"\n[agent.her]\nk = 4\n", expect: "agent.her" },
+    Cfg { toml: "[agent]\nalgo = \"ppo\"\nnorm_obs = { clip = 10.0 }\n", expect: "agent.ppo.norm_obs" },
+    Cfg { toml: "[agent]\nnorm_obs = { clip = -1.0 }\n", expect: "agent.norm_obs.clip" },
+    Cfg { toml: "[agent]\nalgo = \"td3\"\nnorm_obs = { clip = 2e6 }\n", expect: "agent.norm_obs.clip" },
     Cfg { toml: "[agent.her]\nk = 0\n", expect: "agent.her.k" },
     // Obstacles.
     Cfg { toml: "[[task.obstacles]]\nshape = \"sphere\"\nradius_m = -1\nposition_m = [0.5, 0, 0.2]\n", expect: "task.obstacles[0].radius_m" },

@@ -124,6 +124,46 @@ fn ppo_with_observation_normalisation_is_deterministic_and_differs_from_plain_pp
     assert_ne!(a, plain, "normalisation changed nothing");
 }
 
+/// The off-policy agents with observation normalisation (`agent.norm_obs`; SAC with HER too):
+/// the same run for the same seed on 1 and 2 threads, the statistics saved with the networks
+/// (merged from every step collected, and moved from their start), and a run other than the
+/// plain one.
+#[test]
+fn off_policy_observation_normalisation_is_deterministic_on_any_thread_count_and_changes_the_run() {
+    let pool = stagerl::base::par::Pool::new(2).unwrap();
+    let her = Some(HerConfig { strategy: HerStrategy::Future, k: 4 });
+    for (algo, her) in [(Algo::Sac, None), (Algo::Td3, None), (Algo::Ddpg, None), (Algo::Sac, her)] {
+        let norm = |cfg: &mut Config| {
+            cfg.agent.norm_obs = Some(ObsNormConfig::default());
+            cfg.agent.her = her;
+            cfg.agent.hidden = vec![128, 128];
+            cfg.agent.batch_size = 256;
+        };
+        let (a, ca) = run_sized(algo, 5, "onorm-a", norm);
+        let split = stagerl::base::par::split_jobs();
+        let (b, cb) = stagerl::base::par::install(Some(&pool), || run_sized(algo, 5, "onorm-b", norm));
+        assert!(stagerl::base::par::split_jobs() > split + 100, "{algo}: the updates were split");
+        assert_eq!(a, b, "{algo} + norm_obs: episodes.csv differs between 1 and 2 threads");
+        for n in ca.tensor_names() {
+            assert_eq!(ca.tensor(n).unwrap(), cb.tensor(n).unwrap(), "{algo} + norm_obs: tensor {n}");
+        }
+        let stats: serde_json::Value = ca.json("obs_norm").unwrap();
+        let steps = stats["count"].as_f64().unwrap();
+        let collected: f64 =
+            a.iter().skip(1).map(|r| r.split(',').nth(2).unwrap().parse::<f64>().unwrap()).sum();
+        assert_eq!(steps.round(), collected, "one merge per step collected: {stats}");
+        let (_, std) = ca.tensor("obs_norm.std").unwrap();
+        assert!(std.iter().all(|&s| s.is_finite() && s > 0.0) && std.iter().any(|&s| s < 0.9), "{std:?}");
+        let plain = |cfg: &mut Config| {
+            norm(cfg);
+            cfg.agent.norm_obs = None;
+        };
+        let (p, cp) = run_sized(algo, 5, "onorm-plain", plain);
+        assert_ne!(a, p, "{algo}: normalisation changed nothing");
+        assert!(cp.json::<serde_json::Value>("obs_norm").is_err(), "{algo}: no statistics when off");
+    }
+}
+
 /// Splitting an update over worker threads (`stagerl::base::par`) changes no bit: the same
 /// episodes.csv and networks on 1 and 2 threads, for every algorithm, with networks and batches
 /// large enough that the products are split (hidden 128, batch 256), and twin critics at once.

@@ -209,6 +209,8 @@ fn small_run(dir: &Path, algo: Algo, norm_obs: bool, obstacles: Option<ObstacleO
         norm_obs,
         ..PpoConfig::default()
     });
+    // The off-policy agents: `agent.norm_obs`.
+    cfg.agent.norm_obs = norm_obs.filter(|_| algo != Algo::Ppo);
     std::fs::remove_dir_all(dir).ok();
     stagerl::train::train(&cfg, dir, |_| {}).unwrap();
     cfg
@@ -219,6 +221,9 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
     let root = std::env::temp_dir().join(format!("stagerl-portable-{}", std::process::id()));
     let variants = Algo::ALL.into_iter().map(|a| (a, false, None)).chain([
         (Algo::Ppo, true, None),
+        (Algo::Sac, true, None),
+        (Algo::Ddpg, true, None),
+        (Algo::Td3, true, Some(ObstacleObservation::Nearest)),
         (Algo::Sac, false, Some(ObstacleObservation::Nearest)),
         (Algo::Td3, false, Some(ObstacleObservation::Absolute)),
         (Algo::Ppo, true, Some(ObstacleObservation::Nearest)),

@@ -37,6 +37,7 @@ collision_penalty = 10.0
 actor_lr = 0.001
 critic_lr = 0.001
 her = { strategy = "future", k = 4 }
+norm_obs = { clip = 5.0 }
 [agent.ddpg]
 [agent.td3]
 [agent.sac]
@@ -134,6 +135,7 @@ fn the_listing_is_the_default_config_and_shows_the_optional_sections_commented_o
         "# [[task.obstacles]]",
         "# [task.random_obstacles]",
         "# [agent.her]",
+        "# [agent.norm_obs]",
         "# [agent.ppo]",
         "# [agent.ppo.norm_obs]",
         "# [agent.sac]",
