@@ -266,25 +266,29 @@ mod tests {
     #[test]
     fn hostile_or_malformed_archives_are_refused_naming_the_entry() {
         use tar::EntryType::{Regular, Symlink};
-        let cases: Vec<(Vec<u8>, &str)> = vec![
-            (
-                archive(&[("runs/../../evil", Regular, b"x")]),
-                "entry `runs/../../evil` leaves the archive's folder",
-            ),
-            (archive(&[("/etc/evil", Regular, b"x")]), "entry `/etc/evil` leaves the archive's folder"),
+        // A name no other process uses: the test asserts that nothing was written under it.
+        let evil = format!("stagerl-archive-test-evil-{}", std::process::id());
+        let up = format!("runs/../../{evil}");
+        let abs = format!("/etc/{evil}");
+        let cases: Vec<(Vec<u8>, String)> = vec![
+            (archive(&[(&up, Regular, b"x")]), format!("entry `{up}` leaves the archive's folder")),
+            (archive(&[(&abs, Regular, b"x")]), format!("entry `{abs}` leaves the archive's folder")),
             (
                 archive(&[("runs/link", Symlink, b"")]),
-                "entry `runs/link` is not a regular file or a directory",
+                "entry `runs/link` is not a regular file or a directory".into(),
             ),
-            (archive(&[("runs/a", Regular, b"x"), ("other/b", Regular, b"y")]), "two top-level folders"),
-            (archive(&[("runs", Regular, b"x")]), "not a folder of runs"),
-            (b"not xz at all".to_vec(), "not a readable .tar.xz archive"),
+            (
+                archive(&[("runs/a", Regular, b"x"), ("other/b", Regular, b"y")]),
+                "two top-level folders".into(),
+            ),
+            (archive(&[("runs", Regular, b"x")]), "not a folder of runs".into()),
+            (b"not xz at all".to_vec(), "not a readable .tar.xz archive".into()),
         ];
         for (bytes, want) in cases {
             let p = write("runs.tar.xz", &bytes);
             let err = unpack(&p).unwrap_err().to_string();
-            assert!(err.contains(want), "{err:?} lacks {want:?}");
-            assert!(!std::env::temp_dir().join("evil").exists() && !Path::new("/etc/evil").exists());
+            assert!(err.contains(&want), "{err:?} lacks {want:?}");
+            assert!(!std::env::temp_dir().join(&evil).exists() && !Path::new(&abs).exists());
             std::fs::remove_dir_all(p.parent().unwrap()).unwrap();
         }
         let dir = temp_dir().unwrap();
