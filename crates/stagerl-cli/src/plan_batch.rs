@@ -25,7 +25,7 @@ pub fn batch(
         steps += u64::from(plan.summary.steps);
         if let Some(v) = view.as_deref_mut().filter(|v| v.trajectories.len() < view::MAX_TRAJECTORIES) {
             let t = &req.target;
-            v.push(planner.env().chain(), &format!("plan {k}"), [t[0], t[1], t[2]], &plan)?;
+            v.push_planned(planner, &format!("plan {k}"), [t[0], t[1], t[2]], &plan)?;
         }
         Ok(BatchLine(plan))
     })?;

@@ -125,7 +125,7 @@ pub fn run(args: Args) -> Result<()> {
     let start = args.start.as_deref().map(|s| numbers("--start", s)).transpose()?;
     let plan = planner.plan(&target, start.as_deref())?;
     if let Some(v) = &mut view {
-        v.push(planner.env().chain(), "plan", [target[0], target[1], target[2]], &plan)?;
+        v.push_planned(&planner, "plan", [target[0], target[1], target[2]], &plan)?;
     }
     if let Some(w) = &plan.warning {
         errln!("stagerl: warning: {w}")?;

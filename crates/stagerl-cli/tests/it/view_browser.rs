@@ -212,3 +212,92 @@ fn the_view_loads_runs_and_draws_in_a_headless_browser() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The pixels in which two screenshots of the same size differ.
+fn differing_pixels(a: &Path, b: &Path) -> usize {
+    let read = |p: &Path| {
+        let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(p).unwrap()));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        buf.truncate(info.buffer_size());
+        (buf, info.color_type.samples())
+    };
+    let ((a, n), (b, _)) = (read(a), read(b));
+    a.chunks(n).zip(b.chunks(n)).filter(|(x, y)| x[..3] != y[..3]).count()
+}
+
+#[test]
+fn names_from_the_urdf_are_text_and_the_scene_is_drawn() {
+    let dir = scratch("view-browser-scene");
+    std::fs::create_dir_all(dir.join("run")).unwrap();
+    // An arm whose links are named to close the data's script and run one of their own.
+    let evil = |k: u32| {
+        format!("&lt;/script&gt;&lt;script&gt;document.body.setAttribute('data-pwned','{k}')&lt;/script&gt;")
+    };
+    let urdf = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../assets/robots/ur5.urdf"))
+        .unwrap()
+        .replace("\"tool0\"", &format!("\"{}\"", evil(1)))
+        .replace("\"wrist_2_link\"", &format!("\"{}w2\"", evil(2)))
+        .replace("\"wrist_3_link\"", &format!("\"{}w3\"", evil(3)));
+    let urdf_path = dir.join("evil.urdf");
+    std::fs::write(&urdf_path, urdf).unwrap();
+    std::fs::write(
+        dir.join("run/config.toml"),
+        format!("[robot]\nurdf = {:?}\n", urdf_path.to_str().unwrap()),
+    )
+    .unwrap();
+    // A ball across the straight way (the Jacobian controller touches it) and a turned box.
+    let requests = dir.join("requests.jsonl");
+    std::fs::write(
+        &requests,
+        concat!(
+            "{\"target\":[-0.4,0.1,0.35],\"obstacles\":[{\"shape\":\"sphere\",\"radius_m\":0.04,",
+            "\"position_m\":[-0.4435,-0.0046,0.391]},{\"shape\":\"cuboid\",\"half_extents_m\":[0.05,0.1,0.02],",
+            "\"position_m\":[-0.2,-0.3,0.3],\"rotation_xyzw\":[0,0,0.3826834,0.9238795]}]}\n"
+        ),
+    )
+    .unwrap();
+    let page = dir.join("scene.html");
+    let run = dir.join("run");
+    ok(bin()
+        .args(["plan", "--run", run.to_str().unwrap(), "--planner", "jacobian"])
+        .args(["--targets", requests.to_str().unwrap(), "--view", page.to_str().unwrap()])
+        .output()
+        .unwrap());
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(!html.contains("</script><script>"), "a name closes the data's script");
+    let data = view_data(&html);
+    let t = &data["trajectories"][0];
+    assert_eq!(t["obstacles"].as_array().unwrap().len(), 2);
+    assert_eq!(t["collision"], true);
+    assert!(
+        t["min_clearance_m"].as_f64().unwrap() < 0.0 && t["closest"]["distance_m"].as_f64().unwrap() < 0.0
+    );
+    assert!(t["contact"]["what"].as_str().unwrap().contains("data-pwned"), "{t}");
+
+    // Paused on the step after the contact: the names are shown as text, no script of theirs ran.
+    let at = |p: &Path| PathBuf::from(format!("{}#traj=1&step=2&paused", p.display()));
+    let (console, dom, canvas) = show(&at(&page), &dir);
+    assert!(console.is_empty(), "console messages: {console:#?}");
+    assert!(dom.contains("<span id=\"info\">step 2 / "), "the script did not run: {dom}");
+    assert!(!dom.contains("data-pwned=\""), "a name ran as script: {dom}");
+    assert!(dom.contains("arm: base_link to &lt;/script&gt;&lt;script&gt;document.body"), "{dom}");
+    assert!(dom.contains("contact at step 1: link `&lt;/script&gt;&lt;script&gt;"), "{dom}");
+    assert!(dom.contains("min clearance -0.0"), "{dom}");
+    assert!(canvas.drawn > 5_000 && canvas.saturated > 500, "blank canvas: {canvas:?}");
+
+    // The obstacles are drawn: the same page without them differs in many pixels.
+    let mut bare = data.clone();
+    bare["trajectories"][0]["obstacles"] = Value::Array(Vec::new());
+    let json = serde_json::to_string(&bare).unwrap().replace('<', "\\u003c");
+    let start = html.find("type=\"application/json\">").unwrap() + "type=\"application/json\">".len();
+    let end = start + html[start..].find("</script>").unwrap();
+    let bare_page = dir.join("bare.html");
+    std::fs::write(&bare_page, format!("{}{json}{}", &html[..start], &html[end..])).unwrap();
+    let (console, _, _) = show(&at(&bare_page), &dir);
+    assert!(console.is_empty(), "console messages: {console:#?}");
+    let diff = differing_pixels(&dir.join("scene.png"), &dir.join("bare.png"));
+    assert!(diff > 1_000, "the obstacles drew {diff} pixels");
+    std::fs::remove_dir_all(&dir).ok();
+}

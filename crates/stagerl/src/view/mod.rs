@@ -16,6 +16,8 @@ use crate::env::ReachEnv;
 use crate::plan::{Plan, PlanRequest, Planner};
 use crate::robot::Chain;
 use crate::run::dir::RunDir;
+use crate::sim::collision::{ArmCollider, Checks};
+use crate::sim::scene::Obstacle;
 use crate::{Error, Result};
 
 /// The page, with `/*STAGERL_DATA*/` where the JSON goes.
@@ -47,6 +49,35 @@ pub struct ViewTrajectory {
     pub frames: Vec<Vec<[f64; 3]>>,
     /// Distance to the target per kept row, metres.
     pub distance: Vec<f64>,
+    /// The plan's scene (the schema of `[[task.obstacles]]`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub obstacles: Vec<Obstacle>,
+    /// The plan's collision report (see [`crate::plan::PlanSummary`]).
+    pub collision: bool,
+    pub min_clearance_m: Option<f64>,
+    /// The closest approach of the arm to the obstacles over the kept rows: the frame (index
+    /// into `frames`) and its points.
+    pub closest: Option<ViewClosest>,
+    /// The first contact along the path: the first frame at or after it and what touched what
+    /// (links named as in the URDF).
+    pub contact: Option<ViewContact>,
+}
+
+/// The closest approach of a trajectory (see [`ViewTrajectory::closest`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ViewClosest {
+    pub frame: usize,
+    pub distance_m: f64,
+    pub arm_point_m: [f64; 3],
+    pub obstacle_point_m: [f64; 3],
+}
+
+/// The first contact of a trajectory (see [`ViewTrajectory::contact`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ViewContact {
+    pub frame: usize,
+    pub step: usize,
+    pub what: String,
 }
 
 /// Most frames a trajectory of a view keeps (a longer plan is shown every `stride`-th row): what
@@ -78,6 +109,8 @@ pub struct View {
     pub center: [f64; 3],
     /// The arm's reach, metres (the camera's scale).
     pub extent_m: f64,
+    /// The arm's chain: its root and tip links, named as in the URDF.
+    pub arm: String,
     pub trajectories: Vec<ViewTrajectory>,
 }
 
@@ -97,6 +130,7 @@ impl View {
             link_radius_m: LINK_RADIUS_M.min(reach / 20.0),
             center: [o.x, o.y, (o.z + reach / 4.0).max(0.0)],
             extent_m: reach,
+            arm: format!("{} to {}", chain.base_link(), chain.tip_link()),
             trajectories: Vec::new(),
         }
     }
@@ -107,8 +141,35 @@ impl View {
         View::new(title, env.chain(), env.task().dt_s, env.reward_config().beta_m)
     }
 
-    /// Add `plan` (to `target`, metres) under `label`; at most [`MAX_TRAJECTORIES`].
+    /// Add `plan` (to `target`, metres) under `label`, without obstacles, contacts looked for
+    /// with the default checks; at most [`MAX_TRAJECTORIES`].
     pub fn push(&mut self, chain: &Chain, label: &str, target: [f64; 3], plan: &Plan) -> Result<()> {
+        self.push_in_scene(chain, Checks::default(), &[], label, target, plan)
+    }
+
+    /// Add a plan of `planner` (its last): its scene and the task's checks.
+    pub fn push_planned(
+        &mut self,
+        planner: &Planner,
+        label: &str,
+        target: [f64; 3],
+        plan: &Plan,
+    ) -> Result<()> {
+        let env = planner.env();
+        self.push_in_scene(env.chain(), env.task().collision, env.obstacles(), label, target, plan)
+    }
+
+    /// Add `plan` (to `target`, metres) among `obstacles`, contacts looked for with `checks`,
+    /// under `label`; at most [`MAX_TRAJECTORIES`].
+    pub fn push_in_scene(
+        &mut self,
+        chain: &Chain,
+        checks: Checks,
+        obstacles: &[Obstacle],
+        label: &str,
+        target: [f64; 3],
+        plan: &Plan,
+    ) -> Result<()> {
         if self.trajectories.len() >= MAX_TRAJECTORIES {
             return Err(Error::InvalidInput(format!(
                 "a view holds at most {MAX_TRAJECTORIES} trajectories; `{label}` would be one more"
@@ -119,6 +180,31 @@ impl View {
             .iter()
             .map(|&k| chain.joint_origins(&plan.q[k * plan.dof..(k + 1) * plan.dof]))
             .collect::<Result<_>>()?;
+        let mut c = ArmCollider::new(chain, checks);
+        c.set_obstacles(obstacles);
+        let row = |k: usize| &plan.q[k * plan.dof..(k + 1) * plan.dof];
+        let closest = kept
+            .iter()
+            .enumerate()
+            .filter_map(|(f, &k)| c.closest_obstacle(chain, row(k)).map(|x| (f, x)))
+            .min_by(|a, b| a.1.distance_m.total_cmp(&b.1.distance_m))
+            .map(|(frame, x)| ViewClosest {
+                frame,
+                distance_m: x.distance_m,
+                arm_point_m: x.arm_point_m,
+                obstacle_point_m: x.obstacle_point_m,
+            });
+        let contact = (0..plan.rows())
+            .find_map(|k| {
+                let hit =
+                    if k == 0 { c.check(chain, row(0)) } else { c.check_motion(chain, row(k - 1), row(k)) };
+                hit.map(|h| (k, h))
+            })
+            .map(|(step, h)| ViewContact {
+                frame: kept.iter().position(|&r| r >= step).unwrap_or(kept.len() - 1),
+                step,
+                what: h.describe(chain),
+            });
         self.trajectories.push(ViewTrajectory {
             label: label.into(),
             target,
@@ -128,6 +214,11 @@ impl View {
             stride,
             frames,
             distance: kept.iter().map(|&k| plan.distance[k]).collect(),
+            obstacles: obstacles.to_vec(),
+            collision: plan.summary.collision,
+            min_clearance_m: plan.summary.min_clearance_m,
+            closest,
+            contact,
         });
         Ok(())
     }
@@ -138,6 +229,9 @@ impl View {
         for t in &mut rounded.trajectories {
             t.frames.iter_mut().flatten().flatten().for_each(|v| *v = round_mm10(*v));
             t.distance.iter_mut().for_each(|v| *v = round_mm10(*v));
+            if let Some(c) = &mut t.closest {
+                c.arm_point_m.iter_mut().chain(&mut c.obstacle_point_m).for_each(|v| *v = round_mm10(*v));
+            }
         }
         let json = serde_json::to_string(&rounded)
             .map_err(|e| Error::InvalidInput(format!("the view's data does not serialise: {e}")))?;
@@ -224,7 +318,6 @@ pub fn view_of_run(run: &RunDir, checkpoint: Option<&Path>, source: &ViewSource)
     }
     let (path, mut planner) = Planner::from_run(run, checkpoint, None)?;
     let title = format!("{} {} ({})", cfg.agent.algo.name(), cfg.reward.function.name(), path.display());
-    let chain = planner.env().chain().clone();
     let mut view = View::for_planner(&title, &planner);
     for (line, r) in &requests {
         let (label, plan) = match source {
@@ -237,7 +330,7 @@ pub fn view_of_run(run: &RunDir, checkpoint: Option<&Path>, source: &ViewSource)
             ),
             ViewSource::Targets { .. } => (format!("target {line}"), planner.plan_request(r)?),
         };
-        view.push(&chain, &label, [r.target[0], r.target[1], r.target[2]], &plan)?;
+        view.push_planned(&planner, &label, [r.target[0], r.target[1], r.target[2]], &plan)?;
     }
     Ok(view)
 }

@@ -74,7 +74,53 @@ pub(super) fn joint_reach(chain: &Chain, shapes: &[super::ArmShape]) -> Vec<f64>
         .collect()
 }
 
+/// The closest points of the arm and the obstacles at one pose (see
+/// [`ArmCollider::closest_obstacle`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Closest {
+    /// Signed distance, metres (negative: a penetration's depth).
+    pub distance_m: f64,
+    /// The arm's point and the obstacle's, metres, base frame.
+    pub arm_point_m: [f64; 3],
+    pub obstacle_point_m: [f64; 3],
+    /// Index into [`Chain::collision_shapes`], and the obstacle's index.
+    pub shape: usize,
+    pub obstacle: usize,
+}
+
 impl ArmCollider {
+    /// The closest pair of the arm's shapes at joint values `q` and the obstacles, with its
+    /// points (parry's contact query, f32); `None` without shapes or obstacles. For views and
+    /// reports (not allocation-free).
+    pub fn closest_obstacle(&mut self, chain: &Chain, q: &[f64]) -> Option<Closest> {
+        if self.shapes.is_empty() || self.obstacles.is_empty() {
+            return None;
+        }
+        self.place(chain, q);
+        let mut best: Option<Closest> = None;
+        for (i, (pose, prim, _)) in self.obstacles.iter().enumerate() {
+            for (k, s) in self.shapes.iter().enumerate() {
+                let p = pose3(&self.world[k]);
+                let Ok(Some(c)) = parry3d::query::contact(&p, s.parry.shape(), pose, prim.shape(), 1e3)
+                else {
+                    continue;
+                };
+                let d = f64::from(c.dist);
+                if best.is_none_or(|b| d < b.distance_m) {
+                    let v = |x: parry3d::math::Vec3| [f64::from(x.x), f64::from(x.y), f64::from(x.z)];
+                    best = Some(Closest {
+                        distance_m: d,
+                        arm_point_m: v(c.point1),
+                        obstacle_point_m: v(c.point2),
+                        shape: s.index,
+                        obstacle: i,
+                    });
+                }
+            }
+        }
+        best
+    }
+
     /// The bound on how far any point of the arm moves along the linear joint motion from `a`
     /// to `b` (metres; see the module's doc).
     pub fn motion_bound_m(&self, a: &[f64], b: &[f64]) -> f64 {
