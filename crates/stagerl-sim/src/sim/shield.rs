@@ -147,6 +147,28 @@ impl ShieldStats {
     }
 }
 
+/// [`ShieldStats`] as the output of `plan` and `eval` writes them (`shield_*` keys).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ShieldSummary {
+    pub shield_steps: u64,
+    pub shield_interventions: u64,
+    pub shield_stops: u64,
+    pub shield_mean_change_rad_per_s: f64,
+    pub shield_max_change_rad_per_s: f64,
+}
+
+impl From<ShieldStats> for ShieldSummary {
+    fn from(s: ShieldStats) -> Self {
+        ShieldSummary {
+            shield_steps: s.steps,
+            shield_interventions: s.interventions,
+            shield_stops: s.stops,
+            shield_mean_change_rad_per_s: s.mean_change_rad_per_s(),
+            shield_max_change_rad_per_s: s.max_change_rad_per_s,
+        }
+    }
+}
+
 /// What the shield did to one command.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Verdict {

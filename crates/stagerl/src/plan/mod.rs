@@ -67,6 +67,9 @@ pub struct PlanSummary {
     /// Steps that ended with the arm in contact (floor, itself, an obstacle): 0 for a
     /// collision-free plan.
     pub collision_steps: u32,
+    /// What the safety shield did in this plan (`--shield`; left out when it is off).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub shield: Option<crate::sim::shield::ShieldSummary>,
 }
 
 /// A planned trajectory: `rows()` states, stored by column.
@@ -115,6 +118,9 @@ pub struct BatchRecord<'a> {
     pub episode_reward: f64,
     pub q: Vec<&'a [f64]>,
     pub ee_pos: &'a [[f64; 3]],
+    /// What the safety shield did (`--shield`; left out when it is off).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub shield: Option<crate::sim::shield::ShieldSummary>,
 }
 
 /// A plan that serialises as its [`BatchRecord`] (one line of batch output).
@@ -147,6 +153,7 @@ impl Plan {
                 path_length_m: 0.0,
                 joint_travel_rad: 0.0,
                 collision_steps: 0,
+                shield: None,
             },
             warning: None,
         };
@@ -203,6 +210,7 @@ impl Plan {
             episode_reward: self.summary.episode_reward,
             q: self.q.chunks_exact(self.dof).collect(),
             ee_pos: &self.ee_pos,
+            shield: self.summary.shield,
         }
     }
 
@@ -324,6 +332,11 @@ impl Planner {
         Ok(Planner::new(env, PlanPolicy::Jacobian(ctl)))
     }
 
+    /// Turn the safety shield on or off for the plans to come (see [`ReachEnv::set_shield`]).
+    pub fn set_shield(&mut self, enabled: bool) -> Result<()> {
+        self.env.set_shield(enabled)
+    }
+
     /// The environment plans run on.
     pub fn env(&self) -> &ReachEnv {
         &self.env
@@ -372,6 +385,7 @@ impl Planner {
         plan.summary.final_distance = self.env.distance();
         plan.summary.episode_reward = reward;
         plan.summary.collision_steps = self.env.collision_steps();
+        plan.summary.shield = self.env.episode_shield_stats().map(Into::into);
         plan.warning = warning;
         Ok(plan)
     }
