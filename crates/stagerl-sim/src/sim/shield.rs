@@ -17,8 +17,10 @@
 //!    subject to the dampers and `lo <= x <= hi` ([`qp`], Goldfarb-Idnani); no such `x`: stop;
 //! 4. verification of the motion `q(t) = q + t dq`, `t in [0, 1]`, `dq = clip(q + x dt) - q`
 //!    (exactly what the arm does), by conservative advancement: a point of shape `k` moves at
-//!    most `D_k = sum_i lever_ki |dq_i|` over the step ([`ArmCollider::levers`]), a pair at most
-//!    `D = D_A (+ D_B)` relative to each other, so a pair at distance `d(t)` stays above
+//!    most `D_k = sum_i lever_ki |dq_i|` over the step ([`ArmCollider::levers`]); a pair with the
+//!    floor or an obstacle at most `D = D_A`, two arm shapes at most `D = sum_{l < i <= u}
+//!    lever_Ui |dq_i|` relative to each other (joints up to the earlier shape's segment `l` move
+//!    both rigidly; `U` is the shape of the later segment `u`), so a pair at distance `d(t)` stays above
 //!    `d(t) - D s` until `t + s`. Each pair must stay above `h = min(m, d(0)) / 2` (`d(t) >= h`
 //!    at every sample, the next sample at `t + (d(t) - h) / D`, done past `t = 1`); a pair
 //!    farther than `h + D` at the start (bounding spheres first) is verified at once. The
@@ -397,7 +399,10 @@ impl Shield {
         }
         self.watched.clear();
         for &pair in &self.pairs {
-            let motion_m = self.motion[pair.shape_a()] + pair.shape_b().map_or(0.0, |b| self.motion[b]);
+            let motion_m = match pair.shape_b() {
+                None => self.motion[pair.shape_a()],
+                Some(b) => self.relative_motion(collider, pair.shape_a(), b),
+            };
             let margin = self.margin(pair);
             if collider.lower_bound(pair) - motion_m >= 0.5 * margin {
                 continue;
@@ -412,6 +417,18 @@ impl Shield {
             }
         }
         self.advance(chain, collider, q)
+    }
+
+    /// The motion bound of arm shapes `a` and `b` relative to each other: their distance
+    /// depends only on the joints between their segments (those before move both rigidly), so
+    /// `D = sum_{l < i <= u} lever_ui |dq_i|` with `u` the shape of the later segment.
+    fn relative_motion(&self, collider: &ArmCollider, a: usize, b: usize) -> f64 {
+        let n = self.dq.len();
+        let seg = |k: usize| collider.segment_of(k).map_or(-1, |s| s as i64);
+        let (lower, upper) = if seg(a) < seg(b) { (a, b) } else { (b, a) };
+        let (from, to) = ((seg(lower) + 1) as usize, seg(upper) as usize);
+        let levers = &self.levers[upper * n..(upper + 1) * n];
+        (from..=to).filter(|&i| self.dq[i] != 0.0).map(|i| levers[i] * self.dq[i].abs()).sum()
     }
 
     /// Step 4's samples over the watched pairs.

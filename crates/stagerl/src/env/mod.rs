@@ -408,6 +408,11 @@ impl ReachEnv {
         self.begin_episode()
     }
 
+    /// Reseed the random stream (the next targets and random obstacles).
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = Rng::new(seed);
+    }
+
     /// Reseed the random stream, then [`ReachEnv::reset`].
     pub fn reset_with_seed(&mut self, seed: u64) -> &[f32] {
         self.rng = Rng::new(seed);

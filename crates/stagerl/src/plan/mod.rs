@@ -337,6 +337,17 @@ impl Planner {
         self.env.set_shield(enabled)
     }
 
+    /// Place each plan's first random obstacle in the way with probability `fraction` (see
+    /// [`ReachEnv::set_obstacles_in_path`]).
+    pub fn set_obstacles_in_path(&mut self, fraction: f64) -> Result<()> {
+        self.env.set_obstacles_in_path(fraction)
+    }
+
+    /// Reseed the environment's random stream (the random obstacles of the plans to come).
+    pub fn reseed(&mut self, seed: u64) {
+        self.env.reseed(seed);
+    }
+
     /// The environment plans run on.
     pub fn env(&self) -> &ReachEnv {
         &self.env
