@@ -81,9 +81,11 @@ class Policy:
         return f"Policy({self.algorithm}, obs_dim={self.obs_dim}, act_dim={self.act_dim}, checkpoint={self.checkpoint!r})"
 
 
-def plan(run_dir, target, start=None, checkpoint=None, max_steps: Optional[int] = None) -> dict:
+def plan(run_dir, target, start=None, checkpoint=None, max_steps: Optional[int] = None, shield: bool = False) -> dict:
     """The ``stagerl plan`` trajectory from ``start`` (radians; default the home pose) to
-    ``target`` (metres) with the run's policy (see the module documentation)."""
+    ``target`` (metres) with the run's policy (see the module documentation); ``shield=True``
+    filters every command through the safety shield (``--shield``; the summary then adds its
+    ``shield_*`` counts)."""
     run_dir = _path("run_dir", run_dir)
     if not os.path.isdir(run_dir):
         raise ValueError(f"`run_dir` = {run_dir!r} is invalid: a run directory (use `checkpoint=` for a checkpoint file)")
@@ -94,7 +96,9 @@ def plan(run_dir, target, start=None, checkpoint=None, max_steps: Optional[int] 
         checkpoint = _path("checkpoint", checkpoint)
     if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or not 1 <= max_steps <= 1_000_000):
         raise ValueError(f"`max_steps` = {max_steps!r} is invalid: an integer from 1 to 1 000 000")
-    arrays, summary, warning = _core.plan(run_dir, target, start, checkpoint, None if max_steps is None else int(max_steps))
+    if not isinstance(shield, (bool, np.bool_)):
+        raise ValueError(f"`shield` = {shield!r} is invalid: True or False")
+    arrays, summary, warning = _core.plan(run_dir, target, start, checkpoint, None if max_steps is None else int(max_steps), bool(shield))
     arrays["summary"] = json.loads(summary)
     arrays["warning"] = warning
     return arrays

@@ -230,9 +230,9 @@ class Run:
         never one of the run's own files. Returns the checkpoint exported."""
         return _core.export_onnx(self.dir, os.fspath(path), self._checkpoint(checkpoint), bool(force))
 
-    def plan(self, target, start=None, checkpoint: Optional[str] = None, max_steps: Optional[int] = None) -> dict:
+    def plan(self, target, start=None, checkpoint: Optional[str] = None, max_steps: Optional[int] = None, shield: bool = False) -> dict:
         """:func:`stagerl.plan` with this run's policy."""
-        return _plan(self.dir, target, start=start, checkpoint=checkpoint, max_steps=max_steps)
+        return _plan(self.dir, target, start=start, checkpoint=checkpoint, max_steps=max_steps, shield=shield)
 
     def __repr__(self) -> str:
         return f"Run({self.dir!r})"
