@@ -301,3 +301,22 @@ def test_reset_targets_are_checked_as_stagerl_plan_checks_them(target, match):
         env.reset(options={"target": target})
     obs, info = env.reset(options={"target": [0.4, 0.2, 0.3]})
     assert env.observation_space.contains(obs)
+
+
+def test_the_shield_through_the_config_keeps_random_actions_clear_of_obstacles():
+    """``[task.shield]`` in the config dict: 2000 random actions among three random obstacles
+    touch nothing shielded (and do unshielded); the dynamic simulation is refused."""
+    hits = {}
+    for on in (False, True):
+        env = ReachEnv(config={"task": {"shield": {"enabled": on}, "random_obstacles": {"count": [3, 3]}}})
+        env.reset(seed=0)
+        rng = np.random.default_rng(0)
+        hits[on] = 0
+        for _ in range(2000):
+            _, _, term, trunc, info = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
+            hits[on] += bool(info["collision"])
+            if term or trunc:
+                env.reset()
+    assert hits[True] == 0 and hits[False] > 0, hits
+    with pytest.raises(ValueError, match="task.shield.enabled"):
+        ReachEnv(config={"task": {"shield": {"enabled": True}, "sim": "dynamic"}})

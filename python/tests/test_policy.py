@@ -51,8 +51,10 @@ def test_a_rollout_of_the_policy_in_the_python_env_is_the_plan(trained_run):
         np.testing.assert_array_equal(plan["ee_pos"], ee)
 
 
-def cli_plan(stagerl_bin, run, target, start=None):
+def cli_plan(stagerl_bin, run, target, start=None, shield=False):
     args = [stagerl_bin, "plan", "--run", str(run), "--target", ",".join(map(repr, target)), "--format", "jsonl"]
+    if shield:
+        args.append("--shield")
     if start is not None:
         args += ["--start", ",".join(map(repr, start))]
     done = subprocess.run(args, capture_output=True, text=True)
@@ -80,6 +82,20 @@ def test_plan_returns_the_cli_numbers(stagerl_bin, trained_run):
             assert plan["warning"] is None
     short = stagerl.plan(trained_run, target, max_steps=3)
     assert short["summary"]["steps"] <= 3
+
+
+def test_a_shielded_plan_is_the_cli_one_with_the_shield_counts(stagerl_bin, trained_run):
+    target = training_targets(trained_run, 1)[0]
+    rows, summary, _ = cli_plan(stagerl_bin, trained_run, target, shield=True)
+    plan = stagerl.plan(trained_run, target, shield=True)
+    assert plan["summary"] == summary
+    assert plan["summary"]["shield_steps"] == plan["summary"]["steps"]
+    for key in ["shield_interventions", "shield_stops", "shield_mean_change_rad_per_s", "shield_max_change_rad_per_s"]:
+        assert key in plan["summary"]
+    np.testing.assert_array_equal(plan["q"], np.array([r["q"] for r in rows]))
+    assert "shield_steps" not in stagerl.plan(trained_run, target)["summary"]
+    with pytest.raises(ValueError, match="shield"):
+        stagerl.plan(trained_run, target, shield="yes")
 
 
 def test_policy_from_a_checkpoint_file_batched_and_one_row(trained_run):

@@ -5,6 +5,7 @@ mod out;
 mod cmd;
 mod jsonl;
 mod plan_batch;
+mod plan_bench;
 mod progress;
 mod run_control;
 

@@ -47,6 +47,29 @@ pub fn summary_line(s: &EvalSummary, json: bool) -> String {
     }
 }
 
+/// An evaluation's summary line with what the safety shield did, if it was on: the
+/// `shield_*` keys in JSON, a clause in text.
+pub fn with_shield(line: String, shield: Option<stagerl::sim::shield::ShieldStats>, json: bool) -> String {
+    let Some(s) = shield else { return line };
+    let keys = stagerl::sim::shield::ShieldSummary::from(s);
+    if json {
+        let mut v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
+        if let (Some(m), Ok(serde_json::Value::Object(k))) = (v.as_object_mut(), serde_json::to_value(keys)) {
+            m.extend(k);
+        }
+        v.to_string()
+    } else {
+        format!(
+            "{line}; shield: {} interventions ({} stops) in {} steps, change mean {:.3} rad/s, max {:.3} rad/s",
+            s.interventions,
+            s.stops,
+            s.steps,
+            s.mean_change_rad_per_s(),
+            s.max_change_rad_per_s
+        )
+    }
+}
+
 /// A progress bar on a terminal; plain log lines every 10 s otherwise.
 pub struct Reporter<'a> {
     output: &'a RunOutput,

@@ -62,6 +62,23 @@ pub struct PlanArgs {
     /// 10 000 000.
     #[arg(long, default_value_t = 20_000, value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
     plans: u32,
+    /// Plan with the damped-least-squares Jacobian controller instead of an agent.
+    #[arg(long, value_enum, conflicts_with = "run")]
+    controller: Option<BenchController>,
+    /// Filter every command through the safety shield (`[task.shield]` defaults).
+    #[arg(long)]
+    shield: bool,
+    /// One random obstacle per plan, across the straight line from the start end effector to
+    /// the target with probability P (default 1; as `eval --obstacles-in-path`); reports reached
+    /// and contact rates, the shield's interventions and the time per plan.
+    #[arg(long, value_name = "P", num_args = 0..=1, default_missing_value = "1")]
+    obstacles_in_path: Option<f64>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchController {
+    /// The damped-least-squares Jacobian controller.
+    Jacobian,
 }
 
 #[derive(clap::Args)]
@@ -315,16 +332,30 @@ fn threads_text(n: u32) -> String {
     }
 }
 
+/// The configuration of `bench plan`: the default task, with one random obstacle per plan when
+/// `--obstacles-in-path` is given.
+fn plan_config(a: &PlanArgs) -> Config {
+    let mut cfg = Config::default();
+    if a.obstacles_in_path.is_some() {
+        cfg.task.random_obstacles =
+            Some(stagerl::sim::scene::RandomObstacles { count: [1, 1], ..Default::default() });
+    }
+    cfg
+}
+
 fn plan(a: PlanArgs) -> Result<()> {
     use stagerl::plan::{PlanPolicy, Planner};
-    let (mut planner, what) = match &a.run {
-        Some(dir) => {
+    let (mut planner, what) = match (&a.run, a.controller) {
+        (_, Some(BenchController::Jacobian)) => {
+            (Planner::jacobian(&plan_config(&a), None)?, "Jacobian controller".to_string())
+        }
+        (Some(dir), None) => {
             let run = stagerl::run::dir::RunDir::new(dir);
             let (ck, planner) = Planner::from_run(&run, None, None)?;
             (planner, format!("checkpoint {}", ck.display()))
         }
-        None => {
-            let mut cfg = Config::default();
+        (None, None) => {
+            let mut cfg = plan_config(&a);
             cfg.agent.algo = a.algo;
             cfg.agent.hidden = vec![a.hidden, a.hidden];
             let run = cfg.resolve()?;
@@ -336,6 +367,28 @@ fn plan(a: PlanArgs) -> Result<()> {
             )
         }
     };
+    if a.shield {
+        planner.set_shield(true).context("--shield")?;
+    }
+    if let Some(p) = a.obstacles_in_path {
+        planner.set_obstacles_in_path(p).context("--obstacles-in-path")?;
+        let b = crate::plan_bench::scene_bench(&mut planner, a.plans)?;
+        let shield = if a.shield { "shielded" } else { "unshielded" };
+        outln!(
+            "plan among obstacles (one per plan, in the way with probability {p}): {what}, {shield}: \
+             reached {:.1} %, contact {:.1} %, {:.2} interventions and {:.2} stops per plan, \
+             {:.1} steps per plan, {:.3} ms per plan, {:.3} ms per 50 steps (one thread, {} plans)",
+            100.0 * b.reached_rate,
+            100.0 * b.contact_rate,
+            b.interventions_per_plan,
+            b.stops_per_plan,
+            b.steps_per_plan,
+            b.ms_per_plan,
+            b.ms_per_50_steps,
+            b.plans
+        )?;
+        return outln!("{}", serde_json::to_string(&b)?);
+    }
     let input = |n: u32, seed: u64| -> String {
         let env = planner.env();
         let mut rng = Rng::new(seed);

@@ -25,6 +25,10 @@ pub struct Args {
     /// an obstacle. Needs `[task.random_obstacles]`. Its per-trial CSV is named for it.
     #[arg(long, value_name = "P")]
     obstacles_in_path: Option<f64>,
+    /// Filter every command through the safety shield (`[task.shield]`); the summary adds the
+    /// `shield_*` counts.
+    #[arg(long)]
+    shield: bool,
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
@@ -66,6 +70,9 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(p) = in_path {
         env.set_obstacles_in_path(p).context("--obstacles-in-path")?;
     }
+    if args.shield {
+        env.set_shield(true).context("--shield")?;
+    }
     let variant = EvalVariant { sim, obstacles_in_path: in_path };
     // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
     // directory untouched).
@@ -97,5 +104,6 @@ pub fn run(args: Args) -> Result<()> {
             csv.display()
         )?;
     }
-    outln!("{}", crate::progress::summary_line(&summary, args.json))
+    let line = crate::progress::summary_line(&summary, args.json);
+    outln!("{}", crate::progress::with_shield(line, env.shield_stats(), args.json))
 }

@@ -68,6 +68,10 @@ pub struct Args {
     /// Replace an existing --view file that holds something else.
     #[arg(long, requires = "view")]
     force: bool,
+    /// Filter every command through the safety shield (`[task.shield]`: no checked pair closer
+    /// than its margin within a step; a plan's output adds the `shield_*` counts).
+    #[arg(long)]
+    shield: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -105,6 +109,9 @@ pub fn run(args: Args) -> Result<()> {
         let name = path.display().to_string();
         let scene = stagerl::env::request::parse_scene(&text, &name)?;
         planner.set_scene(scene, &format!("--scene {name}: obstacles"))?;
+    }
+    if args.shield {
+        planner.set_shield(true).context("--shield")?;
     }
     let mut view = args.view.as_ref().map(|_| View::for_planner(&view_title(&args), &planner));
     if let Some(path) = &args.targets {

@@ -63,6 +63,10 @@ pub struct Args {
     /// see docs/performance.md).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     threads: u32,
+    /// Filter every command through the safety shield (sets task.shield.enabled; the rest of
+    /// `[task.shield]` from the config or its defaults).
+    #[arg(long, conflicts_with = "resume")]
+    shield: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -96,6 +100,10 @@ fn run_on_pool(args: Args) -> Result<()> {
     }
     if let Some(n) = args.eval_every_env_steps {
         cfg.train.eval_every_env_steps = Some(n);
+    }
+    if args.shield {
+        cfg.task.shield =
+            Some(stagerl::sim::shield::ShieldConfig { enabled: true, ..cfg.task.shield.unwrap_or_default() });
     }
     // The config's one check, with the flags applied, and its resolution against the arm.
     let run = cfg.resolve()?;

@@ -14,6 +14,7 @@ mod plan_cli;
 mod report_cli;
 mod reproduce;
 mod resume;
+mod shield_cli;
 mod sigterm_resume;
 mod special_files;
 mod stale_results;

@@ -4,6 +4,8 @@
 //!
 //! A step of `dt` seconds from joint positions `q` with an action `a` (one value per joint):
 //! 1. the command `c_i = clip(a_i, -1, 1) * vmax_i` (rad/s, m/s for prismatic joints);
+//!    with the shield on (`[task.shield]`, kinematic only), `c` is then filtered by
+//!    [`super::shield::Shield::filter`];
 //! 2. kinematic: `q_i' = clip(q_i + c_i dt, lo_i, hi_i)`; dynamic: `c` drives the joints' velocity
 //!    motors for `dt`, and `q'` is where the simulated arm got to, clamped to the limits (a joint
 //!    a hair past its limit in f32 continues from the clamped pose);
@@ -13,6 +15,7 @@
 use super::collision::{ArmCollider, Checks, Contact};
 use super::physics::DynamicArm;
 use super::scene::Obstacle;
+use super::shield::{Shield, ShieldConfig};
 use crate::robot::Chain;
 use crate::{Error, Result};
 
@@ -27,6 +30,8 @@ pub struct Arm {
     contact: Option<Contact>,
     /// The joints' commands, then the simulated positions (scratch, one per joint).
     scratch: Vec<f64>,
+    /// The safety shield, when on (kinematic arms with collision shapes only).
+    shield: Option<Box<Shield>>,
 }
 
 impl Arm {
@@ -52,7 +57,7 @@ impl Arm {
                 Some(Box::new(DynamicArm::new(chain.urdf_source(), chain, dt_s, obstacles, checks.floor)?))
             }
         };
-        Ok(Arm { physics, collider, contact: None, scratch: vec![0.0; chain.dof()] })
+        Ok(Arm { physics, collider, contact: None, scratch: vec![0.0; chain.dof()], shield: None })
     }
 
     /// Put the scene's obstacles in place of the ones before.
@@ -101,6 +106,7 @@ impl Arm {
         let n = q.len();
         let (lo, hi, vmax) = (chain.lower_limits(), chain.upper_limits(), chain.velocity_limits());
         match &mut self.physics {
+            None if self.shield.is_some() => self.step_shielded(chain, action, dt_s, q, joint_vel),
             None => {
                 for i in 0..n {
                     let command = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
@@ -142,6 +148,74 @@ impl Arm {
         }
         self.check_contact(chain, q);
         Ok(())
+    }
+
+    /// The kinematic step with the shield: the commands filtered, then integrated as without.
+    fn step_shielded(
+        &mut self,
+        chain: &Chain,
+        action: &[f32],
+        dt_s: f64,
+        q: &mut [f64],
+        joint_vel: &mut [f64],
+    ) {
+        let (lo, hi, vmax) = (chain.lower_limits(), chain.upper_limits(), chain.velocity_limits());
+        for (i, c) in self.scratch.iter_mut().enumerate() {
+            *c = f64::from(action[i].clamp(-1.0, 1.0)) * vmax[i];
+        }
+        if let (Some(shield), Some(collider)) = (&mut self.shield, &mut self.collider) {
+            shield.filter(chain, collider, q, &mut self.scratch, dt_s);
+        }
+        for i in 0..q.len() {
+            let q_old = q[i];
+            let q_new = (q_old + self.scratch[i] * dt_s).clamp(lo[i], hi[i]);
+            joint_vel[i] = (q_new - q_old) / dt_s;
+            q[i] = q_new;
+        }
+    }
+
+    /// Turn the safety shield on with `config` (off: `None`).
+    ///
+    /// Errors: a dynamic arm (the shield needs the kinematic simulation's exact motion), an arm
+    /// without collision shapes (nothing to keep apart), values out of range.
+    pub fn set_shield(&mut self, chain: &Chain, config: Option<ShieldConfig>) -> Result<()> {
+        let Some(config) = config.filter(|c| c.enabled) else {
+            self.shield = None;
+            return Ok(());
+        };
+        config.validate()?;
+        if self.physics.is_some() {
+            return Err(Error::config(
+                "task.shield.enabled",
+                true,
+                "false with task.sim = \"dynamic\": the shield verifies the motion a command makes, \
+                 which only the kinematic simulation carries out exactly",
+            ));
+        }
+        let Some(collider) = self.collider.as_mut() else {
+            return Err(Error::config(
+                "task.shield.enabled",
+                true,
+                format!(
+                    "false for this arm: no link of `{}` to `{}` has a collision shape, so there is \
+                     nothing to keep apart",
+                    chain.base_link(),
+                    chain.tip_link()
+                ),
+            ));
+        };
+        self.shield = Some(Box::new(Shield::new(chain, collider, config)));
+        Ok(())
+    }
+
+    /// The safety shield, when on.
+    pub fn shield(&self) -> Option<&Shield> {
+        self.shield.as_deref()
+    }
+
+    /// The safety shield, when on (to reset its counts).
+    pub fn shield_mut(&mut self) -> Option<&mut Shield> {
+        self.shield.as_deref_mut()
     }
 
     /// Look for the arm's contacts at joint positions `q`.

@@ -17,6 +17,8 @@ use parry3d::query::intersection_test;
 use parry3d::shape::{Ball, Capsule, Cuboid, Shape as ParryShape};
 use serde::{Deserialize, Serialize};
 
+pub mod distance;
+
 use super::scene::Obstacle;
 use crate::robot::{Chain, ConvexPart, Shape};
 

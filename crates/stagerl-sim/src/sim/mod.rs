@@ -6,3 +6,4 @@ pub mod arm;
 pub mod collision;
 pub mod physics;
 pub mod scene;
+pub mod shield;

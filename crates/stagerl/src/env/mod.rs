@@ -31,6 +31,7 @@ use crate::robot::{Chain, Pose};
 use crate::sim::arm::Arm;
 use crate::sim::collision::{CollisionKind, Contact};
 use crate::sim::scene::{place_obstacles, Placement};
+use crate::sim::shield::ShieldStats;
 use crate::{Error, Result};
 pub use task::{
     ObservationKind, ObstacleObservation, OnCollision, ResolvedTask, Sim, TaskConfig,
@@ -376,7 +377,8 @@ impl ReachEnv {
         obstacles.extend(task.obstacles.iter().cloned());
         let q = task.home_pose.clone();
         let ee = chain.fk(&q);
-        let arm = Arm::new(&chain, task.sim == Sim::Dynamic, task.dt_s, &obstacles, task.collision)?;
+        let mut arm = Arm::new(&chain, task.sim == Sim::Dynamic, task.dt_s, &obstacles, task.collision)?;
+        arm.set_shield(&chain, task.shield)?;
         let far_obs = empty_slot_distance(&task, &chain);
         let mut env = ReachEnv {
             arm,
@@ -409,6 +411,11 @@ impl ReachEnv {
         self.q.copy_from_slice(&self.task.home_pose);
         self.target = self.task.sample_target(&self.chain, &mut self.rng, &mut self.scratch);
         self.begin_episode()
+    }
+
+    /// Reseed the random stream (the next targets and random obstacles).
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = Rng::new(seed);
     }
 
     /// Reseed the random stream, then [`ReachEnv::reset`].
@@ -516,6 +523,9 @@ impl ReachEnv {
             self.arm.set_obstacles(&self.obstacles);
         }
         self.joint_vel.fill(0.0);
+        if let Some(shield) = self.arm.shield_mut() {
+            shield.begin_episode();
+        }
         // The start pose was checked against the limits; at rest.
         self.arm
             .set_state(&self.chain, &self.q, &self.joint_vel)
@@ -659,6 +669,35 @@ impl ReachEnv {
                 slot[3 + k] = (scale * h[k]) as f32;
             }
             slot[6] = (scale * distance) as f32;
+        }
+    }
+
+    /// What the safety shield did since the environment was made or its counts were reset
+    /// (`None`: the shield is off).
+    pub fn shield_stats(&self) -> Option<ShieldStats> {
+        self.arm.shield().map(|s| *s.stats())
+    }
+
+    /// What the safety shield did in this episode (`None`: the shield is off).
+    pub fn episode_shield_stats(&self) -> Option<ShieldStats> {
+        self.arm.shield().map(|s| *s.episode_stats())
+    }
+
+    /// Turn the safety shield on or off (`--shield`), with the task's `[task.shield]` values
+    /// (the defaults when it has none); its counts start at zero.
+    ///
+    /// Errors: on for a dynamic simulation or an arm without collision shapes.
+    pub fn set_shield(&mut self, enabled: bool) -> Result<()> {
+        let config = crate::sim::shield::ShieldConfig { enabled, ..self.task.shield.unwrap_or_default() };
+        self.arm.set_shield(&self.chain, Some(config))?;
+        self.task.shield = Some(config);
+        Ok(())
+    }
+
+    /// Forget the safety shield's counts.
+    pub fn reset_shield_stats(&mut self) {
+        if let Some(s) = self.arm.shield_mut() {
+            s.reset_stats();
         }
     }
 

@@ -9,6 +9,7 @@ use crate::base::rng::Rng;
 use crate::robot::{Chain, JointKind};
 use crate::sim::collision::Checks;
 use crate::sim::scene::{Obstacle, RandomObstacles, MAX_OBSTACLES};
+use crate::sim::shield::ShieldConfig;
 use crate::{Error, Result};
 
 /// What the policy observes.
@@ -86,6 +87,11 @@ pub struct TaskConfig {
     /// velocity actually achieved, `(q_new - q_old) / dt_s`.
     #[serde(default, skip_serializing_if = "Sim::is_kinematic")]
     pub sim: Sim,
+    /// `[task.shield]`: the safety shield that filters every command so that no checked pair
+    /// comes closer than a margin within a step (see [`crate::sim::shield`]; `--shield` on
+    /// `plan`, `eval`, `train`). Unset: off. Kinematic simulation only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shield: Option<ShieldConfig>,
 }
 
 /// `task.sim`: the simulator.
@@ -194,6 +200,7 @@ impl Default for TaskConfig {
             obstacle_observation: ObstacleObservation::Absolute,
             obstacle_range_m: None,
             sim: Sim::Kinematic,
+            shield: None,
         }
     }
 }
@@ -228,6 +235,8 @@ pub struct ResolvedTask {
     /// `task.obstacle_range_m`, m (nearest encoding only).
     pub obstacle_range_m: Option<f64>,
     pub sim: Sim,
+    /// `[task.shield]` as configured (the shield is on when it is `enabled`).
+    pub shield: Option<ShieldConfig>,
 }
 
 fn check_finite(field: &str, v: f64) -> Result<()> {
@@ -298,6 +307,21 @@ impl TaskConfig {
                 ));
             }
         }
+        self.validate_shield()
+    }
+
+    /// `[task.shield]`: its values, and the kinematic simulation when it is on.
+    fn validate_shield(&self) -> Result<()> {
+        let Some(shield) = &self.shield else { return Ok(()) };
+        shield.validate()?;
+        if shield.enabled && self.sim == Sim::Dynamic {
+            return Err(Error::config(
+                "task.shield.enabled",
+                true,
+                "false with task.sim = \"dynamic\" (the shield verifies the motion a command makes, \
+                 which only the kinematic simulation carries out exactly)",
+            ));
+        }
         Ok(())
     }
 
@@ -314,7 +338,8 @@ impl TaskConfig {
     }
 
     /// [`TaskConfig::resolve`] of a task whose values are checked already (by
-    /// [`crate::config::Config::resolve`]).
+    /// [`crate::config::Config::resolve`]). Both per-joint vectors unset on an arm that is not
+    /// six-jointed: one message naming both.
     pub(crate) fn resolve_checked(&self, chain: &Chain) -> Result<ResolvedTask> {
         let n = chain.dof();
         let (home, range) = self.joint_vectors(chain)?;
@@ -335,6 +360,7 @@ impl TaskConfig {
             obstacle_observation: self.obstacle_observation,
             obstacle_range_m: self.obstacle_range_m,
             sim: self.sim,
+            shield: self.shield,
         };
         // Estimate how often a draw passes the height test; refuse a distribution the arm
         // cannot (or almost never) reach.

@@ -97,6 +97,9 @@ pub struct PlanSummary {
     /// RRT-Connect's statistics (that planner only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rrt_connect: Option<RrtStats>,
+    /// What the safety shield did in this plan (`--shield`; left out when it is off).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub shield: Option<crate::sim::shield::ShieldSummary>,
 }
 
 /// A planned trajectory: `rows()` states, stored by column.
@@ -153,6 +156,9 @@ pub struct BatchRecord<'a> {
     pub rrt_connect: Option<RrtStats>,
     pub q: Vec<&'a [f64]>,
     pub ee_pos: &'a [[f64; 3]],
+    /// What the safety shield did (`--shield`; left out when it is off).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub shield: Option<crate::sim::shield::ShieldSummary>,
 }
 
 /// A plan that serialises as its [`BatchRecord`] (one line of batch output).
@@ -190,6 +196,7 @@ impl Plan {
                 plan_time_s: 0.0,
                 reason: None,
                 rrt_connect: None,
+                shield: None,
             },
             warning: None,
         };
@@ -251,6 +258,7 @@ impl Plan {
             rrt_connect: self.summary.rrt_connect,
             q: self.q.chunks_exact(self.dof).collect(),
             ee_pos: &self.ee_pos,
+            shield: self.summary.shield,
         }
     }
 
@@ -411,6 +419,22 @@ impl Planner {
         &self.scene
     }
 
+    /// Turn the safety shield on or off for the plans to come (see [`ReachEnv::set_shield`]).
+    pub fn set_shield(&mut self, enabled: bool) -> Result<()> {
+        self.env.set_shield(enabled)
+    }
+
+    /// Place each plan's first random obstacle in the way with probability `fraction` (see
+    /// [`ReachEnv::set_obstacles_in_path`]).
+    pub fn set_obstacles_in_path(&mut self, fraction: f64) -> Result<()> {
+        self.env.set_obstacles_in_path(fraction)
+    }
+
+    /// Reseed the environment's random stream (the random obstacles of the plans to come).
+    pub fn reseed(&mut self, seed: u64) {
+        self.env.reseed(seed);
+    }
+
     /// The environment plans run on.
     pub fn env(&self) -> &ReachEnv {
         &self.env
@@ -542,6 +566,7 @@ impl Planner {
                 plan.summary.steps
             ));
         }
+        plan.summary.shield = self.env.episode_shield_stats().map(Into::into);
         Ok(plan)
     }
 

@@ -21,6 +21,15 @@ fn random_obstacles_allocate_nothing() {
     no_allocation_in(cfg);
 }
 
+/// With the safety shield filtering every command among random obstacles.
+#[test]
+fn the_shielded_step_allocates_nothing() {
+    let mut cfg = stagerl::config::Config::default();
+    cfg.task.random_obstacles = Some(stagerl::sim::scene::RandomObstacles::default());
+    cfg.task.shield = Some(stagerl::sim::shield::ShieldConfig { enabled: true, ..Default::default() });
+    no_allocation_in(cfg);
+}
+
 fn no_allocation_in(cfg: stagerl::config::Config) {
     let mut env = stagerl::env::ReachEnv::from_config(&cfg, 1).unwrap();
     let mut venv = stagerl::env::VecEnv::from_config(4, &cfg, 1).unwrap();

@@ -13,3 +13,4 @@ mod policy_portable;
 mod props;
 mod report_synthetic;
 mod robot_k_oracle;
+mod shield;

@@ -20,6 +20,13 @@ sim = "dynamic"
 [task.collision]
 floor = true
 self_collision = false
+[task.shield]
+# enabled = true is refused with sim = "dynamic"
+enabled = false
+margin_m = 0.03
+self_margin_m = 0.003
+influence_m = 0.2
+gain = 0.5
 [[task.obstacles]]
 shape = "cuboid"
 position_m = [0.4, 0.0, 0.3]
@@ -132,6 +139,7 @@ fn the_listing_is_the_default_config_and_shows_the_optional_sections_commented_o
     assert_eq!(parsed, Config::default(), "what is not commented out is the default config");
     for section in [
         "# [task.collision]",
+        "# [task.shield]",
         "# [[task.obstacles]]",
         "# [task.random_obstacles]",
         "# [agent.her]",
