@@ -4,6 +4,7 @@
 mod out;
 mod cmd;
 mod jsonl;
+mod obstacles_bench;
 mod plan_batch;
 mod plan_bench;
 mod progress;

@@ -18,7 +18,7 @@ pub enum Bench {
     Plan(PlanArgs),
     /// Every planner on fixed, seeded problem sets among obstacles (free, one in the way, 3 and
     /// 6 random, a narrow gap): success, collisions, path length, joint travel, plan time.
-    Obstacles(super::bench_obstacles::ObstaclesArgs),
+    Obstacles(crate::obstacles_bench::ObstaclesArgs),
     /// RRT-Connect on seeded problems with one obstacle across the straight line (the set of
     /// `stagerl eval --obstacles-in-path 1`): solved, contacts, plan time (median, p95), one thread.
     #[command(name = "rrt-connect")]
@@ -148,7 +148,7 @@ pub fn run(b: Bench) -> Result<()> {
             stagerl::base::par::install(Some(&pool), || train(a))
         }
         Bench::Plan(a) => plan(a),
-        Bench::Obstacles(a) => super::bench_obstacles::run(a),
+        Bench::Obstacles(a) => crate::obstacles_bench::run(a),
         Bench::RrtConnect(a) => rrt_connect(a),
     }
 }

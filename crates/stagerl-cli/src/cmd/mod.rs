@@ -1,5 +1,4 @@
 pub mod bench;
-pub mod bench_obstacles;
 pub mod config;
 pub mod demo;
 pub mod eval;
