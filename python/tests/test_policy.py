@@ -88,12 +88,22 @@ def test_a_shielded_plan_is_the_cli_one_with_the_shield_counts(stagerl_bin, trai
     target = training_targets(trained_run, 1)[0]
     rows, summary, _ = cli_plan(stagerl_bin, trained_run, target, shield=True)
     plan = stagerl.plan(trained_run, target, shield=True)
+    assert plan["summary"].pop("plan_time_s") > 0 and summary.pop("plan_time_s") > 0  # wall time
     assert plan["summary"] == summary
     assert plan["summary"]["shield_steps"] == plan["summary"]["steps"]
     for key in ["shield_interventions", "shield_stops", "shield_mean_change_rad_per_s", "shield_max_change_rad_per_s"]:
         assert key in plan["summary"]
     np.testing.assert_array_equal(plan["q"], np.array([r["q"] for r in rows]))
-    assert "shield_steps" not in stagerl.plan(trained_run, target)["summary"]
+    free = stagerl.plan(trained_run, target)
+    assert "shield_steps" not in free["summary"]
+    # Obstacles and the shield together: a ball across the unshielded path is not touched.
+    on_path = free["ee_pos"][int(0.6 * (len(free["ee_pos"]) - 1))]
+    ball = [{"shape": "sphere", "position_m": [float(x) for x in on_path], "radius_m": 0.04}]
+    unshielded = stagerl.plan(trained_run, target, obstacles=ball)
+    shielded = stagerl.plan(trained_run, target, obstacles=ball, shield=True)
+    assert unshielded["summary"]["collision"] and "shield_steps" not in unshielded["summary"]
+    assert not shielded["summary"]["collision"] and shielded["summary"]["min_clearance_m"] > 0
+    assert shielded["summary"]["shield_interventions"] > 0
     with pytest.raises(ValueError, match="shield"):
         stagerl.plan(trained_run, target, shield="yes")
 
