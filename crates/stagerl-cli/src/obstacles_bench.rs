@@ -1,7 +1,9 @@
 //! `stagerl bench obstacles`: every planner on the same fixed, seeded problem sets
 //! ([`stagerl::plan::problems`]), one thread: success (reached with no contact anywhere along the
-//! path, checked continuously), collision rate, path length, joint travel and plan time (median
-//! and 95th percentile).
+//! path, checked continuously), collision rate, path length, joint travel, plan time (median
+//! and 95th percentile) and, for the shielded planners (`jacobian+shield`, `policy+shield`: the
+//! safety shield of `--shield` filtering every command), the shield's interventions and stops per
+//! plan.
 //!
 //! Every problem is known to be solvable: RRT-Connect with a generous budget (`--solvable-budget-s`,
 //! its own seed) found a contact-free path to it, else the candidate was drawn again (counted in
@@ -34,7 +36,7 @@ pub struct ObstaclesArgs {
     /// obstacles are not used.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// A trained run whose policy joins the table (`policy`); its arm is used.
+    /// A trained run whose policy joins the table (`policy` and `policy+shield`); its arm is used.
     #[arg(long)]
     run: Option<PathBuf>,
     /// Write the problems as JSON lines (`set`, `id`, `robot`, `start_rad`, `target_m`,
@@ -42,7 +44,8 @@ pub struct ObstaclesArgs {
     #[arg(long, value_name = "FILE")]
     problems_out: Option<PathBuf>,
     /// Write one JSON line per planner and problem (`planner`, `set`, `id`, `success`,
-    /// `collision`, `reached`, `path_length_m`, `joint_travel_rad`, `plan_time_s`).
+    /// `collision`, `reached`, `min_clearance_m`, `path_length_m`, `joint_travel_rad`,
+    /// `plan_time_s`, and the shielded planners' `shield_*` counts).
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
     /// RRT-Connect's wall-time budget per plan in the table, seconds.
@@ -70,6 +73,8 @@ struct Row {
     path_length_m: Vec<f64>,
     joint_travel_rad: Vec<f64>,
     plan_time_s: Vec<f64>,
+    /// Shielded planners: commands the shield changed and stops, summed over the plans.
+    shield: Option<(u64, u64)>,
 }
 
 pub fn run(a: ObstaclesArgs) -> Result<()> {
@@ -96,13 +101,19 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
         rrt(a.seed ^ JUDGE_SEED, a.solvable_budget_s, 100 * DEFAULT_ITERATIONS),
     )
     .context("--solvable-budget-s")?;
+    let shielded = |mut p: Planner| -> Result<Planner> {
+        p.set_shield(true).context("the shielded planners")?;
+        Ok(p)
+    };
     let mut planners: Vec<(&'static str, Planner)> = vec![
         ("jacobian", Planner::jacobian(&cfg, None)?),
+        ("jacobian+shield", shielded(Planner::jacobian(&cfg, None)?)?),
         ("rrt-connect", Planner::rrt_connect(&cfg, None, table_rrt).context("--planner-budget-s")?),
     ];
     if let Some(run) = &a.run {
-        let (_, p) = Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None)?;
-        planners.push(("policy", p));
+        let policy = || Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None).map(|(_, p)| p);
+        planners.push(("policy", policy()?));
+        planners.push(("policy+shield", shielded(policy()?)?));
     }
     // Checked before the work; written whole at the end (atomically, never over another file
     // without --force).
@@ -145,6 +156,7 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
                 path_length_m: Vec::new(),
                 joint_travel_rad: Vec::new(),
                 plan_time_s: Vec::new(),
+                shield: None,
             };
             for p in &problems {
                 let plan = planner
@@ -153,11 +165,17 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
                 let success = record(&mut row, &plan);
                 if let Some(f) = out.as_mut() {
                     let s = &plan.summary;
-                    let line = serde_json::json!({
+                    let mut line = serde_json::json!({
                         "planner": name, "set": set.name(), "id": p.id, "success": success,
-                        "collision": s.collision, "reached": s.reached, "path_length_m": s.path_length_m,
-                        "joint_travel_rad": s.joint_travel_rad, "plan_time_s": s.plan_time_s,
+                        "collision": s.collision, "reached": s.reached, "min_clearance_m": s.min_clearance_m,
+                        "path_length_m": s.path_length_m, "joint_travel_rad": s.joint_travel_rad,
+                        "plan_time_s": s.plan_time_s,
                     });
+                    if let (Some(counts), Some(map)) = (s.shield, line.as_object_mut()) {
+                        if let serde_json::Value::Object(c) = serde_json::to_value(counts)? {
+                            map.extend(c);
+                        }
+                    }
                     writeln!(f, "{line}")?;
                 }
             }
@@ -181,6 +199,10 @@ fn record(row: &mut Row, plan: &Plan) -> bool {
     row.success += usize::from(success);
     row.collision += usize::from(s.collision);
     row.plan_time_s.push(s.plan_time_s);
+    if let Some(c) = s.shield {
+        let (changed, stops) = row.shield.unwrap_or((0, 0));
+        row.shield = Some((changed + c.shield_interventions, stops + c.shield_stops));
+    }
     if success {
         row.path_length_m.push(s.path_length_m);
         row.joint_travel_rad.push(s.joint_travel_rad);
@@ -220,20 +242,28 @@ fn print_table(rows: &[Row], refused: &[(ProblemSet, usize)], a: &ObstaclesArgs)
         "obstacles: {} problems per set, seed {}, one thread; success = reached with no contact along the \
          path (checked continuously); path length and joint travel over successes; every problem solved \
          by RRT-Connect within {} s (candidates it could not solve, drawn again: {}); rrt-connect's \
-         budget in the table {} s",
+         budget in the table {} s; shield: commands it changed and stops it made, per plan",
         a.problems,
         a.seed,
         a.solvable_budget_s,
         refused.join(", "),
         a.planner_budget_s
     )?;
-    outln!("| planner | set | success % | collision % | path length m | joint travel rad | plan time median ms | p95 ms |")?;
-    outln!("|---|---|---|---|---|---|---|---|")?;
+    outln!(
+        "| planner | set | success % | collision % | path length m | joint travel rad | plan time median ms \
+         | p95 ms | shield changes/plan | shield stops/plan |"
+    )?;
+    outln!("|---|---|---|---|---|---|---|---|---|---|")?;
     for r in rows {
         let n = r.plans.max(1) as f64;
         let mut t = r.plan_time_s.clone();
+        let per_plan = |k: u64| format!("{:.2}", k as f64 / n);
+        let (changes, stops) = match r.shield {
+            Some((c, s)) => (per_plan(c), per_plan(s)),
+            None => ("-".into(), "-".into()),
+        };
         outln!(
-            "| {} | {} | {:.1} | {:.1} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            "| {} | {} | {:.1} | {:.1} | {:.3} | {:.3} | {:.3} | {:.3} | {changes} | {stops} |",
             r.planner,
             r.set.name(),
             100.0 * r.success as f64 / n,

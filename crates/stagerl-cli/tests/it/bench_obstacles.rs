@@ -47,10 +47,30 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
-    assert_eq!((problems.len(), plans.len()), (24, 48));
+    assert_eq!((problems.len(), plans.len()), (24, 72));
     // Each problem carries the goal RRT-Connect reached, one value per joint.
     assert!(problems.iter().all(|p| p["goal_rad"].as_array().is_some_and(|g| g.len() == 6)));
     assert!(plans.iter().filter(|p| p["planner"] == "rrt-connect").all(|p| p["collision"] == false));
+    // The shield: no contact on any set, its counts on its lines only, and it changed commands
+    // where an obstacle is in the way.
+    let shielded: Vec<&Value> = plans.iter().filter(|p| p["planner"] == "jacobian+shield").collect();
+    assert_eq!(shielded.len(), 24);
+    assert!(shielded.iter().all(|p| p["collision"] == false && p["shield_steps"].as_u64().unwrap() > 0));
+    assert!(shielded
+        .iter()
+        .any(|p| p["set"] == "in-the-way" && p["shield_interventions"].as_u64().unwrap() > 0));
+    assert!(plans
+        .iter()
+        .filter(|p| p["planner"] != "jacobian+shield")
+        .all(|p| p.get("shield_steps").is_none()));
+    for set in ["free", "in-the-way", "narrow-gap"] {
+        let row =
+            table.lines().find(|l| l.starts_with(&format!("| jacobian+shield | {set} |"))).expect(&table);
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        assert_eq!(cells[4], "0.0", "{row}");
+        assert!(cells[9].parse::<f64>().is_ok() && cells[10].parse::<f64>().is_ok(), "{row}");
+    }
+    assert!(table.contains("| jacobian | free | 100.0 | 0.0 |") && table.contains("| - | - |"), "{table}");
     let plans: Vec<Value> = plans.into_iter().filter(|p| p["planner"] == "jacobian").collect();
     // The free set: the Jacobian controller reaches every target without contact.
     let free: Vec<&Value> = plans.iter().filter(|p| p["set"] == "free").collect();
@@ -95,9 +115,9 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
         "{}",
         String::from_utf8_lossy(&refused.stderr)
     );
-    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 48, "overwritten");
+    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 72, "overwritten");
     assert!(again(true).status.success());
-    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 4);
+    assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 6);
     // An in-the-way problem blocks the straight line: the controller touches its obstacle.
     assert!(plans.iter().filter(|p| p["set"] == "in-the-way").any(|p| p["collision"] == true));
     std::fs::remove_dir_all(&dir).ok();
