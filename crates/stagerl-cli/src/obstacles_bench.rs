@@ -262,14 +262,19 @@ fn print_table(rows: &[Row], refused: &[(ProblemSet, usize)], a: &ObstaclesArgs)
             Some((c, s)) => (per_plan(c), per_plan(s)),
             None => ("-".into(), "-".into()),
         };
+        // Over the successes: "-" when there is none.
+        let over_successes = |v: &[f64]| match mean(v) {
+            m if m.is_finite() => format!("{m:.3}"),
+            _ => "-".into(),
+        };
         outln!(
-            "| {} | {} | {:.1} | {:.1} | {:.3} | {:.3} | {:.3} | {:.3} | {changes} | {stops} |",
+            "| {} | {} | {:.1} | {:.1} | {} | {} | {:.3} | {:.3} | {changes} | {stops} |",
             r.planner,
             r.set.name(),
             100.0 * r.success as f64 / n,
             100.0 * r.collision as f64 / n,
-            mean(&r.path_length_m),
-            mean(&r.joint_travel_rad),
+            over_successes(&r.path_length_m),
+            over_successes(&r.joint_travel_rad),
             1e3 * quantile(&mut t, 0.5),
             1e3 * quantile(&mut t, 0.95),
         )?;

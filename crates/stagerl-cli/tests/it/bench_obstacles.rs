@@ -118,6 +118,14 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
     assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 72, "overwritten");
     assert!(again(true).status.success());
     assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 6);
+    // The Jacobian controller succeeds on no narrow-gap problem here: no path length to average.
+    let gap = table.lines().find(|l| l.starts_with("| jacobian | narrow-gap |")).expect(&table);
+    assert!(
+        gap.starts_with("| jacobian | narrow-gap | 0.0 |")
+            && gap.contains("| - | - |")
+            && !gap.contains("NaN"),
+        "{gap}"
+    );
     // An in-the-way problem blocks the straight line: the controller touches its obstacle.
     assert!(plans.iter().filter(|p| p["set"] == "in-the-way").any(|p| p["collision"] == true));
     std::fs::remove_dir_all(&dir).ok();
