@@ -24,7 +24,8 @@ shortcutting), one thread. Every returned path is checked again, densely (1 mrad
 checker: a path that touches is counted as a collision, not as a success.
 
 Writes one JSON line per problem (`set`, `id`, `solved`, `collision`, `plan_time_s`,
-`path_length_rad`) and prints per set: solved, collisions, plan time median and 95th percentile.
+`path_length_rad` (Euclidean in joint space), `joint_travel_rad` (sum of |dq| over joints, as
+stagerl's) and `path_length_m` (the tip's path)) and prints per set: solved, collisions, plan time median and 95th percentile.
 """
 
 from __future__ import annotations
@@ -53,15 +54,20 @@ def load_problems(path):
     return problems
 
 
-def dense_collision(checker, path, step_rad=1e-3):
-    """Whether the piecewise-linear joint path touches anything, checked every `step_rad`."""
+def dense_states(path, step_rad=1e-3):
+    """The piecewise-linear joint path at states no more than `step_rad` apart (its corners kept)."""
+    rows = [path[:1]]
     for a, b in zip(path[:-1], path[1:]):
         k = max(1, int(np.ceil(np.linalg.norm(b - a) / step_rad)))
-        t = np.linspace(0.0, 1.0, k + 1)[:, None]
-        hit, _ = checker.check(a + t * (b - a))
-        if hit.any():
-            return True
-    return False
+        t = np.linspace(0.0, 1.0, k + 1)[1:, None]
+        rows.append(a + t * (b - a))
+    return np.concatenate(rows)
+
+
+def dense_collision(checker, path, step_rad=1e-3):
+    """Whether the piecewise-linear joint path touches anything, checked every `step_rad`."""
+    hit, _ = checker.check(dense_states(path, step_rad))
+    return bool(hit.any())
 
 
 def solve(problem, chains, budget_s, resolution_rad):
@@ -100,13 +106,19 @@ def solve(problem, chains, budget_s, resolution_rad):
     status = setup.solve(budget_s)
     solved = bool(status) and setup.haveExactSolutionPath()
     result = {"set": problem["set"], "id": problem["id"], "solved": solved, "collision": False,
-              "plan_time_s": setup.getLastPlanComputationTime(), "path_length_rad": None}
+              "plan_time_s": setup.getLastPlanComputationTime(), "path_length_rad": None,
+              "joint_travel_rad": None, "path_length_m": None}
     if solved:
         setup.simplifySolution()
         result["plan_time_s"] += setup.getLastSimplificationTime()
         path = setup.getSolutionPath()
         states = np.array([[path.getState(k)[i] for i in range(dof)] for k in range(path.getStateCount())])
         result["path_length_rad"] = float(np.linalg.norm(np.diff(states, axis=0), axis=1).sum())
+        # As `stagerl bench obstacles` measures its plans: the sum of |dq| over joints, and the
+        # tip's path (here along the straight joint segments, sampled every 1 mrad).
+        result["joint_travel_rad"] = float(np.abs(np.diff(states, axis=0)).sum())
+        tips, _ = chain.fk(dense_states(states))
+        result["path_length_m"] = float(np.linalg.norm(np.diff(tips, axis=0), axis=1).sum())
         result["collision"] = dense_collision(checker, states)
         result["solved"] = not result["collision"]
     return result
