@@ -13,7 +13,9 @@
 //! the environment computes it: the target entries of both observations
 //! ([`crate::env::ObservationLayout::write_target_entries`]), the reward with the run's reward function (any of the
 //! five: each is a pure function of the step's end-effector pose, joint velocities and target,
-//! eqs. 1-15 and 18), the success bonus and the termination (`D_PT < beta` for `g`). The real
+//! eqs. 1-15 and 18), the success bonus and the termination (`D_PT < beta` for `g`). The clearance
+//! term (`[reward.clearance]`) depends on the arm's pose, not on the goal: the step's measured
+//! clearance is logged and charged again. The real
 //! transitions are stored as without HER, after every step, so that the updates of Algorithm 1
 //! see them at once; the relabelled ones follow when the episode ends.
 //!
@@ -48,6 +50,10 @@ pub struct EpisodeLog {
     /// Each step ended in contact (absent in checkpoints of older versions: no contact).
     #[serde(default)]
     contact: Vec<bool>,
+    /// The arm's clearance from the obstacles after each step ([`crate::env::Step::clearance_m`];
+    /// absent in checkpoints of older versions and when it is not measured).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    clearance: Vec<Option<f64>>,
 }
 
 impl EpisodeLog {
@@ -61,6 +67,7 @@ impl EpisodeLog {
             v.clear();
         }
         self.contact.clear();
+        self.clearance.clear();
     }
 
     /// Record a step of the episode (after the environment took it).
@@ -73,6 +80,10 @@ impl EpisodeLog {
         self.quat.extend_from_slice(&pose.quaternion_xyzw());
         self.joint_vel.extend_from_slice(t.env.joint_velocities());
         self.contact.push(t.step.collision.is_some());
+        if t.step.clearance_m.is_some() {
+            // An infinite clearance (no obstacle near) is charged as none: JSON has no infinity.
+            self.clearance.push(t.step.clearance_m.filter(|d| d.is_finite()));
+        }
     }
 
     /// Steps recorded.
@@ -86,6 +97,10 @@ impl EpisodeLog {
 
     fn contact_after(&self, t: usize) -> bool {
         self.contact.get(t).copied().unwrap_or(false)
+    }
+
+    fn clearance_after(&self, t: usize) -> Option<f64> {
+        self.clearance.get(t).copied().flatten()
     }
 
     fn ee_after(&self, t: usize) -> Vector3<f64> {
@@ -182,7 +197,8 @@ impl Relabeller {
                     joint_vel: &log.joint_vel[t * dof..(t + 1) * dof],
                     prev_ee_pos: Some(before),
                 };
-                let step = Step::outcome(task, reward, &input, log.contact_after(t), t as u32 + 1);
+                let (contact, clearance) = (log.contact_after(t), log.clearance_after(t));
+                let step = Step::outcome(task, reward, &input, contact, clearance, t as u32 + 1);
                 sink(&Relabelled {
                     step: t,
                     goal,
