@@ -75,12 +75,13 @@ pub struct TaskConfig {
     /// collision shape of the arm, see [`ObstacleObservation::PerLink`]).
     #[serde(default, skip_serializing_if = "ObstacleObservation::is_absolute")]
     pub obstacle_observation: ObstacleObservation,
-    /// With `obstacle_observation = "nearest"`: obstacles whose surface is farther than this
-    /// from the end effector (m, > 0) are left out of the observation (their slots read as
-    /// empty, far away), so that the obstacle entries change only near an obstacle. Unset: every
-    /// obstacle is observed. See docs/physics.md's random-obstacles results for what it changes.
-    /// With `"per_link"`: the influence radius R (m, > 0; unset: [`PER_LINK_DEFAULT_RANGE_M`]),
-    /// the distance at and beyond which a link's slot reads "no obstacle near".
+    /// How far the obstacle observation sees, metres (> 0): with `obstacle_observation =
+    /// "nearest"`, obstacles whose surface is farther than this from the end effector are left
+    /// out (unset: none is), with `"per_link"` the influence radius R (unset: 0.3 m).
+    /// `"nearest"`: a left-out obstacle's slot reads as empty, far away, so that the obstacle
+    /// entries change only near an obstacle (see docs/physics.md's random-obstacles results for
+    /// what it changes). `"per_link"`: R is the distance at and beyond which a shape's slot
+    /// reads "no obstacle near" ([`PER_LINK_DEFAULT_RANGE_M`] when unset).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub obstacle_range_m: Option<f64>,
     /// How a joint-velocity command moves the arm: `"kinematic"` (the default: integrated and

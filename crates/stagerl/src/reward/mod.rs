@@ -125,16 +125,17 @@ pub struct RewardConfig {
     /// collision term. Unset: 0 (and left out of a written config).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub collision_penalty: Option<f64>,
-    /// `[reward.clearance]`: a penalty as the arm comes closer to an obstacle than a margin
-    /// (our extension, eqs. 19-21 of this module; [`ClearanceConfig`]). Unset: off, the paper's
+    /// `[reward.clearance]`: a penalty as the arm comes closer to an obstacle than a margin,
+    /// our extension ([`ClearanceConfig`], eqs. 19-21 of this module). Unset: off, the paper's
     /// rewards.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clearance: Option<ClearanceConfig>,
 }
 
-/// `[reward.clearance]`: `R_clearance = weight (1 - c)^2` with `c = max(d, -margin_m) /
-/// margin_m` when the arm's clearance from the obstacles `d < margin_m`, else 0 (eqs. 19-21),
-/// taken off every step's reward. Values in [0, 4 weight].
+/// `[reward.clearance]`: a penalty taken off every step's reward as the arm comes closer to an
+/// obstacle than `margin_m` (our extension, off by default: unset, the paper's rewards).
+/// `R_clearance = weight (1 - c)^2` with `c = max(d, -margin_m) / margin_m` when the arm's
+/// clearance from the obstacles `d < margin_m`, else 0 (eqs. 19-21); values in [0, 4 weight].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ClearanceConfig {
