@@ -119,8 +119,8 @@ fn the_layout_describes_every_value_of_every_observation_option() {
             }
         }
     }
-    // The per-link encoding: one slot per collision shape of the UR5 (13), whatever the count.
-    assert_eq!(slots_seen, [0, 0, 1, 3, 4, 3, 13, 0]);
+    // The per-link encoding: one slot per collision shape of the UR5 (14), whatever the count.
+    assert_eq!(slots_seen, [0, 0, 1, 3, 4, 3, 14, 0]);
 }
 
 #[test]
