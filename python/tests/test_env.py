@@ -9,7 +9,8 @@ import stagerl  # noqa: F401  (registers the environment)
 from stagerl.envs import ReachEnv
 
 TERMS = ["distance", "reached", "position", "phi", "direction", "posture", "move", "stride",
-         "gamma_posture", "har", "alpha1", "alpha2", "sar", "basic", "reward", "bonus", "total"]
+         "gamma_posture", "har", "alpha1", "alpha2", "sar", "basic", "reward", "bonus", "total",
+         "clearance"]
 
 
 @pytest.mark.parametrize("reward", ["basic", "posture", "stride", "har", "sar"])
@@ -98,14 +99,18 @@ def test_per_link_observation_is_bounded_and_sized_by_the_arm():
     check_env(env.unwrapped, skip_render_check=True)
     rng = np.random.default_rng(3)
     obs, _ = env.reset(seed=3)
-    near = 0
+    near, charged = 0, 0
     for _ in range(500):
         assert env.observation_space.contains(obs), obs
         near += int((obs[16:].reshape(-1, 4)[:, 3] < 1.0).sum())
-        obs, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
+        obs, r, term, trunc, info = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
+        if not info["collision"]:
+            assert r == info["total"] == info["reward"] + info["bonus"] - info["clearance"]
+        assert 0.0 <= info["clearance"] <= 4.0
+        charged += info["clearance"] > 0
         if term or trunc:
             obs, _ = env.reset()
-    assert near > 0
+    assert near > 0 and charged > 0, (near, charged)
     with pytest.raises(ValueError, match="reward.clearance"):
         gym.make("stagerl/Reach-v0", config={"reward": reward})  # no obstacle to keep clear of
 
