@@ -267,7 +267,7 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
             assert_eq!(p.spec["observation"]["obstacles"].is_null(), obstacles.is_none());
             let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
             if obstacles == Some(ObstacleObservation::PerLink) {
-                // One slot of 4 per collision shape of the arm, R the default 0.3 m.
+                // One slot of 4 per collision shape of the arm, R the default 0.1 m.
                 let (o, shapes) = (&p.spec["observation"]["obstacles"], env.chain().collision_shapes().len());
                 assert_eq!(
                     (&o["encoding"], &o["slots"], &o["values_per_slot"]),
@@ -275,7 +275,7 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
                 );
                 assert_eq!(
                     (&o["range_m"], &p.spec["observation"]["dim"]),
-                    (&0.3.into(), &(16 + 4 * shapes).into())
+                    (&0.1.into(), &(16 + 4 * shapes).into())
                 );
             }
             let mut agent = stagerl::train::load_agent(&cfg, &env, &path).unwrap();
