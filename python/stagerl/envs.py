@@ -25,7 +25,9 @@ in [-1, 1], scaled by the joint's speed limit. The episode terminates when the t
 (``info["is_success"]``) and is truncated at ``task.max_steps``. ``info`` holds every reward term
 (``distance`` in metres, ``reached``, ``position``, ``phi``, ``direction``, ``posture``, ``move``,
 ``stride``, ``gamma_posture``, ``har``, ``alpha1``, ``alpha2``, ``sar``, ``basic``, ``reward``,
-``bonus``, ``total``) and ``is_success``; ``reset`` returns ``distance`` and ``is_success``.
+``bonus``, ``total``, ``clearance``: the clearance penalty already taken off ``total``, 0 without
+``[reward.clearance]``), ``collision`` and ``is_success``; ``reset`` returns ``distance`` and
+``is_success``.
 
 With ``[task.random_obstacles]``, the config's ``train.obstacles_in_path`` (a probability,
 default 0) places each episode's first random obstacle across the straight line from the start

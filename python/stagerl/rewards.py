@@ -16,7 +16,10 @@ fresh memory, whose pages the system clears on first use (about a sixth of a 1 M
 ``constants``: any field of the config's ``[reward]`` section (``beta_m``, ``success_bonus``,
 ``har_boundary_m``, ``sar_sigma1``, ``sar_sigma2``, ``sar_scale_m``, ``direction``,
 ``direction_fold``), ``dt_s`` (the control period of eq. 9, seconds, default 0.05) and
-``prev_ee_pos`` ((N, 3) metres, needed by ``direction="displacement"``).
+``prev_ee_pos`` ((N, 3) metres, needed by ``direction="displacement"``). The clearance term
+(``[reward.clearance]``, our extension: a penalty as the arm comes near an obstacle) needs the
+whole arm and the obstacles, which these rows do not hold: ``clearance=`` is refused with a
+ValueError naming ``reward.clearance`` (the environment, ``ReachEnv``, charges it).
 """
 
 from __future__ import annotations

@@ -9,7 +9,8 @@ import stagerl  # noqa: F401  (registers the environment)
 from stagerl.envs import ReachEnv
 
 TERMS = ["distance", "reached", "position", "phi", "direction", "posture", "move", "stride",
-         "gamma_posture", "har", "alpha1", "alpha2", "sar", "basic", "reward", "bonus", "total"]
+         "gamma_posture", "har", "alpha1", "alpha2", "sar", "basic", "reward", "bonus", "total",
+         "clearance"]
 
 
 @pytest.mark.parametrize("reward", ["basic", "posture", "stride", "har", "sar"])
@@ -81,6 +82,37 @@ def test_observed_obstacles_stay_within_the_space(encoding):
             obs, _ = env.reset()
     with pytest.raises(ValueError, match="task.obstacle_observation"):
         gym.make("stagerl/Reach-v0", config={"task": {"obstacles": [ball], "obstacle_observation": "nearest"}})
+
+
+def test_per_link_observation_is_bounded_and_sized_by_the_arm():
+    """task.obstacle_observation = "per_link": one slot of 4 values per collision shape of the
+    arm, whatever the number of obstacles, every value in [-1, 1] (the Box's bounds); the
+    clearance term of the reward is charged (total = reward + bonus - clearance)."""
+    task = {"random_obstacles": {"count": [1, 3]}, "observe_obstacles": True,
+            "obstacle_observation": "per_link"}
+    reward = {"clearance": {"weight": 1.0, "margin_m": 0.1}}
+    env = gym.make("stagerl/Reach-v0", config={"task": task, "reward": reward})
+    n = env.observation_space.shape[0] - 16
+    assert n % 4 == 0 and n >= 4 * 6, n
+    np.testing.assert_array_equal(env.observation_space.low[16:], -np.ones(n, dtype=np.float32))
+    np.testing.assert_array_equal(env.observation_space.high[16:], np.ones(n, dtype=np.float32))
+    check_env(env.unwrapped, skip_render_check=True)
+    rng = np.random.default_rng(3)
+    obs, _ = env.reset(seed=3)
+    near, charged = 0, 0
+    for _ in range(500):
+        assert env.observation_space.contains(obs), obs
+        near += int((obs[16:].reshape(-1, 4)[:, 3] < 1.0).sum())
+        obs, r, term, trunc, info = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
+        if not info["collision"]:
+            assert r == info["total"] == info["reward"] + info["bonus"] - info["clearance"]
+        assert 0.0 <= info["clearance"] <= 4.0
+        charged += info["clearance"] > 0
+        if term or trunc:
+            obs, _ = env.reset()
+    assert near > 0 and charged > 0, (near, charged)
+    with pytest.raises(ValueError, match="reward.clearance"):
+        gym.make("stagerl/Reach-v0", config={"reward": reward})  # no obstacle to keep clear of
 
 
 def test_obstacle_range_empties_far_slots():

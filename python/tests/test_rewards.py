@@ -249,6 +249,8 @@ def test_any_number_of_joints():
         (dict(dt_s=0.0), ["dt_s", "0.0", "> 0"]),
         (dict(dt_s=float("nan")), ["dt_s", "nan"]),
         (dict(direction="displacement"), ["prev_ee_pos", "displacement"]),
+        # The clearance term needs the arm and the obstacles, which the rows do not hold.
+        (dict(clearance={"weight": 1.0, "margin_m": 0.1}), ["reward.clearance", "stagerl.rewards.compute", "end effector"]),
     ],
 )
 def test_bad_constants_name_field_value_and_allowed(kwargs, words):

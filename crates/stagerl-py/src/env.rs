@@ -48,10 +48,11 @@ pub(crate) fn build_config(
     Ok(cfg)
 }
 
-/// The info keys of a step, in order: every reward term, then `collision` (1 when the step
-/// ended with the arm in contact with the floor, itself or an obstacle, else 0); `is_success`
-/// follows them in the info.
-pub(crate) const STEP_KEYS: [&str; 18] = [
+/// The info keys of a step, in order: every reward term (`clearance`: the clearance penalty
+/// taken off `total`, 0 without `[reward.clearance]`), then `collision` (1 when the step ended
+/// with the arm in contact with the floor, itself or an obstacle, else 0); `is_success` follows
+/// them in the info.
+pub(crate) const STEP_KEYS: [&str; 19] = [
     "distance",
     "reached",
     "position",
@@ -69,11 +70,12 @@ pub(crate) const STEP_KEYS: [&str; 18] = [
     "reward",
     "bonus",
     "total",
+    "clearance",
     "collision",
 ];
 
 /// The values of [`STEP_KEYS`] for a step.
-pub(crate) fn step_values(s: &Step) -> [f64; 18] {
+pub(crate) fn step_values(s: &Step) -> [f64; 19] {
     let t = &s.terms;
     [
         t.distance,
@@ -93,6 +95,7 @@ pub(crate) fn step_values(s: &Step) -> [f64; 18] {
         t.reward,
         t.bonus,
         t.total,
+        t.clearance,
         f64::from(u8::from(s.collision.is_some())),
     ]
 }

@@ -54,6 +54,8 @@ const ARGS: &[Case] = &[
     // Missing required arguments, unknown commands.
     Case { args: &["eval"], stdin: "", expect: &["--run"] },
     Case { args: &["reward"], stdin: "", expect: &["--function"] },
+    // The clearance term needs the whole arm and the obstacles: refused, not ignored.
+    Case { args: &["reward", "--function", "sar", "--config", "$DIR/clearance.toml"], stdin: "", expect: &["reward.clearance", "stagerl reward", "end effector"] },
     Case { args: &["frobnicate"], stdin: "", expect: &["frobnicate"] },
     Case { args: &[], stdin: "", expect: &["Usage"] },
     // Eval: run directories and checkpoints.
@@ -272,6 +274,7 @@ fn fixture(dir: &Path) {
     std::fs::copy(&final_ck, dir.join("copy.safetensors")).unwrap();
     std::fs::write(dir.join("bad.toml"), "[task]\nmax_step = 10\n").unwrap();
     std::fs::write(dir.join("huge_buffer.toml"), "[agent]\nbuffer_size = 100000000000000\n").unwrap();
+    std::fs::write(dir.join("clearance.toml"), "[reward.clearance]\nweight = 1.0\n").unwrap();
     std::fs::write(dir.join("displacement.toml"), "[reward]\ndirection = \"displacement\"\n").unwrap();
     std::fs::write(dir.join("two.urdf"), TWO_JOINT_URDF).unwrap();
     let branchy =

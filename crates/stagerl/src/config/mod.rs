@@ -73,8 +73,14 @@ impl MemoryEstimate {
 impl Config {
     /// The memory a run of this config needs for an arm of `dof` joints, estimated before anything
     /// is allocated (in f64: absurd sizes do not overflow).
+    /// The per-link observation's slots (one per collision shape of the arm, unknown before it
+    /// is loaded) are estimated as three per joint (the UR5 has 14 shapes for 6 joints).
     pub fn estimated_memory(&self, dof: usize) -> MemoryEstimate {
-        let obs = crate::env::ObservationLayout::new(self.task.observation, dof, self.task.obstacle_slots())
+        let (encoding, mut slots) = (self.task.obstacle_observation, self.task.obstacle_slots());
+        if encoding == crate::env::ObstacleObservation::PerLink && slots > 0 {
+            slots = 3 * dof;
+        }
+        let obs = crate::env::ObservationLayout::with_encoding(self.task.observation, dof, encoding, slots)
             .dim() as f64;
         let act = dof as f64;
         let f32_bytes = 4.0;

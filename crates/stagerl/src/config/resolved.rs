@@ -35,6 +35,7 @@ impl Config {
         self.check_memory(chain.dof())?;
         let task = self.task.resolve_checked(&chain)?;
         crate::env::check_task_for_arm(&chain, &task)?;
+        crate::env::check_clearance_settings(&chain, &task, &self.reward)?;
         Ok(Resolved { config: self.clone(), chain, task })
     }
 }

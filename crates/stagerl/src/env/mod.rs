@@ -11,6 +11,7 @@
 //! [`ReachEnv::step`] allocates nothing.
 
 mod observation;
+mod proximity;
 pub mod request;
 mod rollout;
 mod task;
@@ -35,7 +36,8 @@ use crate::sim::shield::ShieldStats;
 use crate::{Error, Result};
 pub use task::{
     ObservationKind, ObstacleObservation, OnCollision, ResolvedTask, Sim, TaskConfig,
-    DEFAULT_TARGET_JOINT_RANGE_RAD, MAX_OBS_DELTA_SCALE, OBSTACLE_OBS_LEN, UR5_HOME_POSE_RAD,
+    DEFAULT_TARGET_JOINT_RANGE_RAD, MAX_OBS_DELTA_SCALE, OBSTACLE_OBS_LEN, PER_LINK_DEFAULT_RANGE_M,
+    PER_LINK_OBS_LEN, UR5_HOME_POSE_RAD,
 };
 
 /// The outcome of one step.
@@ -52,6 +54,11 @@ pub struct Step {
     /// With `task.on_collision = "record"` (the default) it changes nothing else; with
     /// `"terminate"` it ends the episode and `terms.total` has `reward.collision_penalty` taken off.
     pub collision: Option<CollisionKind>,
+    /// The arm's clearance from the obstacles after the step (metres, negative inside; the
+    /// smallest signed distance between a collision shape and an obstacle), when it was
+    /// measured: with `[reward.clearance]` or the per-link observation, among obstacles nearer
+    /// than their margin or radius (`f64::INFINITY`: none was). `None`: not measured.
+    pub clearance_m: Option<f64>,
 }
 
 impl Step {
@@ -70,20 +77,24 @@ impl Step {
 
     /// The outcome of a step of `task` from what the arm did (`input`: the end-effector pose
     /// after the step and before it, the joint velocities applied, the target), whether it ended
-    /// in contact (`collided`) and the steps taken so far, this one included (the result's
+    /// in contact (`collided`), the arm's clearance from the obstacles (`clearance_m`, metres,
+    /// see [`Step::clearance_m`]) and the steps taken so far, this one included (the result's
     /// `collision` is left for the caller, who knows what was touched). One rule for the
     /// environment and for hindsight relabelling, which asks it again for substituted goals:
     /// 1. the reward terms of the run's reward function (eqs. 1-15 and 18), the success bonus
     ///    included when `D_PT < beta`;
     /// 2. a step in contact with `task.on_collision = "terminate"` ends the episode and loses
     ///    `reward.collision_penalty` (0 when unset); with `"record"` contact changes nothing;
-    /// 3. terminated: reached or ended by contact; truncated: not terminated at `max_steps`.
+    /// 3. with `[reward.clearance]`, R_clearance of `clearance_m` is taken off (eqs. 19-21 of
+    ///    [`crate::reward`]; 0 when not measured); unset, nothing is;
+    /// 4. terminated: reached or ended by contact; truncated: not terminated at `max_steps`.
     #[inline]
     pub fn outcome(
         task: &ResolvedTask,
         reward: &RewardConfig,
         input: &RewardInput<'_>,
         collided: bool,
+        clearance_m: Option<f64>,
         steps: u32,
     ) -> Step {
         let mut terms = RewardTerms::compute(reward, task.dt_s, input);
@@ -91,9 +102,13 @@ impl Step {
         if ended_by_contact {
             terms.total -= reward.collision_penalty.unwrap_or(0.0);
         }
+        if let (Some(c), Some(d)) = (&reward.clearance, clearance_m) {
+            terms.clearance = c.penalty(d);
+            terms.total -= terms.clearance;
+        }
         let terminated = terms.reached || ended_by_contact;
         let truncated = !terminated && steps >= task.max_steps;
-        Step { terms, terminated, truncated, collision: None }
+        Step { terms, terminated, truncated, collision: None, clearance_m }
     }
 }
 
@@ -205,6 +220,12 @@ pub struct ReachEnv {
     /// A request's obstacles ([`ReachEnv::set_request_obstacles`]): episodes have the task's
     /// fixed obstacles and these, and no random ones. `None`: the task's scene.
     request_obstacles: Option<Vec<crate::sim::scene::Obstacle>>,
+    /// Each collision shape's nearest obstacle within `proximity_cutoff` (scratch, one per
+    /// shape; see [`proximity`]).
+    proximity: Vec<Option<(usize, crate::sim::collision::distance::Closest)>>,
+    /// The distance below which `proximity` is measured (m); `None`: it is not (neither the
+    /// per-link observation nor `[reward.clearance]` is on).
+    proximity_cutoff: Option<f64>,
 }
 
 /// The checks of an environment's parts: the reward's values and collision settings, and the
@@ -212,7 +233,36 @@ pub struct ReachEnv {
 pub fn check_parts(chain: &Chain, task: &ResolvedTask, reward: &RewardConfig) -> Result<()> {
     reward.validate()?;
     check_collision_settings(task.on_collision, reward)?;
+    check_clearance_settings(chain, task, reward)?;
     check_task_for_arm(chain, task)
+}
+
+/// Check that `[reward.clearance]` can measure something: obstacles to keep clear of, and an
+/// arm with collision shapes to measure from.
+pub fn check_clearance_settings(chain: &Chain, task: &ResolvedTask, reward: &RewardConfig) -> Result<()> {
+    let Some(c) = &reward.clearance else { return Ok(()) };
+    let value = format!("{{ weight = {}, margin_m = {} }}", c.weight, c.margin_m);
+    if task.max_obstacles() == 0 {
+        return Err(Error::config(
+            "reward.clearance",
+            value,
+            "unset for a task without obstacles ([[task.obstacles]] or [task.random_obstacles]): \
+             it penalises the arm's clearance from them",
+        ));
+    }
+    if chain.collision_shapes().is_empty() {
+        return Err(Error::config(
+            "reward.clearance",
+            value,
+            format!(
+                "unset for this arm: no link of `{}` to `{}` has a collision shape (box, sphere, \
+                 cylinder or loaded mesh) to measure the clearance from",
+                chain.base_link(),
+                chain.tip_link()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The checks of a resolved task against the arm: one value per joint, and contacts that can
@@ -381,6 +431,8 @@ impl ReachEnv {
         arm.set_shield(&chain, task.shield)?;
         let far_obs = empty_slot_distance(&task, &chain);
         let mut env = ReachEnv {
+            proximity: vec![None; chain.collision_shapes().len()],
+            proximity_cutoff: proximity::proximity_cutoff(&task, &reward),
             arm,
             nearest: Vec::with_capacity(task.max_obstacles()),
             far_obs,
@@ -402,6 +454,7 @@ impl ReachEnv {
             task,
             reward,
         };
+        env.measure_proximity();
         env.write_observation();
         Ok(env)
     }
@@ -534,6 +587,7 @@ impl ReachEnv {
         self.steps = 0;
         self.collision_steps = 0;
         self.done = false;
+        self.measure_proximity();
         self.write_observation();
         &self.obs
     }
@@ -571,6 +625,7 @@ impl ReachEnv {
         self.ee = self.chain.fk(&self.q);
         self.steps += 1;
         self.collision_steps += u32::from(self.arm.contact().is_some());
+        let clearance = self.measure_proximity();
         let input = RewardInput {
             ee_pos: self.ee.position,
             ee_quat: self.ee.quaternion_xyzw(),
@@ -579,7 +634,8 @@ impl ReachEnv {
             prev_ee_pos: Some(prev_ee),
         };
         let contact = self.arm.contact();
-        let mut step = Step::outcome(&self.task, &self.reward, &input, contact.is_some(), self.steps);
+        let mut step =
+            Step::outcome(&self.task, &self.reward, &input, contact.is_some(), clearance, self.steps);
         step.collision = contact.map(|c| c.kind());
         self.done = step.done();
         self.write_observation();
@@ -599,6 +655,7 @@ impl ReachEnv {
         match self.task.obstacle_observation {
             ObstacleObservation::Absolute => self.write_obstacles_absolute(slots),
             ObstacleObservation::Nearest => self.write_obstacles_nearest(slots),
+            ObstacleObservation::PerLink => self.write_obstacles_per_link(slots),
         }
         let k = self.task.obs_delta_scale;
         self.layout.write_target_entries(&mut self.obs, k, self.ee.position, self.target);
@@ -845,6 +902,7 @@ impl ReachEnv {
         let v = if s.sim_velocities.is_empty() { &s.joint_vel } else { &s.sim_velocities };
         self.arm.set_state(&self.chain, &self.q, v)?;
         self.ee = self.chain.fk(&self.q);
+        self.measure_proximity();
         self.write_observation();
         Ok(())
     }

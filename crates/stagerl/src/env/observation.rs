@@ -13,15 +13,17 @@
 //! 3. `target` (3): the target, metres, base frame;
 //! 4. `scaled_delta` (3): `k (target - ee_pos)`;
 //! 5. `scaled_distance` (1): `k |target - ee_pos|`;
-//! 6. with `task.observe_obstacles`, `obstacle_<i>` (7 each) for each obstacle slot `i`, in the
-//!    encoding of `task.obstacle_observation` ([`ObstacleObservation`]).
+//! 6. with `task.observe_obstacles`, `obstacle_<i>` for each obstacle slot `i`, in the encoding
+//!    of `task.obstacle_observation` ([`ObstacleObservation`]): 7 values per obstacle slot
+//!    (`"absolute"`, `"nearest"`), or 4 per collision shape of the arm (`"per_link"`, each
+//!    value in [-1, 1]).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::ops::Range;
 
-use super::task::{ObservationKind, ObstacleObservation, ResolvedTask, OBSTACLE_OBS_LEN};
+use super::task::{ObservationKind, ObstacleObservation, ResolvedTask, OBSTACLE_OBS_LEN, PER_LINK_OBS_LEN};
 use crate::robot::Chain;
 
 /// One block of the observation, as the portable policy description writes it.
@@ -43,17 +45,40 @@ pub struct ObservationLayout {
     kind: ObservationKind,
     dof: usize,
     obstacle_slots: usize,
+    /// Values per obstacle slot.
+    slot_len: usize,
 }
 
 impl ObservationLayout {
-    /// The layout of `kind` for `dof` joints and `obstacle_slots` observed obstacles.
+    /// The layout of `kind` for `dof` joints and `obstacle_slots` observed obstacles of
+    /// [`OBSTACLE_OBS_LEN`] values each (the `"absolute"` and `"nearest"` encodings).
     pub const fn new(kind: ObservationKind, dof: usize, obstacle_slots: usize) -> ObservationLayout {
-        ObservationLayout { kind, dof, obstacle_slots }
+        ObservationLayout { kind, dof, obstacle_slots, slot_len: OBSTACLE_OBS_LEN }
+    }
+
+    /// The layout of `kind` for `dof` joints with `encoding`'s slots: `slots` of them
+    /// (obstacles, or the arm's collision shapes for `"per_link"`).
+    pub const fn with_encoding(
+        kind: ObservationKind,
+        dof: usize,
+        encoding: ObstacleObservation,
+        slots: usize,
+    ) -> ObservationLayout {
+        let slot_len = match encoding {
+            ObstacleObservation::PerLink => PER_LINK_OBS_LEN,
+            _ => OBSTACLE_OBS_LEN,
+        };
+        ObservationLayout { kind, dof, obstacle_slots: slots, slot_len }
     }
 
     /// The layout of a resolved task.
     pub fn of(task: &ResolvedTask) -> ObservationLayout {
-        ObservationLayout::new(task.observation, task.home_pose.len(), task.obstacle_slots())
+        ObservationLayout::with_encoding(
+            task.observation,
+            task.home_pose.len(),
+            task.obstacle_observation,
+            task.obstacle_slots(),
+        )
     }
 
     /// `q / pi`, one per joint.
@@ -91,12 +116,18 @@ impl ObservationLayout {
         self.scaled_delta().end
     }
 
-    /// Every obstacle slot's values, `OBSTACLE_OBS_LEN` per slot (empty without observed
-    /// obstacles).
+    /// Every obstacle slot's values, [`ObservationLayout::slot_len`] per slot (empty without
+    /// observed obstacles).
     #[inline]
     pub fn obstacles(&self) -> Range<usize> {
         let s = self.scaled_distance() + 1;
-        s..s + OBSTACLE_OBS_LEN * self.obstacle_slots
+        s..s + self.slot_len * self.obstacle_slots
+    }
+
+    /// Values per obstacle slot: [`OBSTACLE_OBS_LEN`], or [`PER_LINK_OBS_LEN`] for the
+    /// per-link encoding.
+    pub fn slot_len(&self) -> usize {
+        self.slot_len
     }
 
     /// Observed obstacle slots.
@@ -143,9 +174,9 @@ impl ObservationLayout {
             entry("scaled_delta", self.scaled_delta(), format!("{k} * (target - ee_pos), per axis")),
             entry("scaled_distance", d..d + 1, format!("{k} * |target - ee_pos| (Euclidean norm)")),
         ];
-        let start = self.obstacles().start;
+        let (start, len) = (self.obstacles().start, self.slot_len);
         for i in 0..self.obstacle_slots {
-            let r = start + i * OBSTACLE_OBS_LEN..start + (i + 1) * OBSTACLE_OBS_LEN;
+            let r = start + i * len..start + (i + 1) * len;
             out.push(entry(&format!("obstacle_{i}"), r, slot_words(task, chain, i)));
         }
         out
@@ -155,8 +186,8 @@ impl ObservationLayout {
     /// `chain` can produce (f32, as the observation is): joints within their limits and within
     /// `max_steps` full-speed steps of the home pose (continuous joints have no limits),
     /// positions within the arm's reach, deltas within twice it, obstacle slots within
-    /// [`ResolvedTask::obstacle_obs_bounds`]; widened a little so that rounding to f32 never puts
-    /// a value outside.
+    /// [`ResolvedTask::obstacle_obs_bounds`] (per-link slots: [-1, 1]); widened a little so that
+    /// rounding to f32 never puts a value outside.
     pub fn bounds(&self, task: &ResolvedTask, chain: &Chain) -> (Vec<f32>, Vec<f32>) {
         let (mut lo, mut hi) = (vec![0.0f32; self.dim()], vec![0.0f32; self.dim()]);
         let travel = f64::from(task.max_steps) * task.dt_s;
@@ -175,6 +206,11 @@ impl ObservationLayout {
         set(self.ee_pos().start..self.target().end, -reach, reach);
         set(self.scaled_delta(), -delta, delta);
         set(self.scaled_distance()..self.scaled_distance() + 1, 0.0, delta);
+        if task.obstacle_observation == ObstacleObservation::PerLink {
+            // Each value is in [-1, 1] by construction, and so is its f32.
+            set(self.obstacles(), -1.0, 1.0);
+            return (lo, hi);
+        }
         let slot = task.obstacle_obs_bounds(chain.reach_bound_m());
         for (i, v) in self.obstacles().enumerate() {
             let (l, h) = slot[i % OBSTACLE_OBS_LEN];
@@ -206,6 +242,16 @@ fn slot_words(task: &ResolvedTask, chain: &Chain, i: usize) -> String {
                  without such an obstacle, zeros and the distance {}",
                 ordinal(i + 1),
                 empty_slot_distance(task, chain)
+            )
+        }
+        ObstacleObservation::PerLink => {
+            let r = task.per_link_range_m();
+            let link = chain.collision_shapes().get(i).map_or("?", |s| s.link.as_str());
+            format!(
+                "collision shape {i} of the arm (on link `{link}`) and its nearest obstacle, with d \
+                 its signed distance (metres, negative inside) and R = {r} m: when d < R, the unit \
+                 direction x, y, z from the shape's closest point to the obstacle's times \
+                 1 - max(d, 0) / R, then max(d, -R) / R; otherwise 0, 0, 0, 1 (every value in [-1, 1])"
             )
         }
     }

@@ -48,8 +48,8 @@ fn observation_layout() {
     assert_eq!(o[15], (e.distance() * 10.0) as f32);
 }
 
-/// For every observation option (no obstacles; fixed or random ones observed absolute or
-/// nearest, with and without a range; a 7-joint arm), the layout's entries tile the
+/// For every observation option (no obstacles; fixed or random ones observed absolute,
+/// nearest, with and without a range, or per link; a 7-joint arm), the layout's entries tile the
 /// observation from 0 without gap, their sizes sum to its length, and every value of a few
 /// random episodes stays within the layout's bounds.
 #[test]
@@ -75,6 +75,12 @@ fn the_layout_describes_every_value_of_every_observation_option() {
             observe_obstacles: true,
             obstacle_observation: nearest,
             obstacle_range_m: Some(0.15),
+            ..TaskConfig::default()
+        },
+        TaskConfig {
+            random_obstacles: random(),
+            observe_obstacles: true,
+            obstacle_observation: ObstacleObservation::PerLink,
             ..TaskConfig::default()
         },
     ];
@@ -113,7 +119,8 @@ fn the_layout_describes_every_value_of_every_observation_option() {
             }
         }
     }
-    assert_eq!(slots_seen, [0, 0, 1, 3, 4, 3, 0]);
+    // The per-link encoding: one slot per collision shape of the UR5 (14), whatever the count.
+    assert_eq!(slots_seen, [0, 0, 1, 3, 4, 3, 14, 0]);
 }
 
 #[test]

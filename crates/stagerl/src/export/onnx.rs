@@ -264,7 +264,8 @@ pub fn encode(
     }
     let mut obs_doc = "standard observation: q / pi, end-effector position (m), target (m), k * (target - ee), k * |target - ee|".to_string();
     if let Some(o) = &spec.observation.obstacles {
-        obs_doc.push_str(&format!(", then {} obstacle slots of 7 values ({} encoding)", o.slots, o.encoding));
+        let (n, len, encoding) = (o.slots, o.values_per_slot, &o.encoding);
+        obs_doc.push_str(&format!(", then {n} obstacle slots of {len} values ({encoding} encoding)"));
     }
     put_len_delimited(&mut graph, 11, &value_info(INPUT, spec.observation.dim, &obs_doc));
     let out_doc = "joint velocity command, rad/s (m/s for prismatic joints)";

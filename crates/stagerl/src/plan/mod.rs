@@ -601,7 +601,10 @@ impl Planner {
         }
         let task = self.env.task();
         let n = self.env.obstacles().len();
-        if task.observe_obstacles {
+        if task.observe_obstacles && task.obstacle_observation == crate::env::ObstacleObservation::PerLink {
+            // One slot per collision shape, each with its nearest obstacle among all of them.
+            None
+        } else if task.observe_obstacles {
             let slots = task.obstacle_slots();
             (n > slots).then(|| {
                 format!(

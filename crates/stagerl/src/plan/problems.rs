@@ -117,6 +117,8 @@ pub fn draw_problems(
     cfg.task.observe_obstacles = false;
     cfg.task.obstacle_observation = Default::default();
     cfg.task.obstacle_range_m = None;
+    // Nor on the reward (whose clearance term needs obstacles, which a free-space set lacks).
+    cfg.reward.clearance = None;
     cfg.train.obstacles_in_path = 0.0;
     let index = ProblemSet::ALL.iter().position(|&s| s == set).unwrap_or(0) as u64;
     let mut env = ReachEnv::from_config(&cfg, 0)?;

@@ -3,6 +3,18 @@
 //! incentive SAR (eqs. 13-15) and the sparse basic reward (eq. 18), plus the +20 success bonus of
 //! section VI.
 //!
+//! Our extension beside the paper's terms, off by default (`[reward.clearance]`,
+//! [`ClearanceConfig`]): with `d` the arm's clearance from the obstacles (the smallest signed
+//! distance between a collision shape of the arm and an obstacle, metres, negative inside;
+//! [`crate::sim::collision::distance`]), weight `w` and margin `m`:
+//! 19. `c = max(d, -m) / m`, in [-1, inf);
+//! 20. `R_clearance = w (1 - c)^2` when `d < m`, else 0: 0 at the margin, `w` at contact,
+//!     growing with the depth of an overlap up to `4 w` at a depth of `m`;
+//! 21. the agent receives `R + bonus - R_clearance` (`R` any of the five functions). It needs
+//!     the arm's geometry, so only the environment computes it ([`crate::env::Step::outcome`]);
+//!     `stagerl reward` and `stagerl.rewards.compute`, which see the end effector only, refuse
+//!     `[reward.clearance]`.
+//!
 //! [`RewardTerms::compute`] evaluates every term at once, so a caller can see why a step got its
 //! reward; [`RewardTerms::reward`] is the value of the configured [`RewardFunction`] and
 //! [`RewardTerms::total`] adds the bonus.
@@ -113,6 +125,73 @@ pub struct RewardConfig {
     /// collision term. Unset: 0 (and left out of a written config).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub collision_penalty: Option<f64>,
+    /// `[reward.clearance]`: a penalty as the arm comes closer to an obstacle than a margin,
+    /// our extension ([`ClearanceConfig`], eqs. 19-21 of this module). Unset: off, the paper's
+    /// rewards.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<ClearanceConfig>,
+}
+
+/// `[reward.clearance]`: a penalty taken off every step's reward as the arm comes closer to an
+/// obstacle than `margin_m` (our extension, off by default: unset, the paper's rewards).
+/// `R_clearance = weight (1 - c)^2` with `c = max(d, -margin_m) / margin_m` when the arm's
+/// clearance from the obstacles `d < margin_m`, else 0 (eqs. 19-21); values in [0, 4 weight].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClearanceConfig {
+    /// Weight w of the clearance penalty (>= 0, finite): its value at contact (d = 0).
+    pub weight: f64,
+    /// Margin m, metres (> 0, finite): no penalty while every collision shape of the arm is at
+    /// least this far from every obstacle.
+    pub margin_m: f64,
+}
+
+impl Default for ClearanceConfig {
+    fn default() -> Self {
+        ClearanceConfig { weight: 1.0, margin_m: 0.1 }
+    }
+}
+
+impl ClearanceConfig {
+    /// The error of a tool that computes rewards from the end effector's pose alone (`tool`:
+    /// `stagerl reward`, `stagerl.rewards.compute`) for a config with `[reward.clearance]`:
+    /// the term needs the whole arm and the obstacles, which only the environment has.
+    pub fn refused_by(&self, tool: &str) -> Error {
+        Error::config(
+            "reward.clearance",
+            format!("{{ weight = {}, margin_m = {} }}", self.weight, self.margin_m),
+            format!(
+                "unset for {tool}: it computes the rewards from the end effector's pose alone, and \
+                 the clearance term needs the whole arm's distance to the obstacles (the environment \
+                 charges it: stagerl train, eval, plan, the Python ReachEnv)"
+            ),
+        )
+    }
+
+    /// Eqs. 19-20 for the arm's clearance `d` (metres; `f64::INFINITY` without obstacles).
+    #[inline]
+    pub fn penalty(&self, d: f64) -> f64 {
+        if d >= self.margin_m {
+            return 0.0;
+        }
+        let c = d.max(-self.margin_m) / self.margin_m;
+        self.weight * (1.0 - c) * (1.0 - c)
+    }
+
+    /// Check both values; the error names the field, the value and what is allowed.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return Err(Error::config("reward.clearance.weight", self.weight, "a finite number >= 0"));
+        }
+        if !(self.margin_m.is_finite() && self.margin_m > 0.0) {
+            return Err(Error::config(
+                "reward.clearance.margin_m",
+                self.margin_m,
+                "a distance in metres, finite and > 0",
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for RewardConfig {
@@ -128,6 +207,7 @@ impl Default for RewardConfig {
             direction: DirectionSource::Quaternion,
             direction_fold: true,
             collision_penalty: None,
+            clearance: None,
         }
     }
 }
@@ -144,6 +224,9 @@ impl RewardConfig {
         positive("reward.sar_scale_m", self.sar_scale_m)?;
         if let Some(p) = self.collision_penalty {
             non_negative("reward.collision_penalty", p)?;
+        }
+        if let Some(c) = &self.clearance {
+            c.validate()?;
         }
         Ok(())
     }
@@ -261,8 +344,12 @@ pub struct RewardTerms {
     /// The success bonus when reached, else 0.
     pub bonus: f64,
     /// `reward + bonus`: what the agent receives. (The environment takes
-    /// `reward.collision_penalty` off it when a contact ends the episode.)
+    /// `reward.collision_penalty` off it when a contact ends the episode, and `clearance`.)
     pub total: f64,
+    /// R_clearance (eqs. 19-20), taken off `total` by the environment; 0 unless
+    /// `[reward.clearance]` is set.
+    #[serde(default)]
+    pub clearance: f64,
 }
 
 impl RewardTerms {
@@ -463,6 +550,7 @@ impl RewardTerms {
             reward,
             bonus,
             total: reward + bonus,
+            clearance: 0.0,
         }
     }
 

@@ -73,20 +73,35 @@ pub struct ObservationSpec {
 /// How the `obstacle_<i>` entries are computed (each entry's `value` says it in words).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ObstacleSlotsSpec {
-    /// Number of slots, 7 values each.
+    /// Number of slots, `values_per_slot` values each.
     pub slots: usize,
+    /// Values per slot: 7 (`absolute`, `nearest`) or 4 (`per_link`). Absent in descriptions
+    /// of older versions: 7.
+    #[serde(default = "seven", skip_serializing_if = "is_seven")]
+    pub values_per_slot: usize,
     /// `absolute`: slot `i` is obstacle `i` (fixed obstacles first, then random ones): centre (3,
     /// m, base frame), half size along its axes (3, m; a sphere's radius three times), 1 for a
     /// sphere else 0; all zeros without one. `nearest`: slot `i` is the `i+1`-th nearest obstacle
     /// to the end effector by surface distance (ties by obstacle order), within `range_m` if set:
     /// `obs_delta_scale` times (centre - end effector) (3), half size (3) and that distance (1);
-    /// without one, zeros and `empty_slot_distance`.
+    /// without one, zeros and `empty_slot_distance`. `per_link`: slot `i` is collision shape `i`
+    /// of the arm and its nearest obstacle, `range_m` the influence radius R: with `d` their
+    /// signed distance, the unit direction from the shape to the obstacle times
+    /// `1 - max(d, 0) / R` (3) and `max(d, -R) / R` (1) when `d < R`, else `0, 0, 0, 1`.
     pub encoding: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub range_m: Option<f64>,
     /// The distance value of an empty `nearest` slot (f32 as written).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub empty_slot_distance: Option<f64>,
+}
+
+fn seven() -> usize {
+    crate::env::OBSTACLE_OBS_LEN
+}
+
+fn is_seven(n: &usize) -> bool {
+    *n == seven()
 }
 
 /// `x' = clip((x - mean) / std, -clip, clip)` per observation value, in f32.
@@ -223,11 +238,12 @@ fn observation_spec(env: &ReachEnv) -> ObservationSpec {
     let layout = ObservationLayout::of(task);
     let obstacles = (layout.obstacle_slots() > 0).then(|| ObstacleSlotsSpec {
         slots: layout.obstacle_slots(),
-        encoding: match task.obstacle_observation {
-            ObstacleObservation::Absolute => "absolute".into(),
-            ObstacleObservation::Nearest => "nearest".into(),
+        encoding: task.obstacle_observation.name().into(),
+        values_per_slot: layout.slot_len(),
+        range_m: match task.obstacle_observation {
+            ObstacleObservation::PerLink => Some(task.per_link_range_m()),
+            _ => task.obstacle_range_m,
         },
-        range_m: task.obstacle_range_m,
         empty_slot_distance: (task.obstacle_observation == ObstacleObservation::Nearest)
             .then(|| f64::from(empty_slot_distance(task, env.chain()))),
     });

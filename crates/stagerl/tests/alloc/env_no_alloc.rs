@@ -9,7 +9,8 @@ fn stepping_and_resetting_allocate_nothing() {
     no_allocation_in(stagerl::config::Config::default());
 }
 
-/// With random obstacles, observed, and contacts ending episodes, too.
+/// With random obstacles, observed (absolute, nearest, per link), and contacts ending episodes,
+/// too; with the clearance term.
 #[test]
 fn random_obstacles_allocate_nothing() {
     let mut cfg = stagerl::config::Config::default();
@@ -18,6 +19,11 @@ fn random_obstacles_allocate_nothing() {
     cfg.task.on_collision = stagerl::env::OnCollision::Terminate;
     no_allocation_in(cfg.clone());
     cfg.task.obstacle_observation = stagerl::env::ObstacleObservation::Nearest;
+    no_allocation_in(cfg.clone());
+    // One slot per collision shape with its nearest obstacle, and the clearance term.
+    cfg.task.obstacle_observation = stagerl::env::ObstacleObservation::PerLink;
+    no_allocation_in(cfg.clone());
+    cfg.reward.clearance = Some(stagerl::reward::ClearanceConfig::default());
     no_allocation_in(cfg);
 }
 

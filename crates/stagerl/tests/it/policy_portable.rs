@@ -98,14 +98,27 @@ impl Portable {
     }
 
     /// The observation from joint positions (rad), end effector and target (m) and the
-    /// obstacles, by the layout.
-    fn observation(&self, q: &[f64], ee: [f64; 3], target: [f64; 3], obstacles: &[Seen]) -> Vec<f32> {
+    /// obstacles, by the layout. The `per_link` slots need the arm's collision shapes, which the
+    /// description does not hold: they are taken from `env_obs` (checked within [-1, 1]).
+    fn observation(
+        &self,
+        q: &[f64],
+        ee: [f64; 3],
+        target: [f64; 3],
+        obstacles: &[Seen],
+        env_obs: &[f32],
+    ) -> Vec<f32> {
         let obs = &self.spec["observation"];
+        let per_link = obs["obstacles"]["encoding"] == "per_link";
         let k = obs["obs_delta_scale"].as_f64().unwrap();
         let mut out = vec![0.0f32; obs["dim"].as_u64().unwrap() as usize];
         let delta: Vec<f64> = (0..3).map(|i| (target[i] - ee[i]) * k).collect();
         let dist = delta.iter().map(|d| d * d).sum::<f64>().sqrt();
-        let slots = if obs["obstacles"].is_null() { Vec::new() } else { self.obstacle_slots(obstacles, ee) };
+        let slots = if obs["obstacles"].is_null() || per_link {
+            Vec::new()
+        } else {
+            self.obstacle_slots(obstacles, ee)
+        };
         let mut size = 0;
         for entry in obs["layout"].as_array().unwrap() {
             let start = entry["start"].as_u64().unwrap() as usize;
@@ -116,6 +129,14 @@ impl Portable {
                 "scaled_delta" => delta.clone(),
                 "scaled_distance" => vec![dist],
                 other => match other.strip_prefix("obstacle_") {
+                    Some(_) if per_link => {
+                        let size = entry["size"].as_u64().unwrap() as usize;
+                        assert_eq!(size as u64, obs["obstacles"]["values_per_slot"].as_u64().unwrap());
+                        let v: Vec<f64> =
+                            env_obs[start..start + size].iter().map(|&x| f64::from(x)).collect();
+                        assert!(v.iter().all(|x| (-1.0..=1.0).contains(x)), "{v:?}");
+                        v
+                    }
                     Some(i) => slots[i.parse::<usize>().unwrap()].clone(),
                     None => panic!("unknown observation entry {other}"),
                 },
@@ -227,6 +248,7 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
         (Algo::Sac, false, Some(ObstacleObservation::Nearest)),
         (Algo::Td3, false, Some(ObstacleObservation::Absolute)),
         (Algo::Ppo, true, Some(ObstacleObservation::Nearest)),
+        (Algo::Sac, true, Some(ObstacleObservation::PerLink)),
     ]);
     for (algo, norm_obs, obstacles) in variants {
         let dir = root.join(format!("{algo}-{norm_obs}-{obstacles:?}"));
@@ -244,6 +266,18 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
             assert_eq!(p.spec["format_version"], version);
             assert_eq!(p.spec["observation"]["obstacles"].is_null(), obstacles.is_none());
             let mut env = ReachEnv::from_config(&cfg, 0).unwrap();
+            if obstacles == Some(ObstacleObservation::PerLink) {
+                // One slot of 4 per collision shape of the arm, R the default 0.1 m.
+                let (o, shapes) = (&p.spec["observation"]["obstacles"], env.chain().collision_shapes().len());
+                assert_eq!(
+                    (&o["encoding"], &o["slots"], &o["values_per_slot"]),
+                    (&"per_link".into(), &shapes.into(), &4.into())
+                );
+                assert_eq!(
+                    (&o["range_m"], &p.spec["observation"]["dim"]),
+                    (&0.1.into(), &(16 + 4 * shapes).into())
+                );
+            }
             let mut agent = stagerl::train::load_agent(&cfg, &env, &path).unwrap();
             let (lo, hi) = (p.floats(&["action", "lower_limits"]), p.floats(&["action", "upper_limits"]));
             let dt = p.spec["action"]["dt_s"].as_f64().unwrap();
@@ -267,7 +301,7 @@ fn the_policy_runs_from_the_checkpoint_and_its_metadata_alone() {
                         distance: o.distance_to_point_m([ee.x, ee.y, ee.z]),
                     })
                     .collect();
-                let obs = p.observation(&q, [ee.x, ee.y, ee.z], t, &seen);
+                let obs = p.observation(&q, [ee.x, ee.y, ee.z], t, &seen, env.observation());
                 assert_eq!(obs, env.observation(), "observation of trial {trial}");
                 // Step 4 clips the action to [-1, 1] (PPO's mean can leave it; a tanh output cannot).
                 let mine: Vec<f32> = p.action(&obs).iter().map(|a| a.clamp(-1.0, 1.0)).collect();

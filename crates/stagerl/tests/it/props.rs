@@ -123,6 +123,7 @@ fn reward_config() -> impl Strategy<Value = RewardConfig> {
                     direction,
                     direction_fold: fold,
                     collision_penalty: None,
+                    clearance: None,
                 }
             },
         )

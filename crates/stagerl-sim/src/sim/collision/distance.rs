@@ -17,7 +17,11 @@
 //!    `min_s |p(s) - clip(p(s), -h, h)|^2`, a convex piecewise quadratic in `s` whose pieces
 //!    end where `p(s)` crosses a face's plane: each piece's minimum in closed form, exact (f64;
 //!    parry's GJK answer was measured up to 6 mm off for such pairs, with its own intersection
-//!    test disagreeing); overlapping, and anything else with a box or a mesh part: parry3d's
+//!    test disagreeing); overlapping with its segment reaching into the box: the penetration
+//!    depth of the segment by the separating axes of the box and the segment (the box's three
+//!    face normals and `u x e_j`, `u` the segment's direction: the face normals of the
+//!    Minkowski difference, so the smallest overlap along them is the exact depth), plus the
+//!    radius, in f64 and without allocation; anything else with a box or a mesh part: parry3d's
 //!    contact query (f32; a mesh part is its convex hull, the same hull the contact check
 //!    tests, so nothing is bounded loosely);
 //! 6. a lower bound for every pair from bounding spheres, `d >= |c_A - c_B| - R_A - R_B`
@@ -155,6 +159,36 @@ impl ArmCollider {
         }
     }
 
+    /// Each arm shape's nearest obstacle at the last placement, by the signed distance of
+    /// [`ArmCollider::closest`] (steps 1-5): `out[k]` for shape `k` of
+    /// [`Chain::collision_shapes`] is `Some((obstacle, closest))` for the obstacle nearest to it
+    /// (ties: the lower index) when one is nearer than `cutoff_m`, else `None`. A pair whose
+    /// bound (step 6) is `cutoff_m` or more, or than the nearest found so far, is not queried.
+    /// Returns the smallest distance found (`f64::INFINITY` when none is below `cutoff_m`): the
+    /// arm's clearance from the obstacles. `out` holds one entry per shape; no allocation for
+    /// capsules and spheres (mesh parts and box-shaped links go to parry, step 5).
+    pub fn nearest_obstacles(&self, cutoff_m: f64, out: &mut [Option<(usize, Closest)>]) -> f64 {
+        let mut smallest = f64::INFINITY;
+        for (shape, slot) in out.iter_mut().enumerate().take(self.shapes.len()) {
+            *slot = None;
+            let mut best = cutoff_m;
+            for obstacle in 0..self.obstacles.len() {
+                let pair = Pair::Obstacle { shape, obstacle };
+                if self.lower_bound(pair) >= best {
+                    continue;
+                }
+                if let Some(c) = self.closest(pair).filter(|c| c.distance_m < best) {
+                    best = c.distance_m;
+                    *slot = Some((obstacle, c));
+                }
+            }
+            if slot.is_some() {
+                smallest = smallest.min(best);
+            }
+        }
+        smallest
+    }
+
     /// Step 5: arm shape `k` against a posed parry shape.
     fn parry_closest(
         &self,
@@ -262,7 +296,7 @@ fn round_closest(ga: &Geo, gb: &Geo) -> Closest {
 }
 
 /// Step 5: a capsule or sphere (segment and radius `g`) against a box of half extents `c` at
-/// `pose`, when they are apart (`None` when the segment reaches into the box).
+/// `pose`: apart or overlapping, in closed form (`None` only for a degenerate box).
 fn round_box_closest(g: &Geo, pose: &parry3d::math::Pose3, c: &parry3d::shape::Cuboid) -> Option<Closest> {
     let (qr, t) = (pose.rotation, pose.translation);
     let (x, y, z, w) = (f64::from(qr.x), f64::from(qr.y), f64::from(qr.z), f64::from(qr.w));
@@ -284,7 +318,17 @@ fn round_box_closest(g: &Geo, pose: &parry3d::math::Pose3, c: &parry3d::shape::C
     let (a, b) = (local(g.a), local(g.b));
     let (p, on_box, d2) = segment_box(a, b, h);
     if d2 <= 1e-24 {
-        return None;
+        let (depth, n, deepest) = segment_in_box(a, b, h)?;
+        let normal = [0, 1, 2].map(|i| r[i][0] * n[0] + r[i][1] * n[1] + r[i][2] * n[2]);
+        let pa = world(deepest);
+        let pa = [0, 1, 2].map(|i| pa[i] - g.radius * normal[i]);
+        let d = -(depth + g.radius);
+        return Some(Closest {
+            distance_m: d,
+            point_a_m: pa,
+            point_b_m: [0, 1, 2].map(|i| pa[i] - d * normal[i]),
+            normal,
+        });
     }
     let len = d2.sqrt();
     let normal_local = [0, 1, 2].map(|j| (p[j] - on_box[j]) / len);
@@ -297,6 +341,40 @@ fn round_box_closest(g: &Geo, pose: &parry3d::math::Pose3, c: &parry3d::shape::C
         point_b_m: world(on_box),
         normal,
     })
+}
+
+/// The penetration of the segment `a`-`b` into the box `[-h, h]` (its frame), which it reaches
+/// into (step 5): the depth (m, >= 0), the unit direction that moves the segment out along it
+/// and the segment's deepest point along that direction; the smallest overlap over the
+/// separating axes (the box's face normals, then `u x e_j`; ties: the first). `None` for a
+/// box without volume.
+pub(crate) fn segment_in_box(a: [f64; 3], b: [f64; 3], h: [f64; 3]) -> Option<(f64, [f64; 3], [f64; 3])> {
+    let u = super::sub(b, a);
+    let mut axes = [[0.0f64; 3]; 6];
+    for j in 0..3 {
+        axes[j][j] = 1.0;
+        let e = axes[j];
+        let c = [u[1] * e[2] - u[2] * e[1], u[2] * e[0] - u[0] * e[2], u[0] * e[1] - u[1] * e[0]];
+        let len = super::dot(c, c).sqrt();
+        // Parallel to a box axis: that face normal covers it (an empty axis is skipped).
+        axes[3 + j] =
+            if len > 1e-9 * (1.0 + super::dot(u, u).sqrt()) { c.map(|v| v / len) } else { [0.0; 3] };
+    }
+    let mut best: Option<(f64, [f64; 3], [f64; 3])> = None;
+    for l in axes.iter().filter(|l| super::dot(**l, **l) > 0.5) {
+        let rho = h[0] * l[0].abs() + h[1] * l[1].abs() + h[2] * l[2].abs();
+        let (pa, pb) = (super::dot(a, *l), super::dot(b, *l));
+        // Out along +l: the segment's lowest point must rise past rho; along -l: its highest
+        // must fall past -rho.
+        let up = (rho - pa.min(pb), *l, if pa <= pb { a } else { b });
+        let down = (pa.max(pb) + rho, l.map(|v| -v), if pa >= pb { a } else { b });
+        for cand in [up, down] {
+            if best.is_none_or(|(d, _, _)| cand.0 < d) {
+                best = Some(cand);
+            }
+        }
+    }
+    best.filter(|(d, _, _)| d.is_finite() && h.iter().all(|&x| x > 0.0)).map(|(d, n, p)| (d.max(0.0), n, p))
 }
 
 /// The closest points of the segment `a`-`b` and the box `[-h, h]` (its frame): the point on

@@ -40,6 +40,9 @@ radius_m = 0.05
 count = [1, 2]
 [reward]
 collision_penalty = 10.0
+[reward.clearance]
+weight = 2.0
+margin_m = 0.05
 [agent]
 actor_lr = 0.001
 critic_lr = 0.001
@@ -142,6 +145,7 @@ fn the_listing_is_the_default_config_and_shows_the_optional_sections_commented_o
         "# [task.shield]",
         "# [[task.obstacles]]",
         "# [task.random_obstacles]",
+        "# [reward.clearance]",
         "# [agent.her]",
         "# [agent.norm_obs]",
         "# [agent.ppo]",
