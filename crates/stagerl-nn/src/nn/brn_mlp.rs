@@ -241,6 +241,11 @@ impl<T: Scalar> BrnMlp<T> {
         &self.out[..batch * self.out_features()]
     }
 
+    /// Output of the last training pass (`batch x out`).
+    pub fn output(&self) -> &[T] {
+        &self.out[..self.batch * self.out_features()]
+    }
+
     /// Step 2: back-propagates `grad_out` = dL/d(output) of the last training pass and adds
     /// dL/d(params) to the gradient vector.
     ///
