@@ -462,3 +462,122 @@ learned_parts!(Crossq, |s, f| {
         f(super::obs_norm::STD_TENSOR, P::Tensor(r!(n.norm.std)));
     }
 });
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agent::{AgentConfig, Algo};
+
+    fn small(own: CrossqConfig) -> AgentConfig {
+        AgentConfig {
+            algo: Algo::Crossq,
+            hidden: vec![16, 16],
+            batch_size: 8,
+            crossq: Some(own),
+            ..AgentConfig::default()
+        }
+    }
+
+    #[test]
+    fn bad_settings_are_refused_naming_the_field_the_value_and_what_is_allowed() {
+        let d = CrossqConfig::default;
+        for (bad, field, value, allowed) in [
+            (CrossqConfig { bn_momentum: 1.5, ..d() }, "agent.crossq.bn_momentum", "1.5", "[0, 1)"),
+            (CrossqConfig { bn_momentum: f64::NAN, ..d() }, "agent.crossq.bn_momentum", "NaN", "[0, 1)"),
+            (CrossqConfig { adam_beta1: 1.0, ..d() }, "agent.crossq.adam_beta1", "1", "[0, 1)"),
+            (CrossqConfig { adam_beta1: -0.5, ..d() }, "agent.crossq.adam_beta1", "-0.5", "[0, 1)"),
+            (CrossqConfig { policy_delay: 0, ..d() }, "agent.crossq.policy_delay", "0", ">= 1"),
+            (CrossqConfig { n_critics: 0, ..d() }, "agent.crossq.n_critics", "0", "1..=20"),
+            (CrossqConfig { n_critics: 21, ..d() }, "agent.crossq.n_critics", "21", "1..=20"),
+            (CrossqConfig { critic_hidden: vec![], ..d() }, "agent.crossq.critic_hidden", "[]", "1..=16384"),
+            (
+                CrossqConfig { critic_hidden: vec![64, 0], ..d() },
+                "agent.crossq.critic_hidden",
+                "[64, 0]",
+                "1..=16384",
+            ),
+            (CrossqConfig { alpha_lr: 0.0, ..d() }, "agent.crossq.alpha_lr", "0", ""),
+            (CrossqConfig { init_alpha: -1.0, ..d() }, "agent.crossq.init_alpha", "-1", ""),
+            (
+                CrossqConfig { target_entropy_per_dim: f64::INFINITY, ..d() },
+                "agent.crossq.target_entropy_per_dim",
+                "inf",
+                "",
+            ),
+        ] {
+            let e = small(bad).validate().unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains(value) && e.contains(allowed), "{e}");
+        }
+        // The joint pass is twice the batch: refused by the batch size, at CrossQ's defaults too.
+        let big = AgentConfig { batch_size: 200_000, ..AgentConfig::new(Algo::Crossq) };
+        let e = big.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("agent.batch_size") && e.contains("2 x batch_size x widest critic layer (1024)"),
+            "{e}"
+        );
+        AgentConfig { batch_size: 200_000, ..AgentConfig::new(Algo::Sac) }.validate().unwrap();
+        // From an `[agent]` table: the field named; another algorithm's run refuses the section.
+        let parse = |t: &str| toml::from_str::<AgentConfig>(t).map_err(|e| e.to_string());
+        let e = parse("algo = \"crossq\"\n[crossq]\nbn_momentum = 1.5\n")
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("agent.crossq.bn_momentum") && e.contains("1.5") && e.contains("[0, 1)"), "{e}");
+        let e = parse("algo = \"sac\"\n[crossq]\npolicy_delay = 2\n")
+            .unwrap()
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("agent.crossq") && e.contains("[agent.sac]"), "{e}");
+        let e = parse("algo = \"crossq\"\n[crossq]\ntau = 0.1\n").unwrap_err();
+        assert!(e.contains("tau"), "{e}");
+        let e = "crossqq".parse::<Algo>().unwrap_err().to_string();
+        assert!(e.contains("crossq"), "{e}");
+        // The defaults: sbx's.
+        let c = CrossqConfig::default();
+        assert_eq!((c.critic_hidden, c.n_critics, c.policy_delay), (vec![1024, 1024], 2, 3));
+        assert_eq!((c.adam_beta1, c.bn_momentum, c.renorm_warmup_steps), (0.5, 0.99, 100_000));
+        assert_eq!(AgentConfig::new(Algo::Crossq).actor_lr(), 1e-3);
+    }
+
+    #[test]
+    fn the_critics_pass_once_per_update_over_both_halves_and_the_actor_every_policy_delay() {
+        let own = CrossqConfig { critic_hidden: vec![32, 32], ..CrossqConfig::default() };
+        let cfg = small(own);
+        let (od, ad, b) = (5, 2, 8);
+        let mut agent = Crossq::new(&cfg, od, ad, 3);
+        let mut rng = Rng::new(4);
+        let mut batch = Batch::new(b, od, ad);
+        for x in batch.obs.iter_mut().chain(&mut batch.next_obs).chain(&mut batch.act) {
+            *x = rng.uniform_range(-1.0, 1.0) as f32;
+        }
+        // The next observations far from the current ones: the joint statistics are the mean of
+        // both halves' (the first norm sees the inputs themselves).
+        for x in &mut batch.next_obs {
+            *x += 10.0;
+        }
+        let obs = [0.3f32; 5];
+        let (mut before, mut after) = ([0.0f32; 2], [0.0f32; 2]);
+        for k in 1..=7u64 {
+            agent.predict(&obs, &mut before);
+            let s = agent.update(&batch);
+            agent.predict(&obs, &mut after);
+            let actor_step = k % 3 == 0;
+            assert_eq!(s.actor_loss.is_some(), actor_step, "update {k}");
+            assert_eq!(before != after, actor_step, "update {k}: the actor moves only at its steps");
+            for c in &agent.critics {
+                assert!(c.net.norms.iter().all(|n| n.stats.steps == k), "one critic pass per update");
+            }
+            assert!(agent.actor_bn.norms.iter().all(|n| n.stats.steps == k / 3), "update {k}");
+        }
+        // The first norm's running mean after 7 passes from 0 at momentum 0.99: 1 - 0.99^7 of the
+        // joint batch mean of observation 0 (current and next halves).
+        let n = b as f64;
+        let joint: f64 =
+            (0..b).map(|r| f64::from(batch.obs[r * od]) + f64::from(batch.next_obs[r * od])).sum::<f64>()
+                / (2.0 * n);
+        let ra = agent.critics[0].net.norms[0].stats.mean[0];
+        assert!((ra - (1.0 - 0.99f64.powi(7)) * joint).abs() < 1e-9, "{ra} vs {joint}");
+    }
+}
