@@ -130,7 +130,7 @@ fn crossq_sar_learns_to_approach_in_a_tiny_run() {
         after.success_rate
     );
     assert_eq!(summary.updates, 5001);
-    // Measured for this seed and budget (about 10 s): untrained median final distance 0.843 m,
+    // Measured for this seed and budget (about 4 s): untrained median final distance 0.843 m,
     // mean reward -31.4; trained 0.095 m, -6.9 (1 % success: the last centimetre takes longer,
     // as for SAC, 5 % at 8000 steps).
     assert!(before.median_final_distance_m > 0.3, "untrained median {}", before.median_final_distance_m);
