@@ -71,7 +71,7 @@ use crate::{Error, Result};
 /// Most critics (`agent.crossq.n_critics`).
 pub const MAX_CROSSQ_CRITICS: usize = ENSEMBLE.len();
 
-/// `[agent.crossq]`: CrossQ's own settings (defaults: sbx's, see the module's documentation).
+/// `[agent.crossq]`: CrossQ's own settings (defaults: sbx's `sbx/crossq`, see docs/training.md).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct CrossqConfig {
