@@ -8,8 +8,9 @@ ONNX checker.
   q += v * dt clamped to the limits) on the 100 targets of a `stagerl eval` reaches exactly the
   targets that evaluation reached.
 
-Each algorithm is covered: DDPG and TD3 (the actor's tanh output), SAC (tanh of the
-mean half), PPO (the linear mean, clipped), and PPO, SAC and TD3 with normalised observations
+Each algorithm is covered: DDPG and TD3 (the actor's tanh output), SAC and CrossQ (tanh of the
+mean half; CrossQ's actor is its batch-renormalised network folded into plain layers), PPO (the
+linear mean, clipped), and PPO, SAC, TD3 and CrossQ with normalised observations
 (`agent.ppo.norm_obs`, `agent.norm_obs`: the model subtracts the running means and divides by
 the standard deviations first). The runs are tiny (trained here in a few seconds): parity needs no good policy, and
 the rollout comparison holds for any success count; a larger success radius (beta = 0.05 m)
@@ -45,7 +46,7 @@ def run_cli(stagerl_bin, *args, stdin=None):
     return p.stdout
 
 
-@pytest.fixture(scope="module", params=["ddpg", "td3", "sac", "ppo", "ppo-norm", "sac-norm", "td3-norm"])
+@pytest.fixture(scope="module", params=["ddpg", "td3", "sac", "ppo", "ppo-norm", "sac-norm", "td3-norm", "crossq", "crossq-norm"])
 def exported(request, stagerl_bin, tmp_path_factory):
     """A tiny trained run of the algorithm, its exported model and the model's session."""
     d = tmp_path_factory.mktemp(f"onnx-{request.param}")
@@ -56,6 +57,8 @@ def exported(request, stagerl_bin, tmp_path_factory):
         config = TINY + "[agent.ppo]\nnorm_obs = { clip = 10.0 }\n"
     else:  # the off-policy agents' setting
         config = TINY.replace("[agent]\n", "[agent]\nnorm_obs = { clip = 10.0 }\n")
+    if algo == "crossq":  # critics as small as the actor (its default, 1024 wide, is for real runs)
+        config += "[agent.crossq]\ncritic_hidden = [32, 32]\n"
     (d / "tiny.toml").write_text(config)
     run = d / "run"
     run_cli(stagerl_bin, "train", "--config", str(d / "tiny.toml"), "--algo", algo,

@@ -26,7 +26,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Train an agent (DDPG, TD3, SAC, PPO) on the reaching task; ends with an evaluation.
+    /// Train an agent (DDPG, TD3, SAC, PPO, CrossQ) on the reaching task; ends with an evaluation.
     Train(cmd::train::Args),
     /// Evaluate a trained run's deterministic policy on random targets.
     Eval(cmd::eval::Args),

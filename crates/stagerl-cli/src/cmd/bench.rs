@@ -91,6 +91,10 @@ pub struct UpdateArgs {
     hidden: usize,
     #[arg(long, default_value_t = 256)]
     batch: usize,
+    /// CrossQ: width of both hidden layers of its critics (unset: [agent.crossq]'s default, 1024;
+    /// --hidden is its actor's).
+    #[arg(long)]
+    critic_hidden: Option<usize>,
     /// Timed updates (after 20 warm-up updates), 1 to 1 000 000.
     #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     updates: u32,
@@ -262,12 +266,18 @@ fn env(a: EnvArgs) -> Result<()> {
 
 fn update(a: UpdateArgs) -> Result<()> {
     use stagerl::agent::replay::Batch;
-    use stagerl::agent::{build_off_policy, AgentConfig};
+    use stagerl::agent::{build_off_policy, AgentConfig, Algo, CrossqConfig};
     let (od, ad) = (16, 6);
+    let crossq =
+        a.critic_hidden.map(|w| CrossqConfig { critic_hidden: vec![w, w], ..CrossqConfig::default() });
+    if crossq.is_some() && a.algo != Algo::Crossq {
+        return Err(stagerl::Error::config("--critic-hidden", a.algo, "only with --algo crossq").into());
+    }
     let cfg = AgentConfig {
         algo: a.algo,
         hidden: vec![a.hidden, a.hidden],
         batch_size: a.batch,
+        crossq,
         ..AgentConfig::default()
     };
     // The whole config's validation: its memory estimate refuses networks too large to allocate.

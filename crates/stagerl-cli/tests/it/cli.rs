@@ -464,7 +464,7 @@ fn unwritable_output_directory_is_refused_before_training() {
 
 #[test]
 fn help_lists_the_allowed_values_of_every_enumerated_option() {
-    let algos = "[possible values: ddpg, td3, sac, ppo]";
+    let algos = "[possible values: ddpg, td3, sac, ppo, crossq]";
     let rewards = "[possible values: basic, posture, stride, har, sar]";
     for (args, wanted) in [
         (&["train", "--help"][..], &[algos, rewards, "[possible values: future, final, episode]"][..]),

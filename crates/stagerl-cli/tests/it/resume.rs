@@ -58,6 +58,19 @@ fn sigkill_then_resume_with_droq_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-droq", &config);
 }
 
+/// The same with CrossQ (batch-renormalised critics and actor: their running statistics and
+/// the update count of the policy delay are in the checkpoint), its renormalisation's warm-up
+/// short enough that the kills land after it, at 2 updates per step.
+#[test]
+fn sigkill_then_resume_with_crossq_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[agent.crossq]\ncritic_hidden = [32, 32]\nrenorm_warmup_steps = 2000\n",
+        CONFIG.replace("[agent]\n", "[agent]\nalgo = \"crossq\"\nupdates_per_step = 2\n")
+    );
+    assert!(config.contains("algo = \"crossq\""));
+    sigkills_then_resume("resume-kill-crossq", &config);
+}
+
 /// The same with PPO (small rollouts, so that kills land between updates and inside rollouts),
 /// with observation normalisation, whose running statistics must survive the kills too (the
 /// SIGTERM test runs PPO without it).

@@ -72,6 +72,9 @@ pub struct BatchRenorm<T> {
     d: Vec<T>,
     warmed: bool,
     ready: bool,
+    /// Per feature: the batch's sums (f64) of the forward pass, and of the backward pass.
+    acc: [Vec<f64>; 2],
+    sums: [Vec<T>; 4],
 }
 
 impl<T: Scalar> BatchRenorm<T> {
@@ -86,7 +89,9 @@ impl<T: Scalar> BatchRenorm<T> {
             m: z.clone(),
             inv: z.clone(),
             r: z.clone(),
+            sums: [z.clone(), z.clone(), z.clone(), z.clone()],
             d: z,
+            acc: [vec![0.0; n], vec![0.0; n]],
             warmed: false,
             ready: false,
         }
@@ -102,34 +107,52 @@ impl<T: Scalar> BatchRenorm<T> {
         self.mu.is_empty()
     }
 
-    /// Steps 1-4 on `x` (`batch x n`) into `y`, with `scale` and `bias` (`n` each).
+    /// Steps 1-4 on `x` (`batch x n`) into `y`, with `scale` and `bias` (`n` each). Every pass
+    /// runs over the rows in order (each feature's sums in increasing row, in f64).
     pub fn forward_train(&mut self, x: &[T], batch: usize, (scale, bias): (&[T], &[T]), y: &mut [T]) {
         let n = self.len();
         assert!(batch > 0 && x.len() == batch * n && y.len() >= batch * n, "BatchRenorm: sizes");
         let s = self.settings;
         let inv_b = 1.0 / batch as f64;
         self.warmed = self.stats.steps >= s.warmup_steps;
+        // 1. Batch statistics (two passes, in f64).
+        let [sum, sq] = &mut self.acc;
+        sum.fill(0.0);
+        sq.fill(0.0);
+        for row in x.chunks_exact(n) {
+            for (a, v) in sum.iter_mut().zip(row) {
+                *a += v.to_f64();
+            }
+        }
+        for a in sum.iter_mut() {
+            *a *= inv_b;
+        }
+        for row in x.chunks_exact(n) {
+            for ((a, v), mu) in sq.iter_mut().zip(row).zip(sum.iter()) {
+                let dev = v.to_f64() - mu;
+                *a += dev * dev;
+            }
+        }
         for j in 0..n {
-            // 1. Batch statistics (two passes, in f64).
-            let mu = (0..batch).map(|b| x[b * n + j].to_f64()).sum::<f64>() * inv_b;
-            let var = (0..batch).map(|b| (x[b * n + j].to_f64() - mu).powi(2)).sum::<f64>() * inv_b;
+            let (mu, var) = (self.acc[0][j], self.acc[1][j] * inv_b);
             // 2. The corrections, from the running statistics before this pass.
             let ra_sd = (self.stats.var[j] + s.eps).sqrt();
             let r = ((var + s.eps).sqrt() / ra_sd).clamp(1.0 / s.r_max, s.r_max);
             let d = ((mu - self.stats.mean[j]) / ra_sd).clamp(-s.d_max, s.d_max);
             let (m, v) = if self.warmed { (mu - d * var.sqrt() / r, var / (r * r)) } else { (mu, var) };
             let inv = 1.0 / (v + s.eps).sqrt();
-            // 3. Normalise.
-            let (mt, it) = (T::from_f64(m), T::from_f64(inv));
-            for b in 0..batch {
-                y[b * n + j] = scale[j] * ((x[b * n + j] - mt) * it) + bias[j];
-            }
             (self.mu[j], self.sd[j], self.m[j], self.inv[j]) =
-                (T::from_f64(mu), T::from_f64(var.sqrt()), mt, it);
+                (T::from_f64(mu), T::from_f64(var.sqrt()), T::from_f64(m), T::from_f64(inv));
             (self.r[j], self.d[j]) = (T::from_f64(r), T::from_f64(d));
             // 4. Running statistics.
             self.stats.mean[j] = s.momentum * self.stats.mean[j] + (1.0 - s.momentum) * mu;
             self.stats.var[j] = s.momentum * self.stats.var[j] + (1.0 - s.momentum) * var;
+        }
+        // 3. Normalise.
+        for (yr, xr) in y.chunks_exact_mut(n).zip(x.chunks_exact(n)) {
+            for j in 0..n {
+                yr[j] = scale[j] * ((xr[j] - self.m[j]) * self.inv[j]) + bias[j];
+            }
         }
         self.stats.steps += 1;
         self.ready = true;
@@ -150,8 +173,9 @@ impl<T: Scalar> BatchRenorm<T> {
 
     /// The backward pass of the last [`BatchRenorm::forward_train`] on `x`: `dx` from `g` =
     /// dL/dy (`batch x n` each); with `param_grads`, adds to the scale's and bias's gradients.
+    /// Rows in order (each feature's sums in increasing row).
     pub fn backward(
-        &self,
+        &mut self,
         (x, g): (&[T], &[T]),
         batch: usize,
         scale: &[T],
@@ -162,23 +186,28 @@ impl<T: Scalar> BatchRenorm<T> {
         let n = self.len();
         let inv_b = T::from_f64(1.0 / batch as f64);
         let half = T::from_f64(0.5);
-        for j in 0..n {
-            let (m, inv, mu) = (self.m[j], self.inv[j], self.mu[j]);
-            let (mut sum_gn, mut sum_gnx, mut sum_g, mut sum_gxn) = (T::ZERO, T::ZERO, T::ZERO, T::ZERO);
-            for b in 0..batch {
-                let (gb, xc) = (g[b * n + j], x[b * n + j] - m);
+        let [sum_gn, sum_gnx, sum_g, sum_gxn] = &mut self.sums;
+        for v in [&mut *sum_gn, &mut *sum_gnx, &mut *sum_g, &mut *sum_gxn] {
+            v.fill(T::ZERO);
+        }
+        for (gr, xr) in g[..batch * n].chunks_exact(n).zip(x.chunks_exact(n)) {
+            for j in 0..n {
+                let (gb, xc) = (gr[j], xr[j] - self.m[j]);
                 let gn = gb * scale[j];
-                sum_gn += gn;
-                sum_gnx += gn * xc;
-                sum_g += gb;
-                sum_gxn += gb * xc * inv;
+                sum_gn[j] += gn;
+                sum_gnx[j] += gn * xc;
+                sum_g[j] += gb;
+                sum_gxn[j] += gb * xc * self.inv[j];
             }
+        }
+        for j in 0..n {
+            let inv = self.inv[j];
             if let Some((ds, db)) = param_grads.as_mut() {
-                ds[j] += sum_gxn;
-                db[j] += sum_g;
+                ds[j] += sum_gxn[j];
+                db[j] += sum_g[j];
             }
-            let dm = -inv * sum_gn;
-            let dv = -half * inv * inv * inv * sum_gnx;
+            let dm = -inv * sum_gn[j];
+            let dv = -half * inv * inv * inv * sum_gnx[j];
             let dvar = if self.warmed {
                 let (r, d, sd) = (self.r[j], self.d[j], self.sd[j]);
                 // dm/dvar = -d / (2 r sqrt(var)): 0 for a constant feature (sqrt is not
@@ -188,11 +217,16 @@ impl<T: Scalar> BatchRenorm<T> {
             } else {
                 dv
             };
-            let two_dvar = T::from_f64(2.0) * dvar * inv_b;
-            let dmu = dm * inv_b;
-            for b in 0..batch {
-                let gn = g[b * n + j] * scale[j];
-                dx[b * n + j] = gn * inv + dmu + two_dvar * (x[b * n + j] - mu);
+            // Kept for the last pass: 2 dL/dvar / B and dL/dmu / B.
+            sum_gn[j] = T::from_f64(2.0) * dvar * inv_b;
+            sum_gnx[j] = dm * inv_b;
+        }
+        for ((dr, gr), xr) in
+            dx[..batch * n].chunks_exact_mut(n).zip(g.chunks_exact(n)).zip(x.chunks_exact(n))
+        {
+            for j in 0..n {
+                let gn = gr[j] * scale[j];
+                dr[j] = gn * self.inv[j] + sum_gnx[j] + sum_gn[j] * (xr[j] - self.mu[j]);
             }
         }
     }

@@ -4,6 +4,8 @@
 //! - [`Linear`] and [`Mlp`]: fully connected layers over ONE flat parameter vector and ONE flat
 //!   gradient vector per network (same layout, described by [`Mlp::tensors`]), so that Adam,
 //!   Polyak averaging, norms, NaN guards and checkpoints are single loops over slices.
+//! - [`BrnMlp`]: CrossQ's batch-renormalised MLP ([`BatchRenorm`] before every layer), which
+//!   folds into a plain [`Mlp`] for inference.
 //! - [`SquashedGaussian`]: SAC's tanh-squashed Gaussian policy head, with its backward pass.
 //! - [`Adam`], [`polyak_update`], [`mse_loss`], [`clip_grad_norm`], [`first_non_finite`] and
 //!   a few slice helpers.
@@ -59,6 +61,7 @@
 mod activation;
 mod adam;
 mod batch_renorm;
+mod brn_mlp;
 mod gaussian;
 mod linear;
 mod loss;
@@ -74,6 +77,7 @@ mod tests;
 pub use activation::Activation;
 pub use adam::Adam;
 pub use batch_renorm::{BatchRenorm, BatchRenormSettings, RunningStats};
+pub use brn_mlp::BrnMlp;
 pub use gaussian::{LogStdBound, SquashedGaussian};
 pub use linear::Linear;
 pub use loss::{mse, mse_loss};

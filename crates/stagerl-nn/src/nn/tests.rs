@@ -813,3 +813,71 @@ fn batch_renorm_values_statistics_and_gradients() {
     }
     assert_eq!(layer.stats, before);
 }
+
+/// CrossQ's batch-renormalised MLP: parameter gradients of a training pass against central
+/// differences (during the warm-up, where the pass is a smooth function of the parameters;
+/// after it the corrections are held constant, as the layer's own test checks); the running
+/// statistics move once per pass; the folded plain MLP computes the network's inference (each
+/// norm with its running statistics, then the layer) to f64 rounding; no allocation-visible
+/// growth after `reserve` (the same buffers).
+#[test]
+fn brn_mlp_gradients_statistics_and_folded_inference() {
+    let (batch, sizes) = (7, [3, 5, 4, 2]);
+    let settings = BatchRenormSettings { warmup_steps: 1_000, ..BatchRenormSettings::default() };
+    let mut rng = Rng::new(21);
+    let mut net = BrnMlp::<f64>::new(&sizes, settings, &mut rng);
+    // Scales and biases away from 1 and 0, so that their gradients are tested in general.
+    let n_lin = net.num_params() - 2 * (3 + 5 + 4);
+    for p in &mut net.params_mut()[n_lin..] {
+        *p += 0.3 * rng.normal();
+    }
+    let x: Vec<f64> = (0..batch * 3).map(|i| rng.normal() * (1.0 + (i % 3) as f64) + 0.7).collect();
+    let c = randn(&mut rng, batch * 2);
+    net.zero_grad();
+    net.forward_train(&x, batch);
+    assert_eq!(net.norms.iter().map(|n| n.stats.steps).collect::<Vec<_>>(), vec![1, 1, 1]);
+    net.backward(&c);
+    let analytic = net.grads().to_vec();
+    let params = net.params().to_vec();
+    let numeric = numeric_grad(&params, |p| {
+        let mut n = net.clone();
+        n.params_mut().copy_from_slice(p);
+        dot(n.forward_train(&x, batch), &c)
+    });
+    assert_grads_close("BrnMlp params", &analytic, &numeric);
+    let names: Vec<String> = net.tensors().into_iter().map(|t| t.name).collect();
+    assert_eq!(names[6..], ["bn0.scale", "bn0.bias", "bn1.scale", "bn1.bias", "bn2.scale", "bn2.bias"]);
+    assert_eq!(net.tensors().iter().map(TensorInfo::len).sum::<usize>(), net.num_params());
+    // A few more passes move the running statistics; then the folded network.
+    for _ in 0..5 {
+        let x: Vec<f64> = (0..batch * 3).map(|_| 2.0 * rng.normal() - 1.0).collect();
+        net.forward_train(&x, batch);
+    }
+    let mut folded = Mlp::<f64>::new(&sizes, Activation::Relu, Activation::Identity, &mut Rng::new(0));
+    net.fold_into(&mut folded);
+    let xs = randn(&mut rng, batch * 3);
+    let mut h = xs.clone();
+    let mut at = n_lin;
+    for (k, w) in sizes.windows(2).enumerate() {
+        let (scale, bias) = (&net.params()[at..at + w[0]], &net.params()[at + w[0]..at + 2 * w[0]]);
+        at += 2 * w[0];
+        let mut y = vec![0.0; batch * w[0]];
+        net.norms[k].forward_eval(&h, batch, (scale, bias), &mut y);
+        let layer = Linear::new(w[0], w[1], sizes.windows(2).take(k).map(|v| v[0] * v[1] + v[1]).sum());
+        h = vec![0.0; batch * w[1]];
+        let act = if k + 2 < sizes.len() { Activation::Relu } else { Activation::Identity };
+        layer.forward_act(net.params(), &y, batch, &mut h, act);
+    }
+    for (a, b) in folded.predict(&xs, batch).iter().zip(&h) {
+        assert!(close(*a, *b, 1e-12), "{a} vs {b}");
+    }
+    // The statistics round trip, and bad ones are refused.
+    let stats = net.running_stats();
+    let mut other = BrnMlp::<f64>::new(&sizes, settings, &mut Rng::new(1));
+    other.set_running_stats(&stats).unwrap();
+    assert_eq!(other.running_stats(), stats);
+    assert!(other.set_running_stats(&stats[..2]).unwrap_err().contains("2 batch-renorm layers"));
+    let mut bad = stats.clone();
+    bad[1].var[0] = -1.0;
+    assert!(other.set_running_stats(&bad).unwrap_err().contains("bn1"));
+}

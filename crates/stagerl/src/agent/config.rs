@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
+use super::crossq::CrossqConfig;
 use super::ddpg::DdpgConfig;
 use super::obs_norm::ObsNormConfig;
 use super::ppo::PpoConfig;
@@ -31,20 +32,24 @@ pub enum Algo {
     /// Proximal Policy Optimization (Schulman et al. 2017), on-policy, as CleanRL's
     /// `ppo_continuous_action`.
     Ppo,
+    /// CrossQ (Bhatt et al., ICLR 2024), as sbx's: SAC without target networks, with batch
+    /// renormalisation and a joint forward pass of the current and next state-actions.
+    Crossq,
 }
 
 impl Algo {
-    pub const ALL: [Algo; 4] = [Algo::Ddpg, Algo::Td3, Algo::Sac, Algo::Ppo];
+    pub const ALL: [Algo; 5] = [Algo::Ddpg, Algo::Td3, Algo::Sac, Algo::Ppo, Algo::Crossq];
     pub fn name(self) -> &'static str {
         match self {
             Algo::Ddpg => "ddpg",
             Algo::Td3 => "td3",
             Algo::Sac => "sac",
             Algo::Ppo => "ppo",
+            Algo::Crossq => "crossq",
         }
     }
 
-    /// Learns from a replay buffer (DDPG, TD3, SAC), not from fresh rollouts (PPO).
+    /// Learns from a replay buffer (DDPG, TD3, SAC, CrossQ), not from fresh rollouts (PPO).
     pub fn is_off_policy(self) -> bool {
         self != Algo::Ppo
     }
@@ -62,7 +67,7 @@ impl FromStr for Algo {
         Algo::ALL
             .into_iter()
             .find(|a| a.name() == s)
-            .ok_or_else(|| Error::config("agent.algo", s, "one of ddpg, td3, sac, ppo"))
+            .ok_or_else(|| Error::config("agent.algo", s, "one of ddpg, td3, sac, ppo, crossq"))
     }
 }
 
@@ -122,6 +127,9 @@ pub struct AgentConfig {
     /// `[agent.ppo]`; unset: [`PpoConfig::default`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ppo: Option<PpoConfig>,
+    /// `[agent.crossq]`; unset: [`CrossqConfig::default`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub crossq: Option<CrossqConfig>,
     /// `agent.her = { strategy = "future" | "final" | "episode", k = 4 }`: hindsight experience
     /// replay ([`crate::train::her`]); unset: off (the paper's agents).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -151,6 +159,7 @@ impl Default for AgentConfig {
             td3: None,
             sac: None,
             ppo: None,
+            crossq: None,
             her: None,
             norm_obs: None,
         }
@@ -172,6 +181,7 @@ impl PartialEq for AgentConfig {
         shared(self) == shared(other)
             && (self.ddpg(), self.td3(), self.sac(), self.ppo())
                 == (other.ddpg(), other.td3(), other.sac(), other.ppo())
+            && self.crossq() == other.crossq()
             && self.her == other.her
             && self.norm_obs == other.norm_obs
     }
@@ -208,12 +218,12 @@ impl AgentConfig {
         AgentConfig { algo, ..AgentConfig::default() }
     }
 
-    /// The actor's learning rate: as set, else 1e-3 for SAC and 3e-4 for DDPG and TD3 (measured
+    /// The actor's learning rate: as set, else 1e-3 for SAC and CrossQ (sbx's) and 3e-4 for DDPG and TD3 (measured
     /// on the reaching task: SAC at 3e-4 learns about twice as slowly; DDPG at 1e-3 diverges)
     /// and PPO (CleanRL's).
     pub fn actor_lr(&self) -> f64 {
         self.actor_lr.unwrap_or(match self.algo {
-            Algo::Sac => 1e-3,
+            Algo::Sac | Algo::Crossq => 1e-3,
             Algo::Ddpg | Algo::Td3 | Algo::Ppo => 3e-4,
         })
     }
@@ -221,7 +231,7 @@ impl AgentConfig {
     /// The critics' learning rate: as set, else as [`AgentConfig::actor_lr`]'s default.
     pub fn critic_lr(&self) -> f64 {
         self.critic_lr.unwrap_or(match self.algo {
-            Algo::Sac => 1e-3,
+            Algo::Sac | Algo::Crossq => 1e-3,
             Algo::Ddpg | Algo::Td3 | Algo::Ppo => 3e-4,
         })
     }
@@ -246,13 +256,20 @@ impl AgentConfig {
         self.ppo.unwrap_or_default()
     }
 
+    /// CrossQ's settings: `[agent.crossq]`, else its defaults.
+    pub fn crossq(&self) -> CrossqConfig {
+        self.crossq.clone().unwrap_or_default()
+    }
+
     /// The config of one run of `algo` from a preset's: only that algorithm's section is kept.
     pub fn for_algo(&self, algo: Algo) -> AgentConfig {
-        let mut c = AgentConfig { algo, ddpg: None, td3: None, sac: None, ppo: None, ..self.clone() };
+        let mut c =
+            AgentConfig { algo, ddpg: None, td3: None, sac: None, ppo: None, crossq: None, ..self.clone() };
         match algo {
             Algo::Ddpg => c.ddpg = self.ddpg,
             Algo::Td3 => c.td3 = self.td3,
             Algo::Sac => c.sac = self.sac,
+            Algo::Crossq => c.crossq = self.crossq.clone(),
             Algo::Ppo => {
                 c.ppo = self.ppo;
                 // Relabelling needs a replay buffer: a preset's `[agent.her]` is for its
@@ -273,13 +290,20 @@ impl AgentConfig {
             Algo::Td3 => c.td3 = Some(self.td3()),
             Algo::Sac => c.sac = Some(self.sac()),
             Algo::Ppo => c.ppo = Some(self.ppo()),
+            Algo::Crossq => c.crossq = Some(self.crossq()),
         }
         c
     }
 
     /// The algorithms whose sections are set.
     pub fn sections(&self) -> Vec<Algo> {
-        let set = [self.ddpg.is_some(), self.td3.is_some(), self.sac.is_some(), self.ppo.is_some()];
+        let set = [
+            self.ddpg.is_some(),
+            self.td3.is_some(),
+            self.sac.is_some(),
+            self.ppo.is_some(),
+            self.crossq.is_some(),
+        ];
         Algo::ALL.into_iter().zip(set).filter(|(_, s)| *s).map(|(a, _)| a).collect()
     }
 
@@ -297,6 +321,10 @@ impl AgentConfig {
     /// names the field, the value and what is allowed.
     pub fn validate(&self) -> Result<()> {
         self.validate_values()?;
+        if self.algo == Algo::Crossq {
+            // Its defaults too: the joint pass of its (wide) critics is checked against the batch.
+            self.crossq().validate(self.batch_size)?;
+        }
         if self.algo == Algo::Ppo && self.her.is_some() {
             return Err(Error::config(
                 "agent.her",
@@ -375,6 +403,9 @@ impl AgentConfig {
         }
         if let Some(p) = &self.ppo {
             p.validate()?;
+        }
+        if let Some(c) = &self.crossq {
+            c.validate(self.batch_size)?;
         }
         if let Some(h) = &self.her {
             h.validate()?;

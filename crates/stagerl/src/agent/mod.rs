@@ -1,7 +1,8 @@
 //! The agents. Each algorithm reads top to bottom in its own file, its `[agent.<algo>]` section
 //! (defaults and checks) included: the off-policy `td3.rs` ([`Td3`], with DDPG, `ddpg.rs`, as
-//! its one-critic case, as in Stable-Baselines3) and `sac.rs` ([`Sac`]), and the on-policy
-//! `ppo.rs` ([`Ppo`]). What they share lives here once: the [`Agent`] verbs, the one list of
+//! its one-critic case, as in Stable-Baselines3), `sac.rs` ([`Sac`]) and `crossq.rs`
+//! ([`Crossq`]: no target networks, batch renormalisation), and the on-policy `ppo.rs`
+//! ([`Ppo`]). What they share lives here once: the [`Agent`] verbs, the one list of
 //! learned parts that drives saving, loading and the non-finite guard, the shared `[agent]`
 //! settings ([`AgentConfig`]), exploration noise, and the critic ensemble of the off-policy
 //! agents (`critics.rs`: n critics with their targets, optimisers and buffers). The replay
@@ -9,6 +10,7 @@
 
 mod config;
 mod critics;
+mod crossq;
 mod ddpg;
 mod her_config;
 pub mod noise;
@@ -20,6 +22,7 @@ mod sac;
 mod td3;
 
 pub use config::{AgentConfig, Algo, NoiseKind, MAX_BATCH_VALUES, MAX_BUFFER_SIZE};
+pub use crossq::{Crossq, CrossqConfig, MAX_CROSSQ_CRITICS};
 pub use ddpg::DdpgConfig;
 pub use her_config::{HerConfig, HerStrategy, MAX_HER_K};
 pub use parts::Learned;
@@ -148,6 +151,7 @@ fn off_policy_of(cfg: &AgentConfig, obs_dim: usize, act_dim: usize, seed: u64) -
         Algo::Ddpg => Some(Box::new(ddpg::new(cfg, obs_dim, act_dim, seed))),
         Algo::Td3 => Some(Box::new(Td3::new(cfg, obs_dim, act_dim, seed))),
         Algo::Sac => Some(Box::new(Sac::new(cfg, obs_dim, act_dim, seed))),
+        Algo::Crossq => Some(Box::new(Crossq::new(cfg, obs_dim, act_dim, seed))),
         Algo::Ppo => None,
     }
 }
@@ -166,7 +170,7 @@ pub fn build_off_policy(
 ) -> Result<Box<dyn OffPolicy>> {
     cfg.validate()?;
     off_policy_of(cfg, obs_dim, act_dim, seed).ok_or_else(|| {
-        crate::Error::config("agent.algo", cfg.algo, "an off-policy algorithm here (ddpg, td3, sac)")
+        crate::Error::config("agent.algo", cfg.algo, "an off-policy algorithm here (ddpg, td3, sac, crossq)")
     })
 }
 

@@ -6,7 +6,7 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 use crate::io::checkpoint::Checkpoint;
-use crate::nn::{first_non_finite, Adam, Mlp};
+use crate::nn::{first_non_finite, Adam, BrnMlp, Mlp, RunningStats, TensorInfo};
 use crate::{Error, Result};
 
 /// The list of an agent's learned parts, each under its checkpoint name, walked in order.
@@ -20,9 +20,11 @@ pub trait Learned {
 
 /// One learned part, shared. Checkpoint names: a network's tensors are
 /// `{name}.layer{i}.weight|bias`, an optimiser's `{name}.m|v|step`, a tensor is `{name}`, a
-/// state `{name}` (JSON).
+/// state `{name}` (JSON); a batch-renormalised network's tensors are its layers' and
+/// `{name}.bn{k}.scale|bias`, its running statistics `{name}.bn_stats` (JSON).
 pub enum Part<'a> {
     Net(&'a Mlp<f32>),
+    BnNet(&'a BrnMlp<f32>),
     Adam(&'a Adam<f32>),
     Tensor(&'a [f32]),
     State(&'a dyn State),
@@ -31,6 +33,7 @@ pub enum Part<'a> {
 /// One learned part, mutable (see [`Part`]).
 pub enum PartMut<'a> {
     Net(&'a mut Mlp<f32>),
+    BnNet(&'a mut BrnMlp<f32>),
     Adam(&'a mut Adam<f32>),
     Tensor(&'a mut [f32]),
     State(&'a mut dyn State),
@@ -56,10 +59,10 @@ impl Part<'_> {
     /// Write this part to `ck` under `name`.
     pub fn save(&self, ck: &mut Checkpoint, name: &str) {
         match self {
-            Part::Net(net) => {
-                for t in net.tensors() {
-                    ck.put_tensor(&format!("{name}.{}", t.name), &t.shape, &net.params()[t.range()]);
-                }
+            Part::Net(net) => save_tensors(ck, name, &net.tensors(), net.params()),
+            Part::BnNet(net) => {
+                save_tensors(ck, name, &net.tensors(), net.params());
+                ck.put_json(&format!("{name}.bn_stats"), &net.running_stats());
             }
             Part::Adam(opt) => {
                 ck.put_tensor(&format!("{name}.m"), &[opt.m.len()], &opt.m);
@@ -74,15 +77,17 @@ impl Part<'_> {
     /// Describe the first non-finite parameter or gradient of a network, or value of a tensor.
     pub fn first_non_finite(&self, name: &str) -> Option<String> {
         match self {
-            Part::Net(net) => {
-                for (what, values) in [("parameter", net.params()), ("gradient", net.grads())] {
-                    if let Some(i) = first_non_finite(values) {
-                        let tensor = net.tensors().into_iter().find(|t| t.range().contains(&i));
-                        let tname = tensor.map(|t| t.name).unwrap_or_default();
-                        return Some(format!("{name} {what} {tname}[{i}] = {}", values[i]));
-                    }
-                }
-                None
+            Part::Net(net) => non_finite_in(name, &net.tensors(), [net.params(), net.grads()]),
+            Part::BnNet(net) => {
+                non_finite_in(name, &net.tensors(), [net.params(), net.grads()]).or_else(|| {
+                    let stats = net.norms.iter().enumerate();
+                    stats.flat_map(|(k, n)| [(k, "mean", &n.stats.mean), (k, "var", &n.stats.var)]).find_map(
+                        |(k, what, v)| {
+                            let i = v.iter().position(|x| !x.is_finite())?;
+                            Some(format!("{name} running {what} bn{k}[{i}] = {}", v[i]))
+                        },
+                    )
+                })
             }
             Part::Tensor(values) => first_non_finite(values).map(|i| format!("{name}[{i}] = {}", values[i])),
             Part::Adam(_) | Part::State(_) => None,
@@ -95,7 +100,15 @@ impl PartMut<'_> {
     /// values (a damaged network would only show later, as a NaN action).
     pub fn load(self, ck: &Checkpoint, name: &str) -> Result<()> {
         match self {
-            PartMut::Net(net) => load_net(ck, name, net),
+            PartMut::Net(net) => load_tensors(ck, name, &net.tensors(), net.params_mut()),
+            PartMut::BnNet(net) => {
+                load_tensors(ck, name, &net.tensors(), net.params_mut())?;
+                let key = format!("{name}.bn_stats");
+                let stats: Vec<RunningStats> = ck.json(&key)?;
+                net.set_running_stats(&stats).map_err(|e| {
+                    Error::InvalidInput(format!("{}: `{key}`: {e} (a different network size?)", ck.name()))
+                })
+            }
             PartMut::Adam(opt) => {
                 ck.read_tensor_into(&format!("{name}.m"), &mut opt.m)?;
                 ck.read_tensor_into(&format!("{name}.v"), &mut opt.v)?;
@@ -108,8 +121,26 @@ impl PartMut<'_> {
     }
 }
 
-fn load_net(ck: &Checkpoint, prefix: &str, net: &mut Mlp<f32>) -> Result<()> {
-    for t in net.tensors() {
+fn save_tensors(ck: &mut Checkpoint, name: &str, tensors: &[TensorInfo], params: &[f32]) {
+    for t in tensors {
+        ck.put_tensor(&format!("{name}.{}", t.name), &t.shape, &params[t.range()]);
+    }
+}
+
+/// The first non-finite parameter or gradient of a network, described.
+fn non_finite_in(name: &str, tensors: &[TensorInfo], [params, grads]: [&[f32]; 2]) -> Option<String> {
+    for (what, values) in [("parameter", params), ("gradient", grads)] {
+        if let Some(i) = first_non_finite(values) {
+            let tensor = tensors.iter().find(|t| t.range().contains(&i));
+            let tname = tensor.map(|t| t.name.as_str()).unwrap_or_default();
+            return Some(format!("{name} {what} {tname}[{i}] = {}", values[i]));
+        }
+    }
+    None
+}
+
+fn load_tensors(ck: &Checkpoint, prefix: &str, tensors: &[TensorInfo], params: &mut [f32]) -> Result<()> {
+    for t in tensors {
         let name = format!("{prefix}.{}", t.name);
         let (shape, data) = ck.tensor(&name)?;
         if shape != t.shape.as_slice() {
@@ -127,7 +158,7 @@ fn load_net(ck: &Checkpoint, prefix: &str, net: &mut Mlp<f32>) -> Result<()> {
                 data[i]
             )));
         }
-        net.params_mut()[t.range()].copy_from_slice(data);
+        params[t.range()].copy_from_slice(data);
     }
     Ok(())
 }

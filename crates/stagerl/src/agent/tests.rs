@@ -5,7 +5,10 @@ use super::*;
 use crate::base::rng::Rng;
 
 fn small_cfg(algo: Algo) -> AgentConfig {
-    AgentConfig { algo, hidden: vec![32, 32], batch_size: 16, ..AgentConfig::default() }
+    // CrossQ's critics 32 wide (its default, 1024, is for training runs).
+    let crossq =
+        (algo == Algo::Crossq).then(|| CrossqConfig { critic_hidden: vec![32, 32], ..Default::default() });
+    AgentConfig { algo, hidden: vec![32, 32], batch_size: 16, crossq, ..AgentConfig::default() }
 }
 
 fn random_batch(rng: &mut Rng, b: usize, od: usize, ad: usize) -> Batch {
@@ -135,7 +138,7 @@ fn ddpg_is_td3_with_one_critic_no_delay_and_no_smoothing() {
 fn part_names(agent: &dyn Agent) -> (Vec<String>, Vec<String>) {
     let (mut nets, mut others) = (Vec::new(), Vec::new());
     agent.parts(&mut |name, part| match part {
-        Part::Net(_) => nets.push(name.to_string()),
+        Part::Net(_) | Part::BnNet(_) => nets.push(name.to_string()),
         _ => others.push(name.to_string()),
     });
     (nets, others)
@@ -144,7 +147,7 @@ fn part_names(agent: &dyn Agent) -> (Vec<String>, Vec<String>) {
 #[test]
 fn one_list_of_parts_drives_save_load_and_the_guard() {
     // DDPG keeps its checkpoint names (`critic`, ...), TD3 and SAC theirs (`q1`, `q2`, ...).
-    let expected: [(Algo, &[&str], &[&str]); 3] = [
+    let expected: [(Algo, &[&str], &[&str]); 4] = [
         (
             Algo::Ddpg,
             &["actor", "critic", "actor_target", "critic_target"],
@@ -159,6 +162,12 @@ fn one_list_of_parts_drives_save_load_and_the_guard() {
             Algo::Sac,
             &["actor", "q1", "q2", "q1_target", "q2_target"],
             &["log_alpha", "actor_opt", "q1_opt", "q2_opt", "alpha_opt", "agent_rng"],
+        ),
+        (
+            // CrossQ: no targets; the actor's inference and the batch-renormalised actor.
+            Algo::Crossq,
+            &["actor", "actor_bn", "q1", "q2"],
+            &["log_alpha", "actor_opt", "q1_opt", "q2_opt", "alpha_opt", "agent_rng", "agent_updates"],
         ),
     ];
     for (algo, nets, rest) in expected {
@@ -196,10 +205,10 @@ fn one_list_of_parts_drives_save_load_and_the_guard() {
         for net in nets {
             agent.load(&ck).unwrap();
             assert_eq!(agent.first_non_finite(), None, "{algo}");
-            agent.parts_mut(&mut |name, part| {
-                if let (true, PartMut::Net(m)) = (name == *net, part) {
-                    m.params_mut()[3] = f32::NAN;
-                }
+            agent.parts_mut(&mut |name, part| match (name == *net, part) {
+                (true, PartMut::Net(m)) => m.params_mut()[3] = f32::NAN,
+                (true, PartMut::BnNet(m)) => m.params_mut()[3] = f32::NAN,
+                _ => {}
             });
             let fault = agent.first_non_finite().unwrap_or_else(|| panic!("{algo}: NaN in {net} unseen"));
             assert!(fault.starts_with(&format!("{net} parameter layer0.weight[3]")), "{algo}: {fault}");

@@ -84,7 +84,10 @@ impl Config {
             .dim() as f64;
         let act = dof as f64;
         let f32_bytes = 4.0;
-        let widths: Vec<f64> = self.agent.hidden.iter().map(|&h| h as f64).collect();
+        // CrossQ's critics have their own widths (and a joint pass of twice the batch).
+        let crossq = self.agent.algo == crate::agent::Algo::Crossq;
+        let hidden = if crossq { self.agent.crossq().critic_hidden } else { self.agent.hidden.clone() };
+        let widths: Vec<f64> = hidden.iter().map(|&h| h as f64).collect();
         // Layer sizes of one network, input obs + act (the critics'; the actor's is smaller).
         let mut params = 0.0;
         let mut fan_in = obs + act;
@@ -96,7 +99,12 @@ impl Config {
         let layer_values = widths.iter().sum::<f64>() + obs + 2.0 * act;
         MemoryEstimate {
             networks: params * nets * 4.0 * f32_bytes,
-            activations: self.update_batch() * layer_values * nets * 2.0 * f32_bytes,
+            activations: self.update_batch()
+                * if crossq { 2.0 } else { 1.0 }
+                * layer_values
+                * nets
+                * 2.0
+                * f32_bytes,
             replay: if self.agent.algo.is_off_policy() {
                 self.agent.buffer_size as f64 * (2.0 * obs + act + 2.0) * f32_bytes
             } else {

@@ -166,7 +166,7 @@ pub fn group_runs(runs: Vec<RunData>, include_incomplete: bool) -> Vec<Group> {
 }
 
 /// The algorithms in Table 1's order (the paper's SAC and DDPG, then ours).
-pub const ALGO_ORDER: [Algo; 4] = [Algo::Sac, Algo::Ddpg, Algo::Td3, Algo::Ppo];
+pub const ALGO_ORDER: [Algo; 5] = [Algo::Sac, Algo::Ddpg, Algo::Td3, Algo::Ppo, Algo::Crossq];
 
 /// One run's indicators.
 #[derive(Clone, Debug, Serialize)]
@@ -368,6 +368,7 @@ pub fn algo_title(a: Algo) -> &'static str {
         Algo::Ddpg => "DDPG",
         Algo::Td3 => "TD3",
         Algo::Ppo => "PPO",
+        Algo::Crossq => "CrossQ",
     }
 }
 

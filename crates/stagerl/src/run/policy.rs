@@ -184,7 +184,9 @@ impl PolicySpec {
             })
             .collect();
         let (rule, rule_text) = match agent.algo() {
-            Algo::Sac => (
+            // CrossQ's actor is its batch-renormalised one folded into a plain MLP (the
+            // running statistics in its weights), SAC's kind of head.
+            Algo::Sac | Algo::Crossq => (
                 "tanh_of_mean",
                 format!(
                     "a[i] = tanh(y[i]) for i < {n}: the actor's output y holds the Gaussian's mean \

@@ -115,7 +115,7 @@ fn each_run_keeps_only_its_algorithms_section() {
                 assert_eq!(agent.sac().init_alpha, 0.5);
                 assert!(written.contains("[agent.sac]") && !written.contains("[agent.ddpg]"), "{written}");
             }
-            Algo::Td3 | Algo::Ppo => unreachable!("not in the sweep"),
+            Algo::Td3 | Algo::Ppo | Algo::Crossq => unreachable!("not in the sweep"),
         }
         // The run's resolved config.toml reads back as the same config.
         assert_eq!(Config::from_toml_str(&written, Path::new("config.toml")).unwrap(), run.config);

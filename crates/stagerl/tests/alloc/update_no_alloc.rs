@@ -1,11 +1,11 @@
-//! A warmed-up SAC, TD3 or DDPG update allocates nothing (the matrix products included: their
+//! A warmed-up SAC, TD3, DDPG or CrossQ update allocates nothing (the matrix products included: their
 //! packing buffers are on the stack): counted with a global allocator.
 
 use crate::common;
 
 use common::allocs;
 use stagerl::agent::replay::Batch;
-use stagerl::agent::{build_off_policy, AgentConfig, Algo, SacConfig};
+use stagerl::agent::{build_off_policy, AgentConfig, Algo, CrossqConfig, SacConfig};
 use stagerl::base::rng::Rng;
 
 /// As `stagerl bench update`: observations 16, actions 6, a random batch of 256.
@@ -78,6 +78,27 @@ fn normalised_updates_allocate_nothing() {
     }
 }
 
+/// CrossQ: batch-renormalised critics (their joint pass of 2 x 256 rows) and actor, the critics
+/// folded for the actor's step (its delayed step runs at the 3rd warm-up update and in the
+/// counted ones); with observation normalisation too.
+fn crossq(critic: usize, norm: bool) -> AgentConfig {
+    let crossq = CrossqConfig { critic_hidden: vec![critic, critic], ..CrossqConfig::default() };
+    let norm_obs = norm.then(stagerl::agent::obs_norm::ObsNormConfig::default);
+    AgentConfig {
+        algo: Algo::Crossq,
+        crossq: Some(crossq),
+        norm_obs,
+        hidden: vec![64, 64],
+        ..AgentConfig::default()
+    }
+}
+
+#[test]
+fn crossq_updates_allocate_nothing() {
+    no_allocation_with(crossq(256, false), 10);
+    no_allocation_with(crossq(64, true), 20);
+}
+
 #[test]
 fn td3_updates_allocate_nothing() {
     no_allocation_in(Algo::Td3, 64, 20);
@@ -109,6 +130,7 @@ fn updates_on_two_threads_allocate_nothing() {
             AgentConfig { sac: Some(sac), hidden: vec![64, 64], ..AgentConfig::default() },
             10,
         );
+        no_allocation_with(crossq(256, false), 6);
     });
     assert!(stagerl::base::par::split_jobs() > split, "work went to the worker");
 }

@@ -2,7 +2,7 @@
 //! time) and identical final networks, for every algorithm.
 
 use stagerl::agent::obs_norm::ObsNormConfig;
-use stagerl::agent::{ActorQ, Algo, PpoConfig, SacConfig};
+use stagerl::agent::{ActorQ, Algo, CrossqConfig, PpoConfig, SacConfig};
 use stagerl::agent::{HerConfig, HerStrategy};
 use stagerl::config::Config;
 use stagerl::io::checkpoint::Checkpoint;
@@ -43,6 +43,11 @@ fn run_sized(algo: Algo, seed: u64, tag: &str, tweak: impl Fn(&mut Config)) -> (
     cfg.agent.ppo =
         (algo == Algo::Ppo).then(|| PpoConfig { num_envs: 4, num_steps: 32, ..PpoConfig::default() });
     tweak(&mut cfg);
+    if algo == Algo::Crossq && cfg.agent.crossq.is_none() {
+        // CrossQ's critics as wide as the actor (its default, 1024, is for training runs).
+        cfg.agent.crossq =
+            Some(CrossqConfig { critic_hidden: cfg.agent.hidden.clone(), ..CrossqConfig::default() });
+    }
     cfg.agent.learning_starts = 300;
     cfg.train.seed = seed;
     cfg.train.episodes = 40;
@@ -266,4 +271,52 @@ fn each_collector_saves_its_own_state_and_ppo_keeps_no_replay_buffer() {
         }
         assert_eq!(state["episode"].as_u64(), Some(4));
     }
+}
+
+/// CrossQ (batch-renormalised critics and actor, no targets), past its renormalisation's
+/// warm-up, at 2 updates per step, with observation normalisation: the same run for the same
+/// seed on 1 and 2 threads (the critics at once, their products split), every network's running
+/// statistics in the checkpoint and moved from their start, another run than SAC's, and another
+/// run for another seed.
+#[test]
+fn crossq_runs_are_deterministic_on_any_thread_count_and_differ_from_sac() {
+    let pool = stagerl::base::par::Pool::new(2).unwrap();
+    let tweak = |cfg: &mut Config| {
+        let own = CrossqConfig {
+            critic_hidden: vec![128, 128],
+            renorm_warmup_steps: 300,
+            ..CrossqConfig::default()
+        };
+        cfg.agent.crossq = Some(own);
+        cfg.agent.updates_per_step = 2;
+        cfg.agent.norm_obs = Some(ObsNormConfig::default());
+        cfg.agent.hidden = vec![32, 32];
+        cfg.agent.batch_size = 128;
+    };
+    let (a, ca) = run_sized(Algo::Crossq, 5, "crossq-a", tweak);
+    let split = stagerl::base::par::split_jobs();
+    let (b, cb) = stagerl::base::par::install(Some(&pool), || run_sized(Algo::Crossq, 5, "crossq-b", tweak));
+    assert!(stagerl::base::par::split_jobs() > split + 100, "the updates were split");
+    assert_eq!(a, b, "CrossQ: episodes.csv differs between 1 and 2 threads");
+    let names: Vec<&str> = ca.tensor_names().collect();
+    for part in ["actor.layer2.weight", "actor_bn.bn0.scale", "q1.bn2.bias", "q2.layer2.weight"] {
+        assert!(names.contains(&part), "{part} in {names:?}");
+    }
+    assert!(!names.iter().any(|n| n.contains("target")), "no target networks: {names:?}");
+    for n in &names {
+        assert_eq!(ca.tensor(n).unwrap(), cb.tensor(n).unwrap(), "CrossQ: tensor {n}");
+    }
+    for net in ["actor_bn", "q1", "q2"] {
+        let key = format!("{net}.bn_stats");
+        let (x, y): (serde_json::Value, serde_json::Value) = (ca.json(&key).unwrap(), cb.json(&key).unwrap());
+        assert_eq!(x, y, "{key}");
+        let steps = x[0]["steps"].as_u64().unwrap();
+        assert!(steps > 300, "{key}: past the warm-up: {steps}");
+        let var0 = x[1]["var"][0].as_f64().unwrap();
+        assert!(var0 != 1.0 && var0.is_finite(), "{key}: the running statistics moved: {var0}");
+    }
+    let (c, _) = run_sized(Algo::Crossq, 6, "crossq-c", tweak);
+    assert_ne!(a, c, "another seed gives another run");
+    let (sac, _) = run(Algo::Sac, 5, "crossq-sac");
+    assert_ne!(a, sac, "CrossQ is not SAC");
 }

@@ -24,6 +24,9 @@ fn exploding(algo: Algo, lr: f64, learning_starts: u64) -> Config {
     cfg.agent.learning_starts = learning_starts;
     cfg.agent.actor_lr = Some(lr);
     cfg.agent.critic_lr = Some(lr);
+    // CrossQ's critics as small as the actor (their default is 1024 wide).
+    cfg.agent.crossq = (algo == Algo::Crossq)
+        .then(|| stagerl::agent::CrossqConfig { critic_hidden: vec![8, 8], ..Default::default() });
     cfg.train.seed = 7;
     cfg.train.episodes = 20;
     cfg.train.eval_every_episodes = 0;
@@ -54,6 +57,9 @@ const FAULTS: &[Fault] = &[
     // 1e39 is infinite in f32: TD3's first update (critics only) has a finite loss and leaves
     // infinite critic weights. It is the last step of episode 2, so the parameter check at the
     // episode's end is the one that sees it.
+    // CrossQ: its critics' first step (the actor waits for the 3rd update) leaves weights of
+    // about 1e30, which the second update's joint pass overflows.
+    Fault { algo: Algo::Crossq, lr: 1e30, learning_starts: 60, quantity: "critic loss = NaN", at: "at episode 2, step 11 (update 2)" },
     Fault { algo: Algo::Td3, lr: 1e39, learning_starts: 100, quantity: "q1 parameter layer0.weight", at: "at episode 2, step 50" },
 ];
 

@@ -58,6 +58,17 @@ critic_dropout = 0.01
 critic_layer_norm = true
 [agent.ppo]
 norm_obs = { clip = 10.0 }
+[agent.crossq]
+critic_hidden = [256, 256]
+n_critics = 3
+policy_delay = 2
+adam_beta1 = 0.9
+bn_momentum = 0.9
+renorm_warmup_steps = 1000
+alpha_lr = 0.0003
+init_alpha = 0.5
+target_entropy_per_dim = -0.5
+fixed_alpha = true
 [train]
 obstacles_in_path = 0.5
 env_steps = 30000
