@@ -10,8 +10,8 @@
 # with obstacles in the way, docs/results/quick-obstacles/in-path/runs/sac-sar-seed1). Each set is
 # its own process (sets are independent streams: the same problems and plans as one process with
 # every set), JOBS at a time (default 2); OUT/<set>/ holds each set's table, problems and plans,
-# and OUT/table.md and OUT/ompl.md the tables put together. Environment: STAGERL_BIN, PROBLEMS
-# (200), JOBS (2), PYTHON (python3).
+# OUT/ompl.jsonl OMPL's results, and OUT/table.md every planner's (scripts/studies/obstacle_table.py).
+# Environment: STAGERL_BIN, PROBLEMS (200), JOBS (2), PYTHON (python3).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
@@ -38,15 +38,6 @@ export -f bench_set
 export bin out problems root run
 printf '%s\n' $sets | xargs -P "$jobs" -I{} bash -c 'bench_set {}'
 
-# The tables put together: each set's opening line (its refused candidates), then one header
-# and every set's rows.
-{
-    for s in $sets; do head -1 "$out/$s/table.md"; done
-    echo
-    sed -n 2,3p "$out/free/table.md"
-    for s in $sets; do tail -n +4 "$out/$s/table.md"; done
-} >"$out/table.md"
-
 # OMPL's RRTConnect on the same problems.
 venv="$out/ompl-venv"
 if [ ! -x "$venv/bin/python" ]; then
@@ -56,6 +47,8 @@ fi
 cat $(printf "$out/%s/problems.jsonl " $sets) >"$out/problems.jsonl"
 "$venv/bin/python" scripts/bench/ompl_rrt_connect.py "$out/problems.jsonl" --out "$out/ompl.jsonl" \
     >"$out/ompl.md"
+# Every planner, OMPL's beside, in one table.
+"${PYTHON:-python3}" scripts/studies/obstacle_table.py "$out" >"$out/table.md"
 {
     echo "binary: $("$bin" --version) at $(git -C "$root" rev-parse HEAD)"
     echo "run: $run"
