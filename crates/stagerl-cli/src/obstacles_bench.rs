@@ -94,27 +94,13 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
         max_iterations,
         ..RrtConnect::default()
     };
-    let table_rrt = rrt(a.seed, a.planner_budget_s, DEFAULT_ITERATIONS);
     let mut judge = Planner::rrt_connect(
         &cfg,
         None,
         rrt(a.seed ^ JUDGE_SEED, a.solvable_budget_s, 100 * DEFAULT_ITERATIONS),
     )
     .context("--solvable-budget-s")?;
-    let shielded = |mut p: Planner| -> Result<Planner> {
-        p.set_shield(true).context("the shielded planners")?;
-        Ok(p)
-    };
-    let mut planners: Vec<(&'static str, Planner)> = vec![
-        ("jacobian", Planner::jacobian(&cfg, None)?),
-        ("jacobian+shield", shielded(Planner::jacobian(&cfg, None)?)?),
-        ("rrt-connect", Planner::rrt_connect(&cfg, None, table_rrt).context("--planner-budget-s")?),
-    ];
-    if let Some(run) = &a.run {
-        let policy = || Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None).map(|(_, p)| p);
-        planners.push(("policy", policy()?));
-        planners.push(("policy+shield", shielded(policy()?)?));
-    }
+    let mut planners = planners(&cfg, &a, rrt(a.seed, a.planner_budget_s, DEFAULT_ITERATIONS))?;
     // Checked before the work; written whole at the end (atomically, never over another file
     // without --force).
     for path in [&a.problems_out, &a.out].into_iter().flatten() {
@@ -164,19 +150,7 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
                     .with_context(|| format!("{name} on {} problem {}", set.name(), p.id))?;
                 let success = record(&mut row, &plan);
                 if let Some(f) = out.as_mut() {
-                    let s = &plan.summary;
-                    let mut line = serde_json::json!({
-                        "planner": name, "set": set.name(), "id": p.id, "success": success,
-                        "collision": s.collision, "reached": s.reached, "min_clearance_m": s.min_clearance_m,
-                        "path_length_m": s.path_length_m, "joint_travel_rad": s.joint_travel_rad,
-                        "plan_time_s": s.plan_time_s,
-                    });
-                    if let (Some(counts), Some(map)) = (s.shield, line.as_object_mut()) {
-                        if let serde_json::Value::Object(c) = serde_json::to_value(counts)? {
-                            map.extend(c);
-                        }
-                    }
-                    writeln!(f, "{line}")?;
+                    writeln!(f, "{}", plan_line(name, set, p.id, success, &plan)?)?;
                 }
             }
             rows.push(row);
@@ -189,6 +163,49 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
         }
     }
     print_table(&rows, &refused, &a)
+}
+
+/// The planners of the table: the Jacobian controller and RRT-Connect (`rrt`) on `cfg`'s arm and
+/// task, the run's policy with `--run`, and the first and the policy again behind the shield.
+fn planners(cfg: &Config, a: &ObstaclesArgs, rrt: RrtConnect) -> Result<Vec<(&'static str, Planner)>> {
+    let shielded = |mut p: Planner| -> Result<Planner> {
+        p.set_shield(true).context("the shielded planners")?;
+        Ok(p)
+    };
+    let mut planners: Vec<(&'static str, Planner)> = vec![
+        ("jacobian", Planner::jacobian(cfg, None)?),
+        ("jacobian+shield", shielded(Planner::jacobian(cfg, None)?)?),
+        ("rrt-connect", Planner::rrt_connect(cfg, None, rrt).context("--planner-budget-s")?),
+    ];
+    if let Some(run) = &a.run {
+        let policy = || Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None).map(|(_, p)| p);
+        planners.push(("policy", policy()?));
+        planners.push(("policy+shield", shielded(policy()?)?));
+    }
+    Ok(planners)
+}
+
+/// One line of `--out`: the plan's verdict and figures, and the shield's counts when it ran.
+fn plan_line(
+    name: &str,
+    set: ProblemSet,
+    id: usize,
+    success: bool,
+    plan: &Plan,
+) -> Result<serde_json::Value> {
+    let s = &plan.summary;
+    let mut line = serde_json::json!({
+        "planner": name, "set": set.name(), "id": id, "success": success,
+        "collision": s.collision, "reached": s.reached, "min_clearance_m": s.min_clearance_m,
+        "path_length_m": s.path_length_m, "joint_travel_rad": s.joint_travel_rad,
+        "plan_time_s": s.plan_time_s,
+    });
+    if let (Some(counts), Some(map)) = (s.shield, line.as_object_mut()) {
+        if let serde_json::Value::Object(c) = serde_json::to_value(counts)? {
+            map.extend(c);
+        }
+    }
+    Ok(line)
 }
 
 /// Add a plan to its row; whether it succeeded (reached with no contact along the path).
