@@ -492,35 +492,9 @@ fn point_segment_distance2(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// Squared distance between segments `p1`-`q1` and `p2`-`q2` (Ericson, Real-Time Collision
 /// Detection, 5.1.9: the closest points' parameters, clamped).
+#[inline]
 pub(crate) fn segment_segment_distance2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3], q2: [f64; 3]) -> f64 {
-    let (d1, d2, r) = (sub(q1, p1), sub(q2, p2), sub(p1, p2));
-    let (a, e, f) = (dot(d1, d1), dot(d2, d2), dot(d2, r));
-    const EPS: f64 = 1e-18;
-    let (s, t) = if a <= EPS && e <= EPS {
-        (0.0, 0.0)
-    } else if a <= EPS {
-        (0.0, (f / e).clamp(0.0, 1.0))
-    } else {
-        let c = dot(d1, r);
-        if e <= EPS {
-            ((-c / a).clamp(0.0, 1.0), 0.0)
-        } else {
-            let b = dot(d1, d2);
-            let denom = a * e - b * b;
-            let mut s = if denom > EPS { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
-            let mut t = (b * s + f) / e;
-            if t < 0.0 {
-                t = 0.0;
-                s = (-c / a).clamp(0.0, 1.0);
-            } else if t > 1.0 {
-                t = 1.0;
-                s = ((b - c) / a).clamp(0.0, 1.0);
-            }
-            (s, t)
-        }
-    };
-    let c1 = [p1[0] + d1[0] * s, p1[1] + d1[1] * s, p1[2] + d1[2] * s];
-    let c2 = [p2[0] + d2[0] * t, p2[1] + d2[1] * t, p2[2] + d2[2] * t];
+    let (c1, c2) = distance::segment_closest_points(p1, q1, p2, q2);
     let d = sub(c1, c2);
     dot(d, d)
 }

@@ -430,8 +430,10 @@ pub(crate) fn segment_box(a: [f64; 3], b: [f64; 3], h: [f64; 3]) -> ([f64; 3], [
     (p, clip(p), best)
 }
 
-/// The closest points of segments `p1`-`q1` and `p2`-`q2` (Ericson 5.1.9, as
-/// [`super::segment_segment_distance2`]).
+/// The closest points of segments `p1`-`q1` and `p2`-`q2` (Ericson, Real-Time Collision
+/// Detection, 5.1.9: the closest points' parameters, clamped); [`super::segment_segment_distance2`]
+/// is their squared distance.
+#[inline]
 pub(crate) fn segment_closest_points(
     p1: [f64; 3],
     q1: [f64; 3],
