@@ -21,7 +21,7 @@
 //! pose is `d - m + CLEARANCE_TOLERANCE_M` metres of arm motion further (no pose in between can
 //! come closer than `m - CLEARANCE_TOLERANCE_M`): the minimum is found within that tolerance.
 
-use super::{pose3, signed_distance, ArmCollider, Contact, Geo};
+use super::{pose3, ArmCollider, Contact, Geo};
 use crate::robot::{Chain, JointKind};
 
 /// Largest motion of any point of the arm between two checked poses of a motion, metres.
@@ -207,8 +207,8 @@ impl ArmCollider {
     /// skipped.
     fn placed_obstacle_distance(&self) -> f64 {
         let mut best = f64::INFINITY;
-        for (pose, prim, geo) in &self.obstacles {
-            for (k, s) in self.shapes.iter().enumerate() {
+        for (i, (_, _, geo)) in self.obstacles.iter().enumerate() {
+            for k in 0..self.shapes.len() {
                 let g = &self.geo[k];
                 let c =
                     [g.centre[0] - geo.centre[0], g.centre[1] - geo.centre[1], g.centre[2] - geo.centre[2]];
@@ -219,7 +219,9 @@ impl ArmCollider {
                 let d = if g.round && geo.round {
                     super::point_segment_distance2(geo.a, g.a, g.b).sqrt() - g.radius - geo.radius
                 } else {
-                    signed_distance(&pose3(&self.world[k]), s.parry.shape(), pose, prim.shape())
+                    // Closed form for a capsule or sphere against a box, parry for the rest.
+                    self.closest(super::distance::Pair::Obstacle { shape: k, obstacle: i })
+                        .map_or(f64::NAN, |c| c.distance_m)
                 };
                 if d < best {
                     best = d;
