@@ -16,10 +16,15 @@
 //! 3. if `c'` satisfies every damper it is kept as it is; otherwise `x = argmin |x - c'|^2`
 //!    subject to the dampers and `lo <= x <= hi` ([`qp`], Goldfarb-Idnani); no such `x`: stop;
 //! 4. verification of the motion `q(t) = q + t dq`, `t in [0, 1]`, `dq = clip(q + x dt) - q`
-//!    (exactly what the arm does), by conservative advancement: a point of shape `k` moves at
-//!    most `D_k = sum_i lever_ki |dq_i|` over the step ([`ArmCollider::levers`]); a pair with the
+//!    (exactly what the arm does), by conservative advancement: joint `i` moves a point `p` of
+//!    shape `k` at `|dq_i|` times its distance to the joint's axis (1 for a prismatic joint),
+//!    and that distance, which only the joints after `i` change, stays below
+//!    `rho_ki = min(lever_ki, a_ki + r_k + sum_{i < j} lever_kj |dq_j|)` over the step
+//!    (`a_ki` the distance of the shape's bounding-sphere centre from the axis at `q`, `r_k`
+//!    its radius, `lever_ki` the pose-free bound of [`ArmCollider::levers`]); so a point of
+//!    shape `k` moves at most `D_k = sum_i rho_ki |dq_i|` over the step; a pair with the
 //!    floor or an obstacle at most `D = D_A`, two arm shapes at most `D = sum_{l < i <= u}
-//!    lever_Ui |dq_i|` relative to each other (joints up to the earlier shape's segment `l` move
+//!    rho_Ui |dq_i|` relative to each other (joints up to the earlier shape's segment `l` move
 //!    both rigidly; `U` is the shape of the later segment `u`), so a pair at distance `d(t)` stays above
 //!    `d(t) - D s` until `t + s`. Each pair must stay above `h = min(m, d(0)) / 2` (`d(t) >= h`
 //!    at every sample, the next sample at `t + (d(t) - h) / D`, done past `t = 1`); a pair
@@ -208,6 +213,8 @@ pub struct Shield {
     x: Vec<f64>,
     dq: Vec<f64>,
     q_t: Vec<f64>,
+    /// `reach[k * dof + i] = rho_ki |dq_i|` of step 4.
+    reach: Vec<f64>,
     motion: Vec<f64>,
     total: ShieldStats,
     episode: ShieldStats,
@@ -233,6 +240,7 @@ impl Shield {
             x: vec![0.0; n],
             dq: vec![0.0; n],
             q_t: vec![0.0; n],
+            reach: vec![0.0; collider.len() * n],
             motion: vec![0.0; collider.len()],
             total: ShieldStats::default(),
             episode: ShieldStats::default(),
@@ -393,9 +401,9 @@ impl Shield {
         for i in 0..n {
             self.dq[i] = (q[i] + self.x[i] * dt_s).clamp(qlo[i], qhi[i]) - q[i];
         }
+        self.reach_bounds(collider);
         for (k, m) in self.motion.iter_mut().enumerate() {
-            let levers = &self.levers[k * n..(k + 1) * n];
-            *m = (0..n).filter(|&i| self.dq[i] != 0.0).map(|i| levers[i] * self.dq[i].abs()).sum();
+            *m = self.reach[k * n..(k + 1) * n].iter().sum();
         }
         self.watched.clear();
         for &pair in &self.pairs {
@@ -427,8 +435,38 @@ impl Shield {
         let seg = |k: usize| collider.segment_of(k).map_or(-1, |s| s as i64);
         let (lower, upper) = if seg(a) < seg(b) { (a, b) } else { (b, a) };
         let (from, to) = ((seg(lower) + 1) as usize, seg(upper) as usize);
-        let levers = &self.levers[upper * n..(upper + 1) * n];
-        (from..=to).filter(|&i| self.dq[i] != 0.0).map(|i| levers[i] * self.dq[i].abs()).sum()
+        self.reach[upper * n + from..=upper * n + to].iter().sum()
+    }
+
+    /// `self.reach` for `self.dq` (the arm placed at `q`): `rho_ki |dq_i|` of step 4.
+    fn reach_bounds(&mut self, collider: &ArmCollider) {
+        let n = self.dq.len();
+        let frames = collider.placed_frames();
+        for k in 0..self.motion.len() {
+            let reach = &mut self.reach[k * n..(k + 1) * n];
+            reach.fill(0.0);
+            let Some(seg) = collider.segment_of(k) else { continue };
+            let (c, r) = collider.bounding_sphere(k);
+            let levers = &self.levers[k * n..(k + 1) * n];
+            // sum_{i < j <= seg} lever_kj |dq_j|: how far the joints after i move the shape.
+            let mut after = 0.0;
+            for i in (0..=seg).rev() {
+                let dq = self.dq[i].abs();
+                if dq != 0.0 {
+                    let rho = if self.prismatic[i] {
+                        1.0
+                    } else {
+                        let f = &frames[i];
+                        let (z, d) = ([f[2], f[6], f[10]], [c[0] - f[3], c[1] - f[7], c[2] - f[11]]);
+                        let x =
+                            [z[1] * d[2] - z[2] * d[1], z[2] * d[0] - z[0] * d[2], z[0] * d[1] - z[1] * d[0]];
+                        levers[i].min((x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt() + r + after)
+                    };
+                    reach[i] = rho * dq;
+                    after += levers[i] * dq;
+                }
+            }
+        }
     }
 
     /// Step 4's samples over the watched pairs.

@@ -92,6 +92,12 @@ impl ArmCollider {
         &self.frames
     }
 
+    /// The bounding sphere of arm shape `k` at the last placement: its centre (world frame)
+    /// and radius, metres.
+    pub fn bounding_sphere(&self, k: usize) -> ([f64; 3], f64) {
+        (self.geo[k].centre, self.geo[k].bound)
+    }
+
     /// The segment (actuated joint) arm shape `k` moves with; `None` for the root's.
     pub fn segment_of(&self, k: usize) -> Option<usize> {
         usize::try_from(self.shapes[k].segment).ok()
