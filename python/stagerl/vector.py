@@ -23,6 +23,14 @@ for ``gymnasium.make``). It behaves exactly as ``gymnasium.vector.SyncVectorEnv`
   ``is_success`` (of its new episode), as after ``reset``. The masks are read-only arrays (one
   array may serve several keys and steps).
 
+- Obstacles: ``reset(options={"obstacles": [...]})`` starts every sub-environment's episode among
+  that scene (a list of dicts in the schema of ``[[task.obstacles]]``, checked as
+  ``ReachEnv.reset`` checks it, with the same ``ValueError`` messages), in place of the task's
+  random obstacles; as in ``SyncVectorEnv``, which passes the options to each sub-environment's
+  ``reset`` but none to its autoresets, the episodes after an autoreset are among the task's own
+  scene again. Other reset options (``target``, ``start``) are per episode of a single
+  environment: use ``ReachEnv`` for them.
+
 Observations are float32 (N, obs_dim), actions float32 (N, act_dim) in [-1, 1], rewards float64.
 
 ``render_mode="rgb_array"`` (with ``render_width``, ``render_height``, as for ``ReachEnv``):
@@ -78,14 +86,15 @@ class ReachVectorEnv(VectorEnv):
 
     def reset(self, *, seed: Union[None, int, Sequence[Optional[int]]] = None, options: Optional[dict] = None):
         super().reset(seed=seed if isinstance(seed, int) else None)
-        if options:
-            raise ValueError(f"`options` = {options!r} is invalid: stagerl/Reach-v0 takes no reset options")
+        if options and (not isinstance(options, dict) or set(options) != {"obstacles"}):
+            raise ValueError(f"`options` = {options!r} is invalid: a vector env takes `obstacles` (a list of dicts) "
+                             "and no other reset option")
         seeds = self._sub_seeds(seed)
         for i, s in enumerate(seeds):
             if s is not None or self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(s)
                 self._refill(i)
-        obs, distance, exhausted = self._core.reset()
+        obs, distance, exhausted = self._core.reset((options or {}).get("obstacles"))
         self._refill_all(exhausted)
         self._reset_done = True
         info = {"distance": distance, "_distance": self._ones}

@@ -188,3 +188,49 @@ def test_bad_step_and_reset_arguments():
     obs, *_ = envs.step(np.zeros((2, 6), np.float32))
     assert obs.shape == (2, 16)
     assert stagerl.ReachVectorEnv is ReachVectorEnv
+
+
+# Random obstacles observed: the scene given to reset shows in the observations.
+SCENE_CFG = {"task": {"max_steps": 6, "observe_obstacles": True, "random_obstacles": {"count": [1, 2]}},
+             "reward": {"beta_m": 0.35}}
+SCENE = [{"shape": "sphere", "radius_m": 0.08, "position_m": [0.35, 0.1, 0.45]},
+         {"shape": "cuboid", "half_extents_m": [0.05, 0.2, 0.05], "position_m": [-0.3, 0.3, 0.5],
+          "rotation_xyzw": [0.0, 0.0, 0.3826834, 0.9238795]},
+         {"shape": "sphere", "radius_m": 0.05, "position_m": [0.0, -0.5, 0.7]}]
+
+
+def test_obstacles_in_reset_equal_sync_vector_env_value_for_value():
+    """reset(options={"obstacles": ...}) puts every sub-environment's episode among the scene and
+    its autoresets back among the task's random obstacles, exactly as SyncVectorEnv over
+    ReachEnvs does; a reset without options drops the scene."""
+    n = 3
+    native, sync = make_vec(n, config=SCENE_CFG), sync_vec(n, config=SCENE_CFG)
+    rng = np.random.default_rng(5)
+    plain = make_vec(n, config=SCENE_CFG).reset(seed=11)[0]
+    for seed, options in ((11, {"obstacles": SCENE}), (12, None), (13, {"obstacles": SCENE[:1]})):
+        a, b = native.reset(seed=seed, options=options), sync.reset(seed=seed, options=options)
+        assert data_equivalence(a, b, exact=True), (a, b)
+        if seed == 11:
+            # Same seeds, same targets: only the scene differs, and the observation shows it.
+            assert not np.array_equal(a[0], plain), "the scene is in the observations"
+        for _ in range(40):
+            actions = rng.uniform(-1, 1, (n, 6)).astype(np.float32)
+            a, b = native.step(actions), sync.step(actions)
+            assert data_equivalence(a, b, exact=True), (a, b)
+
+
+def test_bad_obstacles_in_reset_get_reach_env_messages():
+    envs = ReachVectorEnv(num_envs=2)
+    single = ReachEnv()
+    bad = [{"shape": "sphere", "radius_m": -0.1, "position_m": [0.3, 0.3, 0.3]}]
+    on_start = [{"shape": "cuboid", "half_extents_m": [0.1, 0.1, 0.1], "position_m": [0.0, 0.0, 0.1]}]
+    for obstacles, want in ((bad, r"`obstacles\[0\].radius_m` = -0.1"), (on_start, "start pose")):
+        with pytest.raises(ValueError, match=want) as native:
+            envs.reset(seed=0, options={"obstacles": obstacles})
+        with pytest.raises(ValueError) as one:
+            single.reset(seed=0, options={"obstacles": obstacles})
+        assert str(native.value) == str(one.value)
+    with pytest.raises(ValueError, match="`options`.*`obstacles`"):
+        envs.reset(options={"obstacles": [], "start": [0.0] * 6})
+    obs, _ = envs.reset(seed=0, options={"obstacles": []})
+    assert obs.shape == (2, 16)

@@ -280,21 +280,9 @@ impl ReachCore {
             self.env.set_request_obstacles(None);
             return Ok(());
         };
-        let env = &mut self.env;
-        guard("reset", || {
-            stagerl::env::check_joint_positions(env.chain(), start).map_err(to_py)?;
-            let all: Vec<_> = env.task().obstacles.iter().chain(&extra).cloned().collect();
-            let nf = env.task().obstacles.len();
-            let named = |i: usize| match i {
-                i if i < nf => format!("task.obstacles[{i}]"),
-                i => format!("obstacles[{}]", i - nf),
-            };
-            let mut c = stagerl::sim::collision::ArmCollider::new(env.chain(), env.task().collision);
-            stagerl::env::request::check_scene_for_request(env.chain(), &mut c, &all, named, start, target)
-                .map_err(to_py)?;
-            env.set_request_obstacles(Some(&extra));
-            Ok(())
-        })
+        crate::obstacles::check_scene(&self.env, &extra, start, target)?;
+        self.env.set_request_obstacles(Some(&extra));
+        Ok(())
     }
 
     /// A new episode began: its path starts at the end effector (when rendering).

@@ -1,5 +1,5 @@
 //! Obstacles from Python (`stagerl.plan(..., obstacles=)`, `ReachEnv.reset(options={"obstacles":
-//! ...})`): a list of dicts in the schema of `[[task.obstacles]]` and of a `stagerl plan` request
+//! ...})`, `ReachVectorEnv.reset(options=...)`): a list of dicts in the schema of `[[task.obstacles]]` and of a `stagerl plan` request
 //! line, `{"shape": "sphere", "radius_m": r, "position_m": [x, y, z]}` or `{"shape": "cuboid",
 //! "half_extents_m": [..], "position_m": [..], "rotation_xyzw": [..]}`. The shapes of the values
 //! are checked here; their values by the library ([`stagerl::env::request`]), so that a bad value
@@ -79,4 +79,26 @@ pub(crate) fn obstacles_of(list: Option<&Bound<'_, PyAny>>) -> PyResult<Option<V
     }
     stagerl::env::request::check_obstacle_values(&out, "obstacles").map_err(crate::to_py)?;
     Ok(Some(out))
+}
+
+/// Check a request's scene, `obstacles` beside `env`'s fixed ones, for an episode from `start`
+/// (to `target`, when given), as `stagerl plan` checks a request's: the same messages.
+pub(crate) fn check_scene(
+    env: &stagerl::env::ReachEnv,
+    obstacles: &[Obstacle],
+    start: &[f64],
+    target: Option<stagerl::nalgebra::Vector3<f64>>,
+) -> PyResult<()> {
+    crate::guard("reset", || {
+        stagerl::env::check_joint_positions(env.chain(), start).map_err(crate::to_py)?;
+        let all: Vec<_> = env.task().obstacles.iter().chain(obstacles).cloned().collect();
+        let nf = env.task().obstacles.len();
+        let named = |i: usize| match i {
+            i if i < nf => format!("task.obstacles[{i}]"),
+            i => format!("obstacles[{}]", i - nf),
+        };
+        let mut c = stagerl::sim::collision::ArmCollider::new(env.chain(), env.task().collision);
+        stagerl::env::request::check_scene_for_request(env.chain(), &mut c, &all, named, start, target)
+            .map_err(crate::to_py)
+    })
 }

@@ -42,6 +42,9 @@ pub struct VecCore {
     /// environment's end-effector path, once [`VecCore::enable_render`] is called.
     renderer: Option<Box<Renderer>>,
     paths: Vec<EePath>,
+    /// Environments whose episode is among the scene given to `reset` (`obstacles`): their
+    /// next autoreset goes back to the task's scene, as a `SyncVectorEnv`'s does.
+    scene: Vec<bool>,
 }
 
 impl VecCore {
@@ -172,7 +175,8 @@ impl VecCore {
         all.getattr("flags")?.setattr("writeable", false)?;
         let (pools, used, next_seeds) = (vec![Vec::new(); num_envs], vec![0; num_envs], vec![0; num_envs]);
         let (renderer, paths) = (None, Vec::new());
-        Ok(VecCore { env, pools, used, next_seeds, keys, all: all.unbind(), renderer, paths })
+        let scene = vec![false; num_envs];
+        Ok(VecCore { env, pools, used, next_seeds, keys, all: all.unbind(), renderer, paths, scene })
     }
 
     #[getter]
@@ -238,14 +242,24 @@ impl VecCore {
         Ok(())
     }
 
-    /// Start a new episode in every environment from its pool's next seed; (observations,
-    /// distances_m, environments to refill).
+    /// Start a new episode in every environment from its pool's next seed, among `obstacles`
+    /// (a list of dicts, checked as `ReachEnv.reset`'s) when given, for this episode only;
+    /// (observations, distances_m, environments to refill).
     #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (obstacles=None))]
     fn reset<'py>(
         &mut self,
         py: Python<'py>,
+        obstacles: Option<Bound<'py, PyAny>>,
     ) -> PyResult<(Bound<'py, PyArray2<f32>>, F64s<'py>, Vec<usize>)> {
+        let extra = crate::obstacles::obstacles_of(obstacles.as_ref())?;
+        if let Some(extra) = &extra {
+            let env = &self.env.envs()[0];
+            crate::obstacles::check_scene(env, extra, &env.task().home_pose, None)?;
+        }
         for i in 0..self.env.len() {
+            self.env.set_request_obstacles(i, extra.as_deref()).map_err(to_py)?;
+            self.scene[i] = extra.is_some();
             self.take_seed(i)?;
         }
         let (env, seeds) = (&mut self.env, &self.next_seeds);
@@ -269,6 +283,10 @@ impl VecCore {
         for i in 0..self.env.len() {
             if self.env.envs()[i].is_done() {
                 self.take_seed(i)?;
+                if self.scene[i] {
+                    self.env.set_request_obstacles(i, None).map_err(to_py)?;
+                    self.scene[i] = false;
+                }
             }
         }
         let (env, seeds) = (&mut self.env, &self.next_seeds);

@@ -184,6 +184,10 @@ pub struct EnvState {
     /// `q` are the simulation's state.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sim_velocities: Vec<f64>,
+    /// The request's scene the next episodes have ([`ReachEnv::set_request_obstacles`]), when
+    /// one is set; `random_obstacles` then holds this episode's obstacles after the fixed ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub request_obstacles: Option<Vec<crate::sim::scene::Obstacle>>,
 }
 
 /// The reaching environment.
@@ -856,6 +860,7 @@ impl ReachEnv {
             collision_steps: self.collision_steps,
             random_obstacles: self.obstacles[self.task.obstacles.len()..].to_vec(),
             sim_velocities: self.arm.sim_velocities(),
+            request_obstacles: self.request_obstacles.clone(),
         }
     }
 
@@ -879,11 +884,17 @@ impl ReachEnv {
         if !finite {
             return Err(Error::InvalidInput("environment state holds a non-finite value".into()));
         }
-        let max = self.task.max_obstacles() - self.task.obstacles.len();
+        if let Some(r) = &s.request_obstacles {
+            request::check_obstacle_values(r, "EnvState.request_obstacles")?;
+        }
+        // This episode's obstacles after the fixed ones: the task's random ones, or a request's.
+        let random = self.task.max_obstacles() - self.task.obstacles.len();
+        let max = random.max(s.request_obstacles.as_ref().map_or(0, Vec::len));
         if s.random_obstacles.len() > max {
             return Err(Error::InvalidInput(format!(
-                "environment state with {} random obstacles, the task allows {max}",
-                s.random_obstacles.len()
+                "environment state with {} random obstacles, the task allows {random} and its request's scene {}",
+                s.random_obstacles.len(),
+                s.request_obstacles.as_ref().map_or(0, Vec::len)
             )));
         }
         for (i, o) in s.random_obstacles.iter().enumerate() {
@@ -896,6 +907,7 @@ impl ReachEnv {
         self.steps = s.steps;
         self.done = s.done;
         self.collision_steps = s.collision_steps;
+        self.request_obstacles.clone_from(&s.request_obstacles);
         self.obstacles.truncate(self.task.obstacles.len());
         self.obstacles.extend(s.random_obstacles.iter().cloned());
         self.arm.set_obstacles(&self.obstacles);

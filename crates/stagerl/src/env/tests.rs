@@ -843,3 +843,66 @@ fn a_seven_joint_arm_without_its_per_joint_settings_names_all_of_them_at_once() 
     let e = range.resolve(&chain).unwrap_err().to_string();
     assert!(e.contains("`task.home_pose_rad`") && !e.contains("target_joint_range"), "{e}");
 }
+
+/// A state saved while a request's scene is set (more obstacles than the task's random ones
+/// allow) restores that scene: the episode goes on among the same obstacles, and the next
+/// episodes keep the request's scene, as in the environment it was saved from; a state
+/// without one goes back to the task's random obstacles; a request's scene that is too large
+/// is refused by name.
+#[test]
+fn a_state_with_a_request_scene_restores_it_for_this_episode_and_the_next() {
+    use crate::sim::scene::{Obstacle, MAX_OBSTACLES};
+    let mut a = random_obstacles_env(3, true);
+    let scene: Vec<Obstacle> =
+        (0..7).map(|i| Obstacle::sphere(0.03, [0.5, -0.6 + 0.2 * f64::from(i), 0.9])).collect();
+    a.set_request_obstacles(Some(&scene));
+    a.reset();
+    assert_eq!(
+        a.obstacles().len(),
+        1 + 7,
+        "the fixed obstacle and the request's 7 (the task allows 5 random)"
+    );
+    a.step(&[0.2; 6]).unwrap();
+    let saved = a.state();
+    assert_eq!(saved.request_obstacles.as_deref(), Some(&scene[..]));
+    let mut b = random_obstacles_env(44, true);
+    b.reset();
+    b.restore(&saved).unwrap();
+    assert_eq!(b.obstacles(), a.obstacles());
+    assert_eq!(b.observation(), a.observation());
+    for _ in 0..3 {
+        while !a.is_done() {
+            assert_eq!(
+                a.step(&[0.3, -0.2, 0.1, 0.0, 0.1, 0.0]).unwrap(),
+                b.step(&[0.3, -0.2, 0.1, 0.0, 0.1, 0.0]).unwrap()
+            );
+        }
+        a.reset();
+        b.reset();
+        assert_eq!(b.obstacles(), a.obstacles(), "the next episode keeps the request's scene");
+        assert_eq!(b.obstacles()[1..], scene[..]);
+    }
+    // Saved without a request: the next episode draws random obstacles again.
+    let mut c = random_obstacles_env(3, true);
+    c.reset();
+    b.restore(&c.state()).unwrap();
+    b.reset();
+    assert!((2..=5).contains(&(b.obstacles().len() - 1)), "{} obstacles", b.obstacles().len());
+    // Through the checkpoint's serialisation, and refusals.
+    let json = serde_json::to_string(&saved).unwrap();
+    assert!(json.contains("request_obstacles"));
+    let back: EnvState = serde_json::from_str(&json).unwrap();
+    b.restore(&back).unwrap();
+    assert_eq!(b.obstacles(), a.obstacles().iter().take(1).chain(&scene).cloned().collect::<Vec<_>>());
+    assert!(!serde_json::to_string(&c.state()).unwrap().contains("request_obstacles"), "absent when none");
+    let huge =
+        EnvState { request_obstacles: Some(vec![scene[0].clone(); MAX_OBSTACLES + 1]), ..saved.clone() };
+    let e = b.restore(&huge).unwrap_err().to_string();
+    assert!(
+        e.contains("EnvState.request_obstacles") && e.contains(&format!("at most {MAX_OBSTACLES}")),
+        "{e}"
+    );
+    let too_many = EnvState { random_obstacles: vec![scene[0].clone(); 8], ..saved };
+    let e = b.restore(&too_many).unwrap_err().to_string();
+    assert!(e.contains("8 random obstacles") && e.contains("request's scene 7"), "{e}");
+}

@@ -190,6 +190,25 @@ impl VecEnv {
         Ok(())
     }
 
+    /// From environment `i`'s next reset on, the scene of a request (see
+    /// [`ReachEnv::set_request_obstacles`]; checked by the caller); `None` goes back to the
+    /// task's scene.
+    pub fn set_request_obstacles(
+        &mut self,
+        i: usize,
+        obstacles: Option<&[crate::sim::scene::Obstacle]>,
+    ) -> Result<()> {
+        let n = self.envs.len();
+        let env = self.envs.get_mut(i).ok_or_else(|| {
+            Error::InvalidInput(format!(
+                "environment {i} does not exist: the vector env holds {n} (0 to {})",
+                n - 1
+            ))
+        })?;
+        env.set_request_obstacles(obstacles);
+        Ok(())
+    }
+
     /// Every environment's state (for checkpoints).
     pub fn states(&self) -> Vec<super::EnvState> {
         self.envs.iter().map(ReachEnv::state).collect()
