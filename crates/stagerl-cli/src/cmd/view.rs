@@ -16,8 +16,9 @@ pub struct Args {
     /// evaluations).
     #[arg(long, conflicts_with = "plans")]
     seed: Option<u64>,
-    /// Plan the requests of FILE instead: JSON lines {"target":[x,y,z]} or
-    /// {"target":[..],"start":[..]}, as `stagerl plan --targets` reads them.
+    /// Plan the requests of FILE instead: JSON lines {"target":[x,y,z]}, with optional
+    /// "start":[..] (radians) and "obstacles":[..] (the schema of [[task.obstacles]]), as
+    /// `stagerl plan --targets` reads them; each line's scene is drawn.
     #[arg(long)]
     plans: Option<PathBuf>,
     /// The HTML file to write (self-contained: opens without network access).

@@ -441,3 +441,64 @@ fn rrt_connect_plans_round_an_obstacle_deterministically_and_the_bench_runs() {
     assert_eq!((last["problems"].as_u64(), last["contacts"].as_u64()), (Some(10), Some(0)), "{out}");
     assert!(last["solved"].as_u64().unwrap() >= 9, "{out}");
 }
+
+/// The view's data: the JSON in the page's data script.
+fn view_data(html: &str) -> Value {
+    let tag = "type=\"application/json\">";
+    let start = html.find(tag).unwrap() + tag.len();
+    let end = start + html[start..].find("</script>").unwrap();
+    serde_json::from_str(&html[start..end]).unwrap()
+}
+
+/// `stagerl view --plans FILE` passes each line's obstacles to the planner and the page, as
+/// `stagerl plan --targets FILE --view` does: the same scenes, contacts and closest approaches
+/// for the same trained policy, and a line without obstacles has none.
+#[test]
+fn view_plans_draws_each_lines_scene_as_plan_view_does() {
+    let dir = scratch("view-plans-scene");
+    std::fs::create_dir_all(&dir).unwrap();
+    let run_dir = trained_run().to_str().unwrap();
+    let plans = dir.join("plans.jsonl");
+    std::fs::write(
+        &plans,
+        concat!(
+            "{\"target\":[-0.4,0.1,0.35],\"obstacles\":[{\"shape\":\"sphere\",\"radius_m\":0.04,",
+            "\"position_m\":[-0.4435,-0.0046,0.391]},{\"shape\":\"cuboid\",\"half_extents_m\":[0.05,0.1,0.02],",
+            "\"position_m\":[-0.2,-0.3,0.3],\"rotation_xyzw\":[0,0,0.3826834,0.9238795]}]}\n",
+            "{\"target\":[0.4,0.2,0.3]}\n",
+            "{\"target\":[0.4,0.2,0.3],\"obstacles\":[{\"shape\":\"sphere\",\"radius_m\":0.05,\"position_m\":[0.3,-0.3,0.9]}]}\n"
+        ),
+    )
+    .unwrap();
+    let (a, b) = (dir.join("view.html"), dir.join("plan.html"));
+    stdout_of(&run(&[
+        "view",
+        "--run",
+        run_dir,
+        "--plans",
+        plans.to_str().unwrap(),
+        "--out",
+        a.to_str().unwrap(),
+    ]));
+    stdout_of(&run(&[
+        "plan",
+        "--run",
+        run_dir,
+        "--targets",
+        plans.to_str().unwrap(),
+        "--view",
+        b.to_str().unwrap(),
+    ]));
+    let (a, b) =
+        (view_data(&std::fs::read_to_string(a).unwrap()), view_data(&std::fs::read_to_string(b).unwrap()));
+    let (ta, tb) = (a["trajectories"].as_array().unwrap(), b["trajectories"].as_array().unwrap());
+    assert_eq!(ta.len(), 3);
+    for (i, want) in [(0, 2), (1, 0), (2, 1)] {
+        assert_eq!(ta[i]["obstacles"].as_array().map_or(0, Vec::len), want, "line {}", i + 1);
+        for key in ["obstacles", "collision", "min_clearance_m", "closest", "contact", "frames", "reached"] {
+            assert_eq!(ta[i][key], tb[i][key], "line {}: {key}", i + 1);
+        }
+    }
+    assert!(ta[0]["min_clearance_m"].as_f64().is_some() && ta[1]["min_clearance_m"].is_null());
+    std::fs::remove_dir_all(&dir).ok();
+}
