@@ -1,5 +1,6 @@
 //! `--shield` end to end: the `shield_*` keys of `plan` and `eval`, `bench plan` among obstacles
-//! in the way without contact, and `train --shield` writing `[task.shield]` into the run.
+//! in the way without contact, and `train --shield` writing `[task.shield]` into the run and
+//! each episode's shield counts into its TensorBoard log.
 
 use crate::common;
 
@@ -72,6 +73,21 @@ fn train_and_eval_with_the_shield() {
         out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Each episode's shield counts are in the run's TensorBoard log.
+    let scalars = common::tb_scalars(&out);
+    for tag in ["train/shield_interventions", "train/shield_stops", "train/shield_mean_change_rad_per_s"] {
+        let mut episodes: Vec<i64> = scalars.iter().filter(|(t, ..)| t == tag).map(|(_, e, _)| *e).collect();
+        episodes.sort_unstable();
+        assert_eq!(episodes, (1..=20).collect::<Vec<i64>>(), "{tag}");
+    }
+    let per_episode = |tag: &str| {
+        let mut v: Vec<(i64, f32)> =
+            scalars.iter().filter(|(t, ..)| t == tag).map(|(_, e, x)| (*e, *x)).collect();
+        v.sort_by_key(|p| p.0);
+        v
+    };
+    let (changed, stopped) = (per_episode("train/shield_interventions"), per_episode("train/shield_stops"));
+    assert!(changed.iter().zip(&stopped).all(|(c, s)| c.1 >= s.1 && s.1 >= 0.0), "{changed:?} {stopped:?}");
     let written = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(written.contains("[task.shield]") && written.contains("enabled = true"), "{written}");
     let e =

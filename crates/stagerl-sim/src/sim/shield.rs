@@ -261,6 +261,11 @@ impl Shield {
         &self.episode
     }
 
+    /// Continue an episode whose counts were `stats` (a resumed run's).
+    pub fn resume_episode(&mut self, stats: ShieldStats) {
+        self.episode = stats;
+    }
+
     /// Start counting a new episode.
     pub fn begin_episode(&mut self) {
         self.episode = ShieldStats::default();

@@ -188,6 +188,9 @@ pub struct EnvState {
     /// one is set; `random_obstacles` then holds this episode's obstacles after the fixed ones.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub request_obstacles: Option<Vec<crate::sim::scene::Obstacle>>,
+    /// What the safety shield did in this episode so far (`None`: the shield is off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shield_episode: Option<ShieldStats>,
 }
 
 /// The reaching environment.
@@ -861,6 +864,7 @@ impl ReachEnv {
             random_obstacles: self.obstacles[self.task.obstacles.len()..].to_vec(),
             sim_velocities: self.arm.sim_velocities(),
             request_obstacles: self.request_obstacles.clone(),
+            shield_episode: self.episode_shield_stats(),
         }
     }
 
@@ -908,6 +912,9 @@ impl ReachEnv {
         self.done = s.done;
         self.collision_steps = s.collision_steps;
         self.request_obstacles.clone_from(&s.request_obstacles);
+        if let (Some(shield), Some(stats)) = (self.arm.shield_mut(), s.shield_episode) {
+            shield.resume_episode(stats);
+        }
         self.obstacles.truncate(self.task.obstacles.len());
         self.obstacles.extend(s.random_obstacles.iter().cloned());
         self.arm.set_obstacles(&self.obstacles);

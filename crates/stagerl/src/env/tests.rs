@@ -906,3 +906,35 @@ fn a_state_with_a_request_scene_restores_it_for_this_episode_and_the_next() {
     let e = b.restore(&too_many).unwrap_err().to_string();
     assert!(e.contains("8 random obstacles") && e.contains("request's scene 7"), "{e}");
 }
+
+/// The shield's counts of the episode in progress are part of the state: an environment
+/// restored mid-episode ends it with the counts of the one it was saved from (a resumed run
+/// logs what an uninterrupted one does); without the shield the state holds none.
+#[test]
+fn the_shields_episode_counts_survive_a_restore() {
+    let make = |seed| {
+        let mut e = random_obstacles_env(seed, true);
+        e.set_shield(true).unwrap();
+        e.set_obstacles_in_path(1.0).unwrap();
+        e
+    };
+    let (mut a, mut b) = (make(21), make(5));
+    a.reset();
+    b.reset();
+    let action = [0.6, 0.5, -0.4, 0.2, 0.0, 0.0];
+    for _ in 0..8 {
+        a.step(&action).unwrap();
+    }
+    let saved = a.state();
+    assert_eq!(saved.shield_episode, a.episode_shield_stats());
+    assert_eq!(saved.shield_episode.unwrap().steps, 8);
+    b.restore(&saved).unwrap();
+    while !a.is_done() {
+        assert_eq!(a.step(&action).unwrap(), b.step(&action).unwrap());
+    }
+    let (ea, eb) = (a.episode_shield_stats().unwrap(), b.episode_shield_stats().unwrap());
+    assert_eq!(ea, eb);
+    assert_eq!(ea.steps, u64::from(a.steps()));
+    let plain = random_obstacles_env(21, true);
+    assert!(plain.state().shield_episode.is_none());
+}

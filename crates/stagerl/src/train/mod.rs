@@ -204,6 +204,10 @@ struct EpisodeEnd {
     /// Steps that ended in contact (`None` in a checkpoint of an older version).
     #[serde(default)]
     collision_steps: Option<u32>,
+    /// What the safety shield did in the episode (`None`: the shield is off, or PPO, whose
+    /// vector env starts the next episode in the step that ends one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    shield: Option<crate::sim::shield::ShieldStats>,
 }
 
 /// How experience is collected and learnt from: a replay buffer and updates after every step
@@ -492,6 +496,11 @@ impl Trainer {
         tb.scalar("train/final_distance_m", ep, record.final_distance_m)?;
         if let Some(c) = record.collision_steps {
             tb.scalar("train/collision_steps", ep, f64::from(c))?;
+        }
+        if let Some(s) = &end.shield {
+            tb.scalar("train/shield_interventions", ep, s.interventions as f64)?;
+            tb.scalar("train/shield_stops", ep, s.stops as f64)?;
+            tb.scalar("train/shield_mean_change_rad_per_s", ep, s.mean_change_rad_per_s())?;
         }
         if let Some(st) = stats {
             tb.scalar("loss/critic", ep, st.critic_loss)?;

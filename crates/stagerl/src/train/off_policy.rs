@@ -199,6 +199,7 @@ impl Collector for OffPolicyCollector {
             success: last.reached,
             final_distance_m: f64::from_bits(last.final_distance_m_bits),
             collision_steps: self.env.collisions_checked().then(|| self.env.collision_steps()),
+            shield: self.env.episode_shield_stats(),
         }))
     }
 
