@@ -29,6 +29,9 @@ pub struct ObstaclesArgs {
     /// The problem sets (comma-separated; default: all).
     #[arg(long, value_delimiter = ',', value_parser = ["free", "in-the-way", "random-3", "random-6", "narrow-gap"])]
     sets: Vec<String>,
+    /// The planners (comma-separated; default: all, the policy's two with --run).
+    #[arg(long, value_delimiter = ',', value_parser = PLANNERS)]
+    planners: Vec<String>,
     /// Seed of the problem sets.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -62,6 +65,9 @@ pub struct ObstaclesArgs {
 
 /// Mixed into `--seed` for the solvability judge's RRT-Connect (not the table's).
 const JUDGE_SEED: u64 = 0x5017_AB1E;
+
+/// The planners of the table, in its order.
+const PLANNERS: [&str; 5] = ["jacobian", "jacobian+shield", "rrt-connect", "policy", "policy+shield"];
 
 /// One planner's figures on one set.
 struct Row {
@@ -181,6 +187,11 @@ fn planners(cfg: &Config, a: &ObstaclesArgs, rrt: RrtConnect) -> Result<Vec<(&'s
         let policy = || Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None).map(|(_, p)| p);
         planners.push(("policy", policy()?));
         planners.push(("policy+shield", shielded(policy()?)?));
+    } else if let Some(p) = a.planners.iter().find(|p| p.starts_with("policy")) {
+        anyhow::bail!("--planners {p}: the policy's planners need --run (a trained run)");
+    }
+    if !a.planners.is_empty() {
+        planners.retain(|(name, _)| a.planners.iter().any(|p| p == name));
     }
     Ok(planners)
 }

@@ -118,6 +118,30 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
     assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 72, "overwritten");
     assert!(again(true).status.success());
     assert_eq!(std::fs::read_to_string(&plans_path).unwrap().lines().count(), 6);
+    // --planners keeps the table's rows of the planners named, with the same figures.
+    let only = run(&[
+        "bench",
+        "obstacles",
+        "--problems",
+        "2",
+        "--sets",
+        "free",
+        "--planners",
+        "rrt-connect,jacobian",
+    ]);
+    let only = String::from_utf8(only.stdout).unwrap();
+    let rows: Vec<&str> = only.lines().filter(|l| l.starts_with("| ") && l.contains("| free |")).collect();
+    assert_eq!(rows.len(), 2, "{only}");
+    assert!(
+        rows[0].starts_with("| jacobian | free | 100.0 | 0.0 |")
+            && rows[1].starts_with("| rrt-connect | free |")
+    );
+    let e = run(&["bench", "obstacles", "--problems", "2", "--planners", "policy+shield"]);
+    assert!(
+        !e.status.success()
+            && String::from_utf8_lossy(&e.stderr)
+                .contains("--planners policy+shield: the policy's planners need --run")
+    );
     // The Jacobian controller succeeds on no narrow-gap problem here: no path length to average.
     let gap = table.lines().find(|l| l.starts_with("| jacobian | narrow-gap |")).expect(&table);
     assert!(
