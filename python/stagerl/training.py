@@ -165,7 +165,7 @@ class Run:
     Attributes: ``dir`` (the directory), ``config`` (its resolved ``config.toml`` as a dict),
     ``episodes`` (``episodes.csv`` as a dict of numpy arrays: ``episode``, ``reward``,
     ``steps``, ``success``, ``final_distance_m``, ``env_steps``, ``collision_steps``,
-    ``wall_s``) and ``evaluations`` (``eval.csv``, the periodic evaluations: ``episode``,
+    ``curriculum_stage`` with ``[train.curriculum]`` only, ``wall_s``) and ``evaluations`` (``eval.csv``, the periodic evaluations: ``episode``,
     ``env_steps``, ``success_rate``, ``mean_reward``, ``mean_steps``,
     ``median_final_distance_m``; empty when there were none). Methods: :meth:`policy`,
     :meth:`evaluate`, :meth:`export_onnx`, :meth:`plan`.

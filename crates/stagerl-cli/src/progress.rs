@@ -102,6 +102,25 @@ impl<'a> Reporter<'a> {
 
     pub fn episode(&mut self, p: &Progress<'_>) {
         let r = p.record;
+        if let Some(a) = &p.stage_advance {
+            let line = format!(
+                "episode {}: curriculum stage {} of 0-{} from the next episode ({}/{} successes over \
+                 the stage's last {} episodes): obstacles in the way with probability {}, at most {} \
+                 random obstacles",
+                r.episode,
+                a.stage,
+                a.stages - 1,
+                a.successes,
+                a.window,
+                a.window,
+                a.obstacles_in_path,
+                a.max_obstacles
+            );
+            match &self.bar {
+                Some(b) => b.println(line),
+                None => self.output.line(format_args!("{line}")),
+            }
+        }
         self.recent.push_back((r.reward, r.success));
         if self.recent.len() > 100 {
             self.recent.pop_front();

@@ -29,6 +29,10 @@ pub struct Args {
     /// `shield_*` counts.
     #[arg(long)]
     shield: bool,
+    /// Evaluate without the safety shield a run trained with `[task.shield] enabled = true`
+    /// (the policy alone). Its per-trial CSV is named for it.
+    #[arg(long, conflicts_with = "shield")]
+    no_shield: bool,
     /// Print one JSON line instead of text.
     #[arg(long)]
     json: bool,
@@ -70,10 +74,12 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(p) = in_path {
         env.set_obstacles_in_path(p).context("--obstacles-in-path")?;
     }
-    if args.shield {
-        env.set_shield(true).context("--shield")?;
+    let run_shield = cfg.task.shield.is_some_and(|s| s.enabled);
+    let shield = (args.shield || args.no_shield).then_some(args.shield).filter(|&on| on != run_shield);
+    if let Some(on) = shield {
+        env.set_shield(on).context(if on { "--shield" } else { "--no-shield" })?;
     }
-    let variant = EvalVariant { sim, obstacles_in_path: in_path };
+    let variant = EvalVariant { sim, obstacles_in_path: in_path, shield };
     // It writes into the run: its lock, once the agent loads (a refused checkpoint leaves the
     // directory untouched).
     let _lock = crate::run_control::lock_run(&args.run.run)?;
@@ -94,11 +100,13 @@ pub fn run(args: Args) -> Result<()> {
     if !args.json {
         let other = sim.map(|s| format!(" in the {} simulation (trained {})", s.name(), trained_in.name()));
         let in_path = in_path.map(|p| format!(" with the first obstacle in the way with probability {p}"));
+        let shield = shield.map(|on| if on { " with the shield" } else { " without the shield" });
         outln!(
-            "{}{}{} on {} trials (seed {}), per-trial CSV {} ({written})",
+            "{}{}{}{} on {} trials (seed {}), per-trial CSV {} ({written})",
             checkpoint.display(),
             other.unwrap_or_default(),
             in_path.unwrap_or_default(),
+            shield.unwrap_or_default(),
             args.trials,
             args.seed,
             csv.display()

@@ -105,6 +105,28 @@ fn sigkill_then_resume_with_obstacles_in_the_way_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-in-path", &config);
 }
 
+/// The same with the obstacle curriculum (`[train.curriculum]`): its stage and window of
+/// outcomes are in the checkpoints, so the stages (the `curriculum_stage` column) and the
+/// obstacles of the resumed run are those of the uninterrupted one.
+#[test]
+fn sigkill_then_resume_with_a_curriculum_gives_the_uninterrupted_run() {
+    // Networks of 64 (the stages advance at episodes 73 and 225, between the kills).
+    let config = format!(
+        "{}[task]\nobserve_obstacles = true\nobstacle_observation = \"per_link\"\n\
+         [task.random_obstacles]\ncount = [1, 3]\n\
+         [train.curriculum]\nwindow = 10\nadvance_at = 0.1\nobstacles_in_path = [0.0, 0.5, 1.0]\n\
+         max_obstacles = [1, 2, 3]\n",
+        CONFIG.replace("hidden = [16, 16]", "hidden = [64, 64]")
+    );
+    let root = sigkills_then_resume_keeping("resume-kill-curriculum", &config, 300, 3);
+    let rows = common::episodes_without_wall(&root.join("cut"));
+    assert!(rows[0].ends_with(",collision_steps,curriculum_stage"), "{}", rows[0]);
+    let stages: std::collections::BTreeSet<&str> =
+        rows[1..].iter().map(|r| r.rsplit_once(',').unwrap().1).collect();
+    assert_eq!(stages.len(), 3, "the run went through every stage: {stages:?}");
+    std::fs::remove_dir_all(&root).ok();
+}
+
 fn sigkills_then_resume(name: &str, config: &str) {
     sigkills_then_resume_expecting(name, config, 300, 3);
 }
@@ -112,6 +134,18 @@ fn sigkills_then_resume(name: &str, config: &str) {
 /// [`sigkills_then_resume`] of a run of `episodes` episodes (0: as many as the uninterrupted run
 /// has) and `evals` periodic evaluations.
 fn sigkills_then_resume_expecting(name: &str, config: &str, episodes: usize, evals: usize) {
+    let root = sigkills_then_resume_keeping(name, config, episodes, evals);
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// [`sigkills_then_resume_expecting`], leaving the runs (`full`, `cut`) in the directory it
+/// returns.
+fn sigkills_then_resume_keeping(
+    name: &str,
+    config: &str,
+    episodes: usize,
+    evals: usize,
+) -> std::path::PathBuf {
     let root = scratch(name);
     let cfg = root.join("c.toml");
     std::fs::write(&cfg, config).unwrap();
@@ -164,7 +198,7 @@ fn sigkills_then_resume_expecting(name: &str, config: &str, episodes: usize, eva
     let out = run(&["train", "--resume", cut.to_str().unwrap(), "--eval-trials", "0"]);
     assert!(out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("already finished"));
-    std::fs::remove_dir_all(&root).ok();
+    root
 }
 
 #[test]

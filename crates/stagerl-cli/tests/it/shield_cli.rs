@@ -95,4 +95,18 @@ fn train_and_eval_with_the_shield() {
     let s = e.last().unwrap();
     assert!(KEYS.iter().all(|k| s.get(k).is_some()), "{s}");
     assert!(s["shield_steps"].as_u64().unwrap() >= 10, "{s}");
+    // The run's own setting: its file is the plain one. --no-shield: the policy alone, in a file
+    // of its own.
+    assert!(out.join("eval-best-trials10-seed0.csv").is_file());
+    let o = run(&["eval", "--run", out.to_str().unwrap(), "--trials", "10", "--no-shield"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("without the shield"));
+    let args = ["eval", "--run", out.to_str().unwrap(), "--trials", "10", "--no-shield", "--json", "--force"];
+    let e = json_lines(&run(&args));
+    let s = e.last().unwrap();
+    assert!(KEYS.iter().all(|k| s.get(k).is_none()), "no shield counts without the shield: {s}");
+    assert!(out.join("eval-best-trials10-seed0-no-shield.csv").is_file());
+    let both = run(&["eval", "--run", out.to_str().unwrap(), "--shield", "--no-shield"]);
+    let err = String::from_utf8_lossy(&both.stderr);
+    assert!(!both.status.success() && err.contains("--no-shield") && err.contains("--shield"), "{err}");
 }

@@ -20,9 +20,11 @@ use crate::env::TaskConfig;
 use crate::reward::RewardConfig;
 use crate::robot::RobotConfig;
 
+pub mod curriculum;
 mod resolved;
 pub mod schema;
 mod train;
+pub use curriculum::{CurriculumConfig, CurriculumState};
 pub use resolved::Resolved;
 pub use train::{TrainConfig, MAX_EVAL_TRIALS};
 
@@ -218,7 +220,35 @@ impl Config {
     /// than the run's.
     pub fn validate(&self) -> Result<()> {
         self.validate_values()?;
-        self.agent.validate()
+        self.agent.validate()?;
+        self.check_curriculum()
+    }
+
+    /// The run-level checks of `[train.curriculum]`: an off-policy agent, and no
+    /// `train.obstacles_in_path` beside it (its stages set that probability).
+    fn check_curriculum(&self) -> Result<()> {
+        if self.train.curriculum.is_none() {
+            return Ok(());
+        }
+        if !self.agent.algo.is_off_policy() {
+            return Err(Error::config(
+                "train.curriculum",
+                "a curriculum section",
+                format!(
+                    "none with agent.algo = \"{}\": the curriculum follows the episodes of the \
+                     off-policy collector's one environment (use ddpg, td3, sac or crossq)",
+                    self.agent.algo
+                ),
+            ));
+        }
+        if self.train.obstacles_in_path != 0.0 {
+            return Err(Error::config(
+                "train.obstacles_in_path",
+                self.train.obstacles_in_path,
+                "0 (left out) with [train.curriculum], whose obstacles_in_path sets it per stage",
+            ));
+        }
+        Ok(())
     }
 
     /// Chain-independent checks of every value of every section.
@@ -235,6 +265,9 @@ impl Config {
             self.train.obstacles_in_path,
             self.task.random_obstacles.is_some(),
         )?;
+        if let Some(c) = &self.train.curriculum {
+            c.check_task(self.task.random_obstacles.as_ref().map(|r| r.count))?;
+        }
         self.check_memory(ESTIMATE_DOF)
     }
 }

@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::curriculum::CurriculumConfig;
 use crate::{Error, Result};
 
 /// The largest evaluation asked for at once (its per-trial records are kept in memory).
@@ -45,6 +46,12 @@ pub struct TrainConfig {
     /// 0 (the default, left out of a written config) changes nothing.
     #[serde(skip_serializing_if = "is_zero")]
     pub obstacles_in_path: f64,
+    /// A curriculum over the random obstacles (unset by default): stages of rising in-the-way
+    /// probability and obstacle count that advance with the training success rate (see
+    /// [`CurriculumConfig`]). Off-policy agents only; needs `[task.random_obstacles]`; replaces
+    /// `train.obstacles_in_path`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub curriculum: Option<CurriculumConfig>,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -63,6 +70,7 @@ impl Default for TrainConfig {
             eval_seed: 1_000_003,
             checkpoint_every_episodes: 250,
             obstacles_in_path: 0.0,
+            curriculum: None,
         }
     }
 }
@@ -103,6 +111,9 @@ impl TrainConfig {
                 0,
                 "an integer >= 1 (or set train.eval_every_episodes = 0 to disable evaluation)",
             ));
+        }
+        if let Some(c) = &self.curriculum {
+            c.validate_values()?;
         }
         Ok(())
     }

@@ -224,6 +224,9 @@ pub struct ReachEnv {
     /// The probability that an episode's first random obstacle is placed in the way
     /// ([`ReachEnv::set_obstacles_in_path`]; 0 unless set).
     obstacles_in_path: f64,
+    /// The task's random obstacles with a smaller largest count
+    /// ([`ReachEnv::set_max_random_obstacles`]; `None`: the task's own).
+    capped_random: Option<crate::sim::scene::RandomObstacles>,
     /// A request's obstacles ([`ReachEnv::set_request_obstacles`]): episodes have the task's
     /// fixed obstacles and these, and no random ones. `None`: the task's scene.
     request_obstacles: Option<Vec<crate::sim::scene::Obstacle>>,
@@ -445,6 +448,7 @@ impl ReachEnv {
             far_obs,
             obstacles,
             obstacles_in_path: 0.0,
+            capped_random: None,
             request_obstacles: None,
             chain,
             rng: Rng::new(seed),
@@ -566,6 +570,7 @@ impl ReachEnv {
             self.obstacles.clone_from(&self.task.obstacles);
             self.arm.set_obstacles(&self.obstacles);
         } else if let Some(random) = &self.task.random_obstacles {
+            let random = self.capped_random.as_ref().unwrap_or(random);
             let p = Placement {
                 chain: &self.chain,
                 q: &self.q,
@@ -840,6 +845,33 @@ impl ReachEnv {
     pub fn set_obstacles_in_path(&mut self, fraction: f64) -> Result<()> {
         check_obstacles_in_path(fraction, self.task.random_obstacles.is_some())?;
         self.obstacles_in_path = fraction;
+        Ok(())
+    }
+
+    /// From the next reset on, draw an episode's random obstacle count uniformly from
+    /// `task.random_obstacles.count[0]` to `max` instead of to `count[1]` (the curriculum's
+    /// stages, `[train.curriculum]`). `max = count[1]` draws as the task says.
+    ///
+    /// Errors: a task without `[task.random_obstacles]`, or `max` outside its `count`.
+    pub fn set_max_random_obstacles(&mut self, max: u32) -> Result<()> {
+        let Some(random) = &self.task.random_obstacles else {
+            return Err(Error::InvalidInput(
+                "a largest random obstacle count for a task without [task.random_obstacles]".into(),
+            ));
+        };
+        let [lo, hi] = random.count;
+        if !(lo..=hi).contains(&max) {
+            return Err(Error::config(
+                "train.curriculum.max_obstacles",
+                max,
+                format!("a count within task.random_obstacles.count = [{lo}, {hi}]"),
+            ));
+        }
+        self.capped_random = (max < hi).then(|| {
+            let mut capped = random.clone();
+            capped.count[1] = max;
+            capped
+        });
         Ok(())
     }
 

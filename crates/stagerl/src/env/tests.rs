@@ -938,3 +938,54 @@ fn the_shields_episode_counts_survive_a_restore() {
     let plain = random_obstacles_env(21, true);
     assert!(plain.state().shield_episode.is_none());
 }
+
+/// `set_max_random_obstacles` (the curriculum's stages): counts drawn from `count[0]` to the
+/// cap, every count of that range drawn; the task's largest count draws the same episodes as an
+/// environment never set; caps outside `count` and tasks without random obstacles are refused.
+#[test]
+fn the_largest_random_obstacle_count_can_be_capped() {
+    // count = [2, 5] and one fixed obstacle.
+    let counts = |cap: Option<u32>| {
+        let mut e = random_obstacles_env(3, true);
+        if let Some(c) = cap {
+            e.set_max_random_obstacles(c).unwrap();
+        }
+        (0..300)
+            .map(|_| {
+                e.reset();
+                e.obstacles().len() - 1
+            })
+            .collect::<Vec<usize>>()
+    };
+    for cap in [2u32, 3, 4] {
+        let seen: std::collections::BTreeSet<usize> = counts(Some(cap)).into_iter().collect();
+        // (A random obstacle with no free place in 100 tries is left out: at most one fewer.)
+        assert!(seen.iter().all(|&n| n <= cap as usize), "cap {cap}: {seen:?}");
+        assert!((2..=cap as usize).all(|n| seen.contains(&n)), "cap {cap}: {seen:?}");
+    }
+    let (mut a, mut b) = (random_obstacles_env(4, true), random_obstacles_env(4, true));
+    b.set_max_random_obstacles(5).unwrap();
+    for _ in 0..50 {
+        a.reset();
+        b.reset();
+        assert_eq!(
+            (a.obstacles(), a.target(), a.observation()),
+            (b.obstacles(), b.target(), b.observation())
+        );
+    }
+    // Back from a cap to the task's count.
+    b.set_max_random_obstacles(2).unwrap();
+    b.set_max_random_obstacles(5).unwrap();
+    let mut c = random_obstacles_env(4, true);
+    for _ in 0..50 {
+        c.reset();
+    }
+    b.reset();
+    c.reset();
+    assert_eq!(b.obstacles(), c.obstacles());
+    for bad in [1, 6] {
+        let e = random_obstacles_env(3, true).set_max_random_obstacles(bad).unwrap_err().to_string();
+        assert!(e.contains("train.curriculum.max_obstacles") && e.contains("[2, 5]"), "{e}");
+    }
+    assert!(env(1).set_max_random_obstacles(1).is_err());
+}

@@ -31,6 +31,15 @@ pub trait CsvRecord: CsvRow + Sized {
     /// Headers of files written before a column was added, still read (their rows lack the
     /// newer columns, which parse as unknown).
     const OLDER_HEADERS: &'static [&'static str] = &[];
+    /// Headers of files of this version with optional columns (written only when their
+    /// setting is on).
+    const OPTIONAL_HEADERS: &'static [&'static str] = &[];
+    /// `header` is one of this row type's files'.
+    fn known_header(header: &str) -> bool {
+        header == Self::HEADER
+            || Self::OLDER_HEADERS.contains(&header)
+            || Self::OPTIONAL_HEADERS.contains(&header)
+    }
     /// Parse the fields of one line (split at commas); `None` when malformed.
     fn parse_row(fields: &[&str]) -> Option<Self>;
 }
@@ -43,7 +52,12 @@ pub fn push_row<R: CsvRow>(out: &mut String, row: &R) {
 
 /// The header and every row, one per line.
 pub fn to_csv<'a, R: CsvRow + 'a>(rows: impl IntoIterator<Item = &'a R>) -> String {
-    let mut s = format!("{}\n", R::HEADER);
+    to_csv_with_header(R::HEADER, rows)
+}
+
+/// [`to_csv`] under another header (a file with optional columns).
+pub fn to_csv_with_header<'a, R: CsvRow + 'a>(header: &str, rows: impl IntoIterator<Item = &'a R>) -> String {
+    let mut s = format!("{header}\n");
     for r in rows {
         push_row(&mut s, r);
     }
@@ -67,7 +81,7 @@ pub fn parse_line<R: CsvRecord>(line: &str, origin: &Path) -> Result<R> {
 pub fn parse_csv<R: CsvRecord>(text: &str, origin: &Path) -> Result<Vec<R>> {
     let mut lines = text.lines();
     let header = lines.next().map(str::trim_end);
-    if !header.is_some_and(|h| h == R::HEADER || R::OLDER_HEADERS.contains(&h)) {
+    if !header.is_some_and(R::known_header) {
         return Err(Error::InvalidInput(format!(
             "{}: expected the header {:?}",
             origin.display(),
@@ -138,9 +152,14 @@ impl<R: CsvRow> CsvWriter<R> {
 
     /// Create `path` with its header (replacing any file there).
     pub fn create(path: &Path) -> Result<CsvWriter<R>> {
+        Self::create_with_header(path, R::HEADER)
+    }
+
+    /// [`CsvWriter::create`] with another header (a file with optional columns).
+    pub fn create_with_header(path: &Path, header: &str) -> Result<CsvWriter<R>> {
         let file = File::create(path).map_err(|e| Error::io(path, e))?;
         let mut csv = CsvWriter::open(file, path);
-        writeln!(csv.out, "{}", R::HEADER).and_then(|_| csv.out.flush()).map_err(|e| Error::io(path, e))?;
+        writeln!(csv.out, "{header}").and_then(|_| csv.out.flush()).map_err(|e| Error::io(path, e))?;
         Ok(csv)
     }
 
@@ -179,6 +198,10 @@ pub struct EpisodeRecord {
     /// Steps of the episode that ended in contact (floor, self, obstacle); `None` in files
     /// written before contacts were recorded (an empty field).
     pub collision_steps: Option<u32>,
+    /// With `train.curriculum`: the stage (0-based) the episode was played at; the column
+    /// `curriculum_stage`, before `wall_s`, is written only then
+    /// ([`EpisodeRecord::HEADER_WITH_STAGE`]).
+    pub curriculum_stage: Option<u32>,
     /// Seconds since the run began (the only column that differs between identical runs, and
     /// the last; written to the millisecond).
     pub wall_s: f64,
@@ -197,21 +220,43 @@ impl CsvRow for EpisodeRecord {
             final_distance_m: d,
             env_steps,
             collision_steps,
+            curriculum_stage,
             wall_s,
         } = *self;
         let (success, collisions) = (u8::from(success), Opt(collision_steps));
-        let _ = write!(out, "{episode},{reward},{steps},{success},{d},{env_steps},{collisions},{wall_s:.3}");
+        let _ = write!(out, "{episode},{reward},{steps},{success},{d},{env_steps},{collisions},");
+        if let Some(stage) = curriculum_stage {
+            let _ = write!(out, "{stage},");
+        }
+        let _ = write!(out, "{wall_s:.3}");
+    }
+}
+
+impl EpisodeRecord {
+    /// The header of a run with `train.curriculum`.
+    pub const HEADER_WITH_STAGE: &'static str =
+        "episode,reward,steps,success,final_distance_m,env_steps,collision_steps,curriculum_stage,wall_s";
+
+    /// The header of a run's `episodes.csv`: with the stage column when it has a curriculum.
+    pub fn header(curriculum: bool) -> &'static str {
+        if curriculum {
+            Self::HEADER_WITH_STAGE
+        } else {
+            <Self as CsvRow>::HEADER
+        }
     }
 }
 
 impl CsvRecord for EpisodeRecord {
     const OLDER_HEADERS: &'static [&'static str] =
         &["episode,reward,steps,success,final_distance_m,env_steps,wall_s"];
+    const OPTIONAL_HEADERS: &'static [&'static str] = &[EpisodeRecord::HEADER_WITH_STAGE];
 
     fn parse_row(f: &[&str]) -> Option<EpisodeRecord> {
-        let (head, collision_steps, wall_s) = match f {
-            [head @ .., c, w] if f.len() == 8 => (head, parse_opt(c)?, w),
-            [head @ .., w] if f.len() == 7 => (head, None, w),
+        let (head, collision_steps, curriculum_stage, wall_s) = match f {
+            [head @ .., c, s, w] if f.len() == 9 => (head, parse_opt(c)?, Some(s.parse().ok()?), w),
+            [head @ .., c, w] if f.len() == 8 => (head, parse_opt(c)?, None, w),
+            [head @ .., w] if f.len() == 7 => (head, None, None, w),
             _ => return None,
         };
         let [episode, reward, steps, success, final_distance_m, env_steps] = head else { return None };
@@ -227,6 +272,7 @@ impl CsvRecord for EpisodeRecord {
             final_distance_m,
             env_steps,
             collision_steps,
+            curriculum_stage,
             wall_s,
         })
     }
@@ -381,6 +427,7 @@ mod tests {
                 env_steps: 50,
                 wall_s: 0.0123,
                 collision_steps: Some(3),
+                curriculum_stage: None,
             },
             EpisodeRecord {
                 episode: 2,
@@ -391,6 +438,7 @@ mod tests {
                 env_steps: 56,
                 wall_s: 0.02,
                 collision_steps: Some(0),
+                curriculum_stage: None,
             },
         ];
         let mut w = EpisodeCsv::create(&p).unwrap();
@@ -411,6 +459,35 @@ mod tests {
         assert!(parse_line::<EpisodeRecord>("1,2,3", &p).is_err());
         assert!(parse_line::<EpisodeRecord>("1,2,3,1,0.1,3,0.5,x", &p).is_err());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The curriculum's stage column: written (before `wall_s`) only for rows that have a stage,
+    /// under its own header, and read back.
+    #[test]
+    fn the_curriculum_stage_column_is_written_only_when_set() {
+        let row = EpisodeRecord {
+            episode: 3,
+            reward: 1.5,
+            steps: 7,
+            success: true,
+            final_distance_m: 0.005,
+            env_steps: 99,
+            collision_steps: Some(0),
+            curriculum_stage: Some(2),
+            wall_s: 0.5,
+        };
+        let text = to_csv_with_header(EpisodeRecord::header(true), [&row]);
+        assert_eq!(
+            text,
+            "episode,reward,steps,success,final_distance_m,env_steps,collision_steps,curriculum_stage,wall_s\n\
+             3,1.5,7,1,0.005,99,0,2,0.500\n"
+        );
+        assert_eq!(parse_csv::<EpisodeRecord>(&text, Path::new("episodes.csv")).unwrap(), vec![row]);
+        let plain = EpisodeRecord { curriculum_stage: None, ..row };
+        let text = to_csv([&plain]);
+        assert_eq!(EpisodeRecord::header(false), EpisodeRecord::HEADER);
+        assert_eq!(text.lines().nth(1), Some("3,1.5,7,1,0.005,99,0,0.500"));
+        assert_eq!(parse_csv::<EpisodeRecord>(&text, Path::new("episodes.csv")).unwrap(), vec![plain]);
     }
 
     /// Files written before contacts were recorded read back, the new columns unknown.

@@ -38,6 +38,9 @@ pub struct EvalVariant {
     /// The first random obstacle in the way with this probability (`--obstacles-in-path`,
     /// `train.obstacles_in_path`'s placement), where the run's evaluations draw them unbiased.
     pub obstacles_in_path: Option<f64>,
+    /// The safety shield on (`--shield`) or off (`--no-shield`) where the run's config
+    /// (`[task.shield]`) has it the other way.
+    pub shield: Option<bool>,
 }
 
 /// Paths inside a run directory.
@@ -117,7 +120,8 @@ impl RunDir {
         self.eval_command_in(checkpoint, trials, seed, EvalVariant::default())
     }
     /// [`RunDir::eval_command`] on another task than the run's ([`EvalVariant`]):
-    /// `eval-<checkpoint>-trials<T>-seed<S>[-sim-<sim>][-in-path-<p>].csv`, which no report takes
+    /// `eval-<checkpoint>-trials<T>-seed<S>[-sim-<sim>][-in-path-<p>][-shield|-no-shield].csv`,
+    /// which no report takes
     /// for the run's own evaluation.
     pub fn eval_command_in(
         &self,
@@ -129,7 +133,12 @@ impl RunDir {
         let stem = checkpoint.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let sim = variant.sim.map(|s| format!("-sim-{}", s.name())).unwrap_or_default();
         let in_path = variant.obstacles_in_path.map(|p| format!("-in-path-{p}")).unwrap_or_default();
-        self.root.join(format!("eval-{stem}-trials{trials}-seed{seed}{sim}{in_path}.csv"))
+        let shield = match variant.shield {
+            Some(true) => "-shield",
+            Some(false) => "-no-shield",
+            None => "",
+        };
+        self.root.join(format!("eval-{stem}-trials{trials}-seed{seed}{sim}{in_path}{shield}.csv"))
     }
     /// The per-trial evaluation on the targets of seed `seed` of older versions: `eval-seed<seed>.csv`.
     pub fn trial_eval(&self, seed: u64) -> PathBuf {
@@ -291,7 +300,7 @@ mod tests {
     #[test]
     fn trial_eval_names_round_trip() {
         let d = RunDir::new(Path::new("/r"));
-        let dynamic = EvalVariant { sim: Some(Sim::Dynamic), obstacles_in_path: None };
+        let dynamic = EvalVariant { sim: Some(Sim::Dynamic), obstacles_in_path: None, shield: None };
         let other = d.eval_command_in(Path::new("c/best.safetensors"), 50, 3, dynamic);
         assert_eq!(other, Path::new("/r/eval-best-trials50-seed3-sim-dynamic.csv"));
         assert_eq!(trial_eval_kind("eval-best-trials50-seed3-sim-dynamic.csv"), None, "not the run's own");
@@ -299,6 +308,10 @@ mod tests {
         let in_path = d.eval_command_in(Path::new("c/best.safetensors"), 50, 3, both);
         assert_eq!(in_path, Path::new("/r/eval-best-trials50-seed3-sim-dynamic-in-path-0.5.csv"));
         assert_eq!(trial_eval_kind("eval-best-trials50-seed3-in-path-1.csv"), None, "not the run's own");
+        let unshielded = EvalVariant { obstacles_in_path: Some(1.0), shield: Some(false), sim: None };
+        let off = d.eval_command_in(Path::new("c/best.safetensors"), 50, 3, unshielded);
+        assert_eq!(off, Path::new("/r/eval-best-trials50-seed3-in-path-1-no-shield.csv"));
+        assert_eq!(trial_eval_kind("eval-best-trials50-seed3-no-shield.csv"), None, "not the run's own");
         assert_eq!(trial_eval_kind("eval-best-trials50-seed3.csv"), Some((2, 3)));
         assert_eq!(d.trial_eval(1_000_003), Path::new("/r/eval-seed1000003.csv"));
         assert_eq!(d.final_eval(7), Path::new("/r/eval-final-seed7.csv"));

@@ -42,6 +42,7 @@ use std::time::Instant;
 
 use crate::agent::{self, Agent, Learner, UpdateStats};
 use crate::base::rng::Rng;
+use crate::config::curriculum::StageAdvance;
 use crate::config::{Config, Resolved};
 use crate::env::{Policy, ReachEnv};
 use crate::io::checkpoint::Checkpoint;
@@ -68,6 +69,9 @@ pub struct Progress<'a> {
     pub env_steps: Option<u64>,
     /// This episode is the run's last.
     pub last: bool,
+    /// With `train.curriculum`: the stage that begins with the next episode, when it changed
+    /// after this one (the stage of this episode is in the record).
+    pub stage_advance: Option<StageAdvance>,
 }
 
 /// How a run ended.
@@ -208,6 +212,12 @@ struct EpisodeEnd {
     /// vector env starts the next episode in the step that ends one).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     shield: Option<crate::sim::shield::ShieldStats>,
+    /// With `train.curriculum`: the stage the episode was played at.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    curriculum_stage: Option<u32>,
+    /// With `train.curriculum`: the stage that begins after this episode, if it changed.
+    #[serde(skip)]
+    advance: Option<StageAdvance>,
 }
 
 /// How experience is collected and learnt from: a replay buffer and updates after every step
@@ -354,7 +364,7 @@ impl Trainer {
         let keep = self.state.n.episode as usize;
         let mut lines = text.lines();
         let header = lines.next().unwrap_or_default();
-        if header != EpisodeRecord::HEADER && !EpisodeRecord::OLDER_HEADERS.contains(&header) {
+        if !EpisodeRecord::known_header(header) {
             return Err(Error::InvalidInput(format!("{}: not an episodes.csv", path.display())));
         }
         // Rows are written again in this version's layout (a run begun by an older version
@@ -367,7 +377,8 @@ impl Trainer {
                 path.display()
             )));
         }
-        crate::io::write_atomic(&path, crate::io::csv::to_csv(&rows).as_bytes())?;
+        let header = EpisodeRecord::header(self.cfg.train.curriculum.is_some());
+        crate::io::write_atomic(&path, crate::io::csv::to_csv_with_header(header, &rows).as_bytes())?;
         crate::io::write_atomic(&self.dir.eval(), self.eval_csv.as_bytes())?;
         // The TensorBoard log too: each tag's steps up to the checkpoint, once (but an evaluation
         // still due at the checkpoint's episode, which runs again).
@@ -415,6 +426,7 @@ impl Trainer {
                 episodes,
                 env_steps: train.env_steps,
                 last,
+                stage_advance: end.advance,
             });
             if record.episode % 50 == 0 {
                 logs.tb.flush()?;
@@ -437,7 +449,8 @@ impl Trainer {
             std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
         }
         let episodes = if self.state.n.episode == 0 && !self.collector.mid_episode() {
-            EpisodeCsv::create(&self.dir.episodes())?
+            let header = EpisodeRecord::header(self.cfg.train.curriculum.is_some());
+            EpisodeCsv::create_with_header(&self.dir.episodes(), header)?
         } else {
             EpisodeCsv::append(&self.dir.episodes())?
         };
@@ -487,6 +500,7 @@ impl Trainer {
             env_steps: self.state.n.env_steps,
             wall_s,
             collision_steps: end.collision_steps,
+            curriculum_stage: end.curriculum_stage,
         };
         logs.episodes.write(&record)?;
         let (ep, tb) = (record.episode as i64, &mut logs.tb);
@@ -501,6 +515,9 @@ impl Trainer {
             tb.scalar("train/shield_interventions", ep, s.interventions as f64)?;
             tb.scalar("train/shield_stops", ep, s.stops as f64)?;
             tb.scalar("train/shield_mean_change_rad_per_s", ep, s.mean_change_rad_per_s())?;
+        }
+        if let Some(s) = record.curriculum_stage {
+            tb.scalar("train/curriculum_stage", ep, f64::from(s))?;
         }
         if let Some(st) = stats {
             tb.scalar("loss/critic", ep, st.critic_loss)?;

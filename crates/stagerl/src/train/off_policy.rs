@@ -15,7 +15,8 @@ use super::{Collector, Counters, EpisodeEnd};
 use crate::agent::replay::{Batch, ReplayBuffer};
 use crate::agent::{Agent, AgentConfig, OffPolicy, UpdateStats};
 use crate::base::rng::Rng;
-use crate::config::Config;
+use crate::config::curriculum::StageAdvance;
+use crate::config::{Config, CurriculumConfig, CurriculumState};
 use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
 use crate::io::checkpoint::Checkpoint;
 use crate::{Error, Result};
@@ -39,6 +40,9 @@ struct OffPolicyState {
     /// Hindsight relabelling (`agent.her`): the episode under way and the goal sampler.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     her: Option<HerState>,
+    /// The obstacle curriculum (`train.curriculum`): the stage and its window of outcomes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    curriculum: Option<CurriculumState>,
 }
 
 /// An environment step taken whose updates are not all done yet; once they are, what the
@@ -76,20 +80,27 @@ pub(super) struct OffPolicyCollector {
     batch: Batch,
     /// The `[agent]` section (`her`: hindsight relabelling's settings).
     cfg: AgentConfig,
+    /// The `[train.curriculum]` section, if any.
+    curriculum: Option<CurriculumConfig>,
     relabeller: Relabeller,
     state: OffPolicyState,
 }
 
 impl OffPolicyCollector {
     /// The collector of run `cfg`: `agent` trained on `env` (obstacles placed in the way as
-    /// `train.obstacles_in_path` says), its random streams drawn from the run's seed.
+    /// `train.obstacles_in_path` says, or as the first stage of `train.curriculum`), its random
+    /// streams drawn from the run's seed.
     pub(super) fn new(
         cfg: &Config,
         mut env: ReachEnv,
         agent: Box<dyn OffPolicy>,
     ) -> Result<OffPolicyCollector> {
         let seed = cfg.train.seed;
-        env.set_obstacles_in_path(cfg.train.obstacles_in_path)?;
+        let curriculum = cfg.train.curriculum.clone();
+        match &curriculum {
+            Some(c) => apply_stage(c, 0, &mut env)?,
+            None => env.set_obstacles_in_path(cfg.train.obstacles_in_path)?,
+        }
         let (od, ad) = (env.obs_dim(), env.act_dim());
         Ok(OffPolicyCollector {
             agent,
@@ -98,6 +109,7 @@ impl OffPolicyCollector {
             batch: Batch::new(cfg.agent.batch_size, od, ad),
             cfg: cfg.agent.clone(),
             relabeller: Relabeller::default(),
+            curriculum,
             state: OffPolicyState {
                 in_episode: false,
                 episode_reward: 0.0,
@@ -108,6 +120,7 @@ impl OffPolicyCollector {
                 replay_pos: 0,
                 step_under_way: None,
                 her: cfg.agent.her.map(|_| HerState::new(Rng::derived(seed, 4))),
+                curriculum: cfg.train.curriculum.as_ref().map(|_| CurriculumState::default()),
             },
             env,
         })
@@ -193,6 +206,7 @@ impl Collector for OffPolicyCollector {
         };
         self.relabel_episode();
         self.state.in_episode = false;
+        let (curriculum_stage, advance) = self.next_stage(last.reached)?;
         Ok(Some(EpisodeEnd {
             reward: self.state.episode_reward,
             steps: self.env.steps(),
@@ -200,6 +214,8 @@ impl Collector for OffPolicyCollector {
             final_distance_m: f64::from_bits(last.final_distance_m_bits),
             collision_steps: self.env.collisions_checked().then(|| self.env.collision_steps()),
             shield: self.env.episode_shield_stats(),
+            curriculum_stage,
+            advance,
         }))
     }
 
@@ -236,8 +252,47 @@ impl Collector for OffPolicyCollector {
         )?;
         self.env.restore(&state.env)?;
         self.state = state;
-        Ok(())
+        self.restore_stage(path)
     }
+}
+
+impl OffPolicyCollector {
+    /// With `train.curriculum`: count the episode just ended (`success`) and, when the stage
+    /// changes, set the environment to the next one from the next episode on. The stage the
+    /// episode was played at, and the change.
+    fn next_stage(&mut self, success: bool) -> Result<(Option<u32>, Option<StageAdvance>)> {
+        let (Some(cfg), Some(state)) = (&self.curriculum, self.state.curriculum.as_mut()) else {
+            return Ok((None, None));
+        };
+        let played = state.stage as u32;
+        let advance = state.record(cfg, success);
+        if let Some(a) = advance {
+            apply_stage(cfg, a.stage, &mut self.env)?;
+        }
+        Ok((Some(played), advance))
+    }
+
+    /// After a restore: the stage saved, checked against the config, set on the environment.
+    fn restore_stage(&mut self, path: &Path) -> Result<()> {
+        let stage = self.state.curriculum.as_ref().map(|c| c.stage);
+        match (&self.curriculum, stage) {
+            (None, None) => Ok(()),
+            (Some(cfg), Some(stage)) if stage < cfg.stages() => apply_stage(cfg, stage, &mut self.env),
+            (cfg, stage) => Err(Error::InvalidInput(format!(
+                "{}: its training state has {}, the run's config (train.curriculum) {}",
+                path.display(),
+                stage.map_or("no curriculum stage".into(), |s| format!("curriculum stage {s}")),
+                cfg.as_ref().map_or("none".into(), |c| format!("{} stages", c.stages()))
+            ))),
+        }
+    }
+}
+
+/// Set `env` to stage `stage` of curriculum `cfg` (from its next episode on).
+fn apply_stage(cfg: &CurriculumConfig, stage: usize, env: &mut ReachEnv) -> Result<()> {
+    let (in_path, max_obstacles) = cfg.stage(stage);
+    env.set_obstacles_in_path(in_path)?;
+    env.set_max_random_obstacles(max_obstacles)
 }
 
 /// Algorithm 1 at each step of a training episode: explore (uniform actions before

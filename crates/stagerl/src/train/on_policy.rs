@@ -134,6 +134,8 @@ impl OnPolicyCollector {
                     final_distance_m: self.vec.last_steps()[i].terms.distance,
                     collision_steps: self.collisions_checked.then_some(self.episode_collisions[i]),
                     shield: None,
+                    curriculum_stage: None,
+                    advance: None,
                 });
                 self.episode_reward[i] = 0.0;
                 self.episode_steps[i] = 0;

@@ -3,6 +3,7 @@
 
 mod bad_inputs;
 mod code_shape;
+mod curriculum;
 mod degenerate;
 mod determinism;
 mod docs_links;

@@ -59,6 +59,7 @@ fn write_run(
             env_steps,
             wall_s: e as f64 * 0.01,
             collision_steps: Some(u32::from(!success)),
+            curriculum_stage: None,
         })
         .unwrap();
         run.rewards.push(r);

@@ -73,6 +73,11 @@ fixed_alpha = true
 obstacles_in_path = 0.5
 env_steps = 30000
 eval_every_env_steps = 1000
+[train.curriculum]
+window = 50
+advance_at = 0.7
+obstacles_in_path = [0.0, 0.5]
+max_obstacles = [1, 2]
 "#;
 
 /// Every `section.field` path of a JSON value (list items as their section).
@@ -162,6 +167,7 @@ fn the_listing_is_the_default_config_and_shows_the_optional_sections_commented_o
         "# [agent.ppo]",
         "# [agent.ppo.norm_obs]",
         "# [agent.sac]",
+        "# [train.curriculum]",
     ] {
         assert!(text.lines().any(|l| l == section), "{section} in\n{text}");
     }

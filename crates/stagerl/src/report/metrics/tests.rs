@@ -105,6 +105,7 @@ fn eq17_by_hand() {
 fn train_and_eval_metrics_by_hand() {
     let rec = |episode, reward, steps, success| EpisodeRecord {
         collision_steps: None,
+        curriculum_stage: None,
         episode,
         reward,
         steps,
