@@ -118,7 +118,12 @@ fn sigkill_then_resume_with_a_curriculum_gives_the_uninterrupted_run() {
          max_obstacles = [1, 2, 3]\n",
         CONFIG.replace("hidden = [16, 16]", "hidden = [64, 64]")
     );
-    let root = sigkills_then_resume_keeping("resume-kill-curriculum", &config, 300, 3);
+    let (root, printed) = sigkills_then_resume_keeping("resume-kill-curriculum", &config, 300, 3);
+    // The uninterrupted run says when each stage begins.
+    let advances: Vec<&str> = printed.lines().filter(|l| l.contains("curriculum stage")).collect();
+    assert_eq!(advances.len(), 2, "{printed}");
+    assert!(advances[0].contains("curriculum stage 1 of 0-2 from the next episode"), "{printed}");
+    assert!(advances[1].contains("with probability 1, at most 3 random obstacles"), "{printed}");
     let rows = common::episodes_without_wall(&root.join("cut"));
     assert!(rows[0].ends_with(",collision_steps,curriculum_stage"), "{}", rows[0]);
     let stages: std::collections::BTreeSet<&str> =
@@ -134,18 +139,18 @@ fn sigkills_then_resume(name: &str, config: &str) {
 /// [`sigkills_then_resume`] of a run of `episodes` episodes (0: as many as the uninterrupted run
 /// has) and `evals` periodic evaluations.
 fn sigkills_then_resume_expecting(name: &str, config: &str, episodes: usize, evals: usize) {
-    let root = sigkills_then_resume_keeping(name, config, episodes, evals);
+    let (root, _) = sigkills_then_resume_keeping(name, config, episodes, evals);
     std::fs::remove_dir_all(&root).ok();
 }
 
 /// [`sigkills_then_resume_expecting`], leaving the runs (`full`, `cut`) in the directory it
-/// returns.
+/// returns, with what the uninterrupted run printed.
 fn sigkills_then_resume_keeping(
     name: &str,
     config: &str,
     episodes: usize,
     evals: usize,
-) -> std::path::PathBuf {
+) -> (std::path::PathBuf, String) {
     let root = scratch(name);
     let cfg = root.join("c.toml");
     std::fs::write(&cfg, config).unwrap();
@@ -160,6 +165,7 @@ fn sigkills_then_resume_keeping(
         "0",
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let printed = String::from_utf8_lossy(&out.stdout).into_owned();
 
     // Kill at moments tied to progress (not to wall time, so any machine speed works): when
     // episodes.csv has reached an episode drawn from a fixed seed, never a checkpoint boundary.
@@ -198,7 +204,7 @@ fn sigkills_then_resume_keeping(
     let out = run(&["train", "--resume", cut.to_str().unwrap(), "--eval-trials", "0"]);
     assert!(out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("already finished"));
-    root
+    (root, printed)
 }
 
 #[test]
