@@ -442,14 +442,6 @@ fn rrt_connect_plans_round_an_obstacle_deterministically_and_the_bench_runs() {
     assert!(last["solved"].as_u64().unwrap() >= 9, "{out}");
 }
 
-/// The view's data: the JSON in the page's data script.
-fn view_data(html: &str) -> Value {
-    let tag = "type=\"application/json\">";
-    let start = html.find(tag).unwrap() + tag.len();
-    let end = start + html[start..].find("</script>").unwrap();
-    serde_json::from_str(&html[start..end]).unwrap()
-}
-
 /// `stagerl view --plans FILE` passes each line's obstacles to the planner and the page, as
 /// `stagerl plan --targets FILE --view` does: the same scenes, contacts and closest approaches
 /// for the same trained policy, and a line without obstacles has none.
@@ -489,8 +481,10 @@ fn view_plans_draws_each_lines_scene_as_plan_view_does() {
         "--view",
         b.to_str().unwrap(),
     ]));
-    let (a, b) =
-        (view_data(&std::fs::read_to_string(a).unwrap()), view_data(&std::fs::read_to_string(b).unwrap()));
+    let (a, b) = (
+        common::view_data(&std::fs::read_to_string(a).unwrap()),
+        common::view_data(&std::fs::read_to_string(b).unwrap()),
+    );
     let (ta, tb) = (a["trajectories"].as_array().unwrap(), b["trajectories"].as_array().unwrap());
     assert_eq!(ta.len(), 3);
     for (i, want) in [(0, 2), (1, 0), (2, 1)] {

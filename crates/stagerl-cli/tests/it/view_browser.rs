@@ -109,13 +109,6 @@ fn show(page: &Path, dir: &Path) -> (Vec<String>, String, Canvas) {
     (console, String::from_utf8_lossy(&o.stdout).into_owned(), canvas_pixels(&shot))
 }
 
-/// The JSON a view embeds.
-fn view_data(html: &str) -> Value {
-    let start = html.find("type=\"application/json\">").unwrap() + "type=\"application/json\">".len();
-    let end = start + html[start..].find("</script>").unwrap();
-    serde_json::from_str(&html[start..end]).unwrap()
-}
-
 fn trained_run(dir: &Path) -> PathBuf {
     let run = dir.join("td3");
     let mut cfg = Config::default();
@@ -149,7 +142,7 @@ fn the_view_loads_runs_and_draws_in_a_headless_browser() {
         assert!(!html.contains(needle), "the page refers to {needle}");
     }
     // The data: the evaluation targets of seed 9, each plan's skeleton ends at its end effector.
-    let data = view_data(&html);
+    let data = common::view_data(&html);
     let trajectories = data["trajectories"].as_array().unwrap();
     assert_eq!(trajectories.len(), 4);
     let cfg = stagerl::run::dir::RunDir::new(&run).load_config().unwrap();
@@ -191,7 +184,7 @@ fn the_view_loads_runs_and_draws_in_a_headless_browser() {
         .output()
         .unwrap();
     let rows = ok(o).lines().count();
-    let data = view_data(&std::fs::read_to_string(&planned).unwrap());
+    let data = common::view_data(&std::fs::read_to_string(&planned).unwrap());
     assert_eq!(data["trajectories"][0]["frames"].as_array().unwrap().len(), rows - 1);
     let (console, dom, canvas) = show(&planned, &dir);
     assert!(dom.contains("<span id=\"info\">step ") && dom.contains(">plan (reached)<"), "{dom}");
@@ -267,7 +260,7 @@ fn names_from_the_urdf_are_text_and_the_scene_is_drawn() {
         .unwrap());
     let html = std::fs::read_to_string(&page).unwrap();
     assert!(!html.contains("</script><script>"), "a name closes the data's script");
-    let data = view_data(&html);
+    let data = common::view_data(&html);
     let t = &data["trajectories"][0];
     assert_eq!(t["obstacles"].as_array().unwrap().len(), 2);
     assert_eq!(t["collision"], true);

@@ -175,14 +175,8 @@ impl VecEnv {
     /// Reseed environment `i`'s target stream with `seed` and start its next episode (as
     /// [`ReachEnv::reset_with_seed`]); its observation row is updated.
     pub fn reset_env_with_seed(&mut self, i: usize, seed: u64) -> Result<()> {
-        let n = self.envs.len();
         let d = self.obs_dim();
-        let env = self.envs.get_mut(i).ok_or_else(|| {
-            Error::InvalidInput(format!(
-                "environment {i} does not exist: the vector env holds {n} (0 to {})",
-                n - 1
-            ))
-        })?;
+        let env = env_at(&mut self.envs, i)?;
         env.reset_with_seed(seed);
         self.obs[i * d..(i + 1) * d].copy_from_slice(env.observation());
         self.final_obs[i * d..(i + 1) * d].copy_from_slice(env.observation());
@@ -198,14 +192,7 @@ impl VecEnv {
         i: usize,
         obstacles: Option<&[crate::sim::scene::Obstacle]>,
     ) -> Result<()> {
-        let n = self.envs.len();
-        let env = self.envs.get_mut(i).ok_or_else(|| {
-            Error::InvalidInput(format!(
-                "environment {i} does not exist: the vector env holds {n} (0 to {})",
-                n - 1
-            ))
-        })?;
-        env.set_request_obstacles(obstacles);
+        env_at(&mut self.envs, i)?.set_request_obstacles(obstacles);
         Ok(())
     }
 
@@ -276,6 +263,17 @@ impl VecEnv {
     pub fn envs(&self) -> &[ReachEnv] {
         &self.envs
     }
+}
+
+/// Environment `i` of `envs`, or an error naming the indices that exist.
+fn env_at(envs: &mut [ReachEnv], i: usize) -> Result<&mut ReachEnv> {
+    let n = envs.len();
+    envs.get_mut(i).ok_or_else(|| {
+        Error::InvalidInput(format!(
+            "environment {i} does not exist: the vector env holds {n} (0 to {})",
+            n - 1
+        ))
+    })
 }
 
 #[cfg(test)]

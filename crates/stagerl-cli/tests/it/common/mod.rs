@@ -122,3 +122,11 @@ pub fn assert_steps_once(scalars: &[(String, i64, f32)], n: i64, eval_every: i64
         assert_eq!(steps, expect, "{what}: steps of {tag}");
     }
 }
+
+/// The data of a view page (`stagerl view`, `plan --view`): the JSON in its data script.
+pub fn view_data(html: &str) -> serde_json::Value {
+    let tag = "type=\"application/json\">";
+    let start = html.find(tag).unwrap() + tag.len();
+    let end = start + html[start..].find("</script>").unwrap();
+    serde_json::from_str(&html[start..end]).unwrap()
+}
