@@ -181,11 +181,15 @@ fn report_on_trained_runs() {
 
 /// The committed reports regenerate from the committed runs: `stagerl report` on a study's
 /// packed runs (`docs/results/STUDY/runs.tar.xz`) writes the committed `table1.md` (but the line
-/// naming the version that wrote it), `claims.md` and `aggregates.md`, byte for byte.
+/// naming the version that wrote it), `claims.md` and `aggregates.md`, byte for byte. `learners`
+/// holds two sweeps (folders of runs one level deeper) and its logs store `env_steps` as
+/// differences (`env_steps:diff`).
 #[test]
 fn the_committed_reports_regenerate_from_the_committed_runs() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    for (study, regime) in [("quick", "tuned regime"), ("paper", "paper regime")] {
+    for (study, regime) in
+        [("quick", "tuned regime"), ("paper", "paper regime"), ("learners", "tuned regime")]
+    {
         let dir = root.join("docs/results").join(study);
         let out = crate::common::scratch(&format!("regenerate-{study}"));
         ok(&stagerl(&["report", dir.join("runs.tar.xz").to_str().unwrap(), "--out", out.to_str().unwrap()]));

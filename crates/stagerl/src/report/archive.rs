@@ -162,11 +162,17 @@ pub fn unpack(archive: &Path) -> Result<Unpacked> {
 /// (its name, then its values), which compresses better; it unpacks as `NAME.csv`.
 pub const TRANSPOSED: &str = ".csv.T";
 
+/// The suffix of a transposed column's name whose values are stored as differences: line
+/// `NAME:diff,v1,d2,d3,...` holds the integer column `NAME` as `v1, v1 + d2, v1 + d2 + d3, ...`
+/// (a running count such as `env_steps` then compresses to almost nothing).
+pub const DIFFERENCES: &str = ":diff";
+
 /// `NAME.csv` from the text of `NAME.csv.T`: every line (column) must have the same number of
-/// fields.
+/// fields; a column named `NAME:diff` ([`DIFFERENCES`]) is summed back into `NAME`.
 pub fn untranspose(data: &[u8]) -> std::result::Result<Vec<u8>, String> {
     let text = std::str::from_utf8(data).map_err(|_| "not UTF-8 text".to_string())?;
-    let cols: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+    let mut summed: Vec<Vec<String>> = Vec::new();
+    let mut cols: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
     let rows = cols.first().map_or(0, Vec::len);
     if let Some((i, c)) = cols.iter().enumerate().find(|(_, c)| c.len() != rows) {
         return Err(format!(
@@ -175,6 +181,19 @@ pub fn untranspose(data: &[u8]) -> std::result::Result<Vec<u8>, String> {
             c[0],
             c.len()
         ));
+    }
+    for c in &cols {
+        if let Some(name) = c[0].strip_suffix(DIFFERENCES) {
+            summed.push(running_sums(name, &c[1..])?);
+        }
+    }
+    let mut next = summed.iter();
+    for c in &mut cols {
+        if c[0].ends_with(DIFFERENCES) {
+            if let Some(values) = next.next() {
+                *c = values.iter().map(String::as_str).collect();
+            }
+        }
     }
     let mut out = Vec::with_capacity(data.len() + rows);
     for r in 0..rows {
@@ -185,6 +204,23 @@ pub fn untranspose(data: &[u8]) -> std::result::Result<Vec<u8>, String> {
             out.extend_from_slice(c[r].as_bytes());
         }
         out.push(b'\n');
+    }
+    Ok(out)
+}
+
+/// `name` followed by the running sums of `diffs` (integers), as text.
+fn running_sums(name: &str, diffs: &[&str]) -> std::result::Result<Vec<String>, String> {
+    let mut out = Vec::with_capacity(diffs.len() + 1);
+    out.push(name.to_owned());
+    let mut total: i64 = 0;
+    for (i, d) in diffs.iter().enumerate() {
+        let step: i64 = d
+            .parse()
+            .map_err(|_| format!("column `{name}{DIFFERENCES}`, value {}: `{d}` is not an integer", i + 1))?;
+        total = total
+            .checked_add(step)
+            .ok_or_else(|| format!("column `{name}{DIFFERENCES}`, value {}: the sum overflows", i + 1))?;
+        out.push(total.to_string());
     }
     Ok(out)
 }
@@ -304,6 +340,13 @@ mod tests {
         assert_eq!(untranspose(t).unwrap(), b"episode,reward,wall_s\n1,-1.5,0\n2,0,0.1\n3,20.25,0.2\n");
         let err = untranspose(b"episode,1,2\nreward,5\n").unwrap_err();
         assert!(err.contains("column 2 (`reward`) holds 2 fields where the first holds 3"), "{err}");
+        // a running count stored as differences sums back to the count
+        let d = b"episode,1,2,3\nenv_steps:diff,50,7,12\nwall_s,0,0.1,0.2\n";
+        assert_eq!(untranspose(d).unwrap(), b"episode,env_steps,wall_s\n1,50,0\n2,57,0.1\n3,69,0.2\n");
+        let err = untranspose(b"episode,1,2\nenv_steps:diff,50,x\n").unwrap_err();
+        assert!(err.contains("column `env_steps:diff`, value 2: `x` is not an integer"), "{err}");
+        let err = untranspose(format!("a,1,2\nn:diff,{},1\n", i64::MAX).as_bytes()).unwrap_err();
+        assert!(err.contains("value 2: the sum overflows"), "{err}");
         let p = write("runs.tar.xz", &archive(&[("runs/r/episodes.csv.T", Regular, t)]));
         let u = unpack(&p).unwrap();
         assert_eq!(std::fs::read(u.root.join("r/episodes.csv")).unwrap(), untranspose(t).unwrap());

@@ -106,3 +106,36 @@ fn the_design_notes_the_code_cites_are_in_the_repository() {
     }
     assert!(cites >= 5, "{cites}");
 }
+
+fn bytes_under(dir: &Path, largest: &mut Vec<(u64, PathBuf)>) -> u64 {
+    let mut total = 0;
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        let meta = std::fs::symlink_metadata(&p).unwrap();
+        if meta.is_dir() {
+            total += bytes_under(&p, largest);
+        } else {
+            total += meta.len();
+            largest.push((meta.len(), p));
+        }
+    }
+    total
+}
+
+/// `docs/` stays small enough for every clone (issue 30): under 40 MB, run folders packed into
+/// archives (docs/results/README.md, "How results are kept"). On failure it names the largest
+/// files.
+#[test]
+fn the_docs_stay_under_40_mb() {
+    let mut largest = Vec::new();
+    let total = bytes_under(&repo().join("docs"), &mut largest);
+    largest.sort();
+    let top: Vec<String> = largest
+        .iter()
+        .rev()
+        .take(5)
+        .map(|(n, p)| format!("{} ({:.1} MB)", p.display(), *n as f64 / 1e6))
+        .collect();
+    assert!(total < 40_000_000, "docs/ holds {:.1} MB (at most 40): largest {top:?}", total as f64 / 1e6);
+    assert!(total > 1_000_000, "docs/ read as {total} bytes: not the docs");
+}
