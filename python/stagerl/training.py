@@ -66,8 +66,9 @@ def train(
 
     ``callback(report)`` is called at every periodic evaluation (and every
     ``callback_every_episodes`` episodes when > 0) with a dict: ``episode``, ``env_steps``,
-    ``wall_s``, ``episode_reward``, ``train_success_rate`` and ``train_mean_reward`` (the last
-    100 episodes), ``last``, and ``eval_success_rate``, ``eval_mean_reward``,
+    ``wall_s``, ``episode_reward``, ``curriculum_stage`` (the episode's stage with
+    ``[train.curriculum]``, 0-based; None without one), ``train_success_rate`` and
+    ``train_mean_reward`` (the last 100 episodes), ``last``, and ``eval_success_rate``, ``eval_mean_reward``,
     ``eval_mean_steps``, ``eval_median_final_distance_m`` (None between evaluations). Returning
     ``False`` stops the run: it is saved (``resume=True`` continues it) and returned. An
     exception in the callback stops and saves the run, then propagates.

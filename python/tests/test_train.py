@@ -228,3 +228,25 @@ def test_reproduce_then_report_a_tiny_sweep(tmp_path):
         stagerl.reproduce("no-such-preset", tmp_path / "x")
     with pytest.raises(ValueError):
         stagerl.reproduce(preset, tmp_path / "y", jobs=0)
+
+
+def test_the_callback_reports_the_curriculum_stage_of_episodes_csv(tmp_path):
+    config = {
+        "agent": {"hidden": [64, 64], "batch_size": 32, "learning_starts": 200},
+        "task": {"observe_obstacles": True, "obstacle_observation": "per_link",
+                 "random_obstacles": {"count": [1, 3]}},
+        "train": {"eval_every_episodes": 50, "eval_trials": 5, "checkpoint_every_episodes": 50,
+                  "curriculum": {"window": 10, "advance_at": 0.1, "obstacles_in_path": [0.0, 0.5, 1.0],
+                                 "max_obstacles": [1, 2, 3]}},
+    }
+    reports = []
+    run = stagerl.train(config, out=tmp_path / "run", episodes=150, eval_trials=0,
+                        callback=lambda r: reports.append(r), callback_every_episodes=1)
+    stage = {int(e): int(s) for e, s in zip(run.episodes["episode"], run.episodes["curriculum_stage"])}
+    assert len(reports) == 150
+    assert [r["curriculum_stage"] for r in reports] == [stage[r["episode"]] for r in reports]
+    assert max(stage.values()) >= 1, "the stage advanced within the run"
+    plain = []
+    stagerl.train(TINY, out=tmp_path / "plain", episodes=20, eval_trials=0,
+                  callback=lambda r: plain.append(r), callback_every_episodes=10)
+    assert [r["curriculum_stage"] for r in plain] == [None, None]

@@ -76,8 +76,9 @@ fn config(
     Ok(cfg)
 }
 
-/// What the callback is given: the episode's counters, the training success and reward over
-/// the last 100 episodes, and the periodic evaluation's figures when one ran.
+/// What the callback is given: the episode's counters (and its curriculum stage, with a
+/// curriculum), the training success and reward over the last 100 episodes, and the periodic
+/// evaluation's figures when one ran.
 fn progress_report<'py>(
     py: Python<'py>,
     p: &Progress<'_>,
@@ -89,6 +90,8 @@ fn progress_report<'py>(
     d.set_item("env_steps", r.env_steps)?;
     d.set_item("wall_s", r.wall_s)?;
     d.set_item("episode_reward", r.reward)?;
+    // None without a curriculum (`train.curriculum`), as episodes.csv then has no such column.
+    d.set_item("curriculum_stage", r.curriculum_stage)?;
     let n = recent.len().max(1) as f64;
     d.set_item("train_success_rate", recent.iter().filter(|x| x.1).count() as f64 / n)?;
     d.set_item("train_mean_reward", recent.iter().map(|x| x.0).sum::<f64>() / n)?;

@@ -71,3 +71,29 @@ fn misplaced_settings_and_other_algorithms_sections_are_refused() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(Config::load(&out.join("config.toml")).unwrap().agent.td3().policy_delay, 3);
 }
+
+/// The bundled obstacle preset (`configs/obstacles.toml`, issue 34) trains as it is, with its
+/// settings in the run's config: SAC with layer-normalised critics, the per-link obstacle
+/// observation and the curriculum (whose stage `episodes.csv` records).
+#[test]
+fn the_obstacle_preset_trains_as_it_is() {
+    let preset = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/obstacles.toml");
+    let dir = scratch("obstacle-preset");
+    let out = dir.join("run");
+    let o = bin()
+        .args(["train", "--config", preset.to_str().unwrap(), "--seed", "1", "--episodes", "30"])
+        .args(["--eval-trials", "5", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cfg = Config::load(&out.join("config.toml")).unwrap();
+    let preset_cfg = Config::load(&preset).unwrap();
+    assert_eq!(preset_cfg.train.episodes, 6000, "the preset's own budget");
+    assert!(cfg.agent.sac.as_ref().is_some_and(|s| s.critic_layer_norm));
+    assert!(cfg.task.observe_obstacles && cfg.task.random_obstacles.is_some());
+    assert!(cfg.train.curriculum.is_some());
+    let log = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert!(log.lines().next().unwrap().contains("curriculum_stage"), "{}", log.lines().next().unwrap());
+    assert_eq!(log.lines().count(), 31, "a header and 30 episodes");
+    std::fs::remove_dir_all(&dir).ok();
+}
