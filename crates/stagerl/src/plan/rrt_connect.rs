@@ -443,14 +443,21 @@ mod tests {
             Obstacle::cuboid(h, c, None)
         };
         let cage: Vec<Obstacle> = (0..3).flat_map(|a| [wall(a, 1.0), wall(a, -1.0)]).collect();
-        let mut p = planner(1);
-        let clock = Instant::now();
+        // No time budget in play (an hour): the attempts' bound ends the search, on any machine.
+        let rrt = RrtConnect { seed: 1, budget_s: 3600.0, ..RrtConnect::default() };
+        let mut p = Planner::rrt_connect(&Config::default(), None, rrt.clone()).unwrap();
         let plan = p.plan_among(&t, None, Some(&cage)).unwrap();
-        assert!(clock.elapsed().as_secs_f64() < 1.5);
         assert!(!plan.summary.reached && plan.summary.steps == 0 && !plan.summary.collision);
         let why = plan.summary.reason.clone().unwrap();
         assert!(why.contains("no collision-free inverse-kinematics solution"), "{why}");
-        assert!(!plan.summary.rrt_connect.unwrap().solved);
+        let stats = plan.summary.rrt_connect.unwrap();
+        assert!(!stats.solved && stats.goals == 0);
+        assert_eq!(stats.ik_attempts, rrt.ik_attempts, "every attempt made, then given up");
+        // A budget spent before the first attempt: given up at once, whatever the machine.
+        let instant = RrtConnect { budget_s: 1e-9, ..rrt };
+        let mut p = Planner::rrt_connect(&Config::default(), None, instant).unwrap();
+        let stats = p.plan_among(&t, None, Some(&cage)).unwrap().summary.rrt_connect.unwrap();
+        assert_eq!((stats.ik_attempts, stats.solved), (0, false));
         let line = serde_json::to_value(plan.batch_record()).unwrap();
         assert_eq!(line["reached"], false);
         assert!(line["reason"].as_str().unwrap().contains("RRT-Connect found no path"));
