@@ -336,7 +336,8 @@ impl Kinematics {
         m
     }
 
-    /// Each joint's z-aligned frame after its motion, in the root frame (`out.len() >= n`).
+    /// Each joint's z-aligned frame after its motion, in the root frame (the first `out.len()`
+    /// when it is shorter than `n`).
     pub fn segment_frames(&self, q: &[f64], out: &mut [Tf]) {
         let mut m = from_cols(&self.base);
         for ((s, &qi), o) in self.steps.iter().zip(q).zip(out.iter_mut()) {

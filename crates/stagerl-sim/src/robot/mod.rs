@@ -283,7 +283,8 @@ impl Chain {
 
     /// The frame each actuated joint moves, after its motion, for joint values `q` (one per
     /// joint, unchecked): `out[i]` is joint `i`'s z-aligned frame in the base frame, a row-major
-    /// 3 x 4 transform (metres). The frames [`LinkShape::segment`] refers to. No allocation.
+    /// 3 x 4 transform (metres). The frames [`LinkShape::segment`] refers to; a shorter `out`
+    /// gets the first `out.len()`. No allocation.
     pub fn segment_frames(&self, q: &[f64], out: &mut [[f64; 12]]) {
         self.kin.segment_frames(q, out)
     }

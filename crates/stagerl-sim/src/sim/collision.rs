@@ -288,12 +288,36 @@ impl ArmCollider {
             self.placed_q.copy_from_slice(q);
         }
         chain.segment_frames(q, &mut self.frames);
-        for (k, s) in self.shapes.iter().enumerate() {
-            self.world[k] = match s.segment {
-                -1 => s.local,
-                i => crate::robot::mul_tf(&self.frames[i as usize], &s.local),
-            };
-            self.geo[k] = Geo::of(&s.shape, &self.world[k]);
+        for k in 0..self.shapes.len() {
+            self.place_shape(k);
+        }
+    }
+
+    /// Put arm shape `k` where the frames of the last placement take it.
+    #[inline(always)]
+    fn place_shape(&mut self, k: usize) {
+        let s = &self.shapes[k];
+        self.world[k] = match s.segment {
+            -1 => s.local,
+            i => crate::robot::mul_tf(&self.frames[i as usize], &s.local),
+        };
+        self.geo[k] = Geo::of(&s.shape, &self.world[k]);
+    }
+
+    /// Put only the arm shapes `k` with `needed[k]` where joint values `q` take them (the
+    /// segment frames up to the last of theirs): the others keep the placement they had, which
+    /// the next full placement replaces. For the samples of the shield's verification, which
+    /// look at a few pairs only. No allocation.
+    pub fn place_some_at(&mut self, chain: &Chain, q: &[f64], needed: &[bool]) {
+        let segments = self.shapes.iter().zip(needed).filter(|(_, &n)| n).map(|(s, _)| s.segment);
+        let Some(last) = segments.max() else { return };
+        self.placed = false;
+        let upto = usize::try_from(last + 1).unwrap_or(0).min(self.frames.len());
+        chain.segment_frames(q, &mut self.frames[..upto]);
+        for k in 0..self.shapes.len().min(needed.len()) {
+            if needed[k] {
+                self.place_shape(k);
+            }
         }
     }
 

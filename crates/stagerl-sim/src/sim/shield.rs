@@ -206,6 +206,10 @@ pub struct Shield {
     /// The signed distance of each of `pairs` at `q` where step 2 computed it (`None`: not
     /// computed; `Some(None)`: no answer), for step 4 at the same placement.
     known: Vec<Option<Option<f64>>>,
+    /// The lower bound of each of `pairs` at `q` (step 2's, for step 4).
+    bounds: Vec<f64>,
+    /// The arm shapes of the pairs a sample of step 4 looks at.
+    needed: Vec<bool>,
     near: Vec<(Pair, Closest)>,
     watched: Vec<Watched>,
     qp: qp::Qp,
@@ -234,6 +238,8 @@ impl Shield {
             levers: collider.levers(chain),
             pairs: Vec::with_capacity(max_pairs),
             known: Vec::with_capacity(max_pairs),
+            bounds: Vec::with_capacity(max_pairs),
+            needed: vec![false; collider.len()],
             near: Vec::with_capacity(max_pairs),
             watched: Vec::with_capacity(max_pairs),
             qp: qp::Qp::new(n, max_pairs + 2 * n),
@@ -347,9 +353,12 @@ impl Shield {
         let c = self.config;
         self.near.clear();
         self.known.clear();
+        self.bounds.clear();
         for &p in &self.pairs {
             let mut known = None;
-            if collider.lower_bound(p) < c.influence_m {
+            let bound = collider.lower_bound(p);
+            self.bounds.push(bound);
+            if bound < c.influence_m {
                 let cl = collider.closest(p);
                 known = Some(cl.map(|cl| cl.distance_m));
                 if let Some(cl) = cl.filter(|cl| cl.distance_m < c.influence_m) {
@@ -426,7 +435,7 @@ impl Shield {
                 Some(b) => self.relative_motion(collider, pair.shape_a(), b),
             };
             let margin = self.margin(pair);
-            if collider.lower_bound(pair) - motion_m >= 0.5 * margin {
+            if self.bounds[j] - motion_m >= 0.5 * margin {
                 continue;
             }
             // Step 2 saw the same placement.
@@ -496,7 +505,15 @@ impl Shield {
                 for (i, v) in self.q_t.iter_mut().enumerate() {
                     *v = q[i] + t * self.dq[i];
                 }
-                collider.place_at(chain, &self.q_t);
+                // Only the shapes of the pairs still watched.
+                self.needed.fill(false);
+                for w in &self.watched {
+                    self.needed[w.pair.shape_a()] = true;
+                    if let Some(b) = w.pair.shape_b() {
+                        self.needed[b] = true;
+                    }
+                }
+                collider.place_some_at(chain, &self.q_t, &self.needed);
             }
             let mut step = f64::INFINITY;
             let mut k = 0;
