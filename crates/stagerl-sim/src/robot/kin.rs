@@ -352,6 +352,13 @@ impl Kinematics {
         }
     }
 
+    /// The tip transform from the last of [`Kinematics::segment_frames`]: the same product in
+    /// the same order as [`Kinematics::fk_tf`], so the same transform to the bit (`None` for
+    /// a chain without joints).
+    pub fn tip_from_last_frame(&self, last: &Tf) -> Option<Tf> {
+        self.steps.last().map(|s| mul(last, &s.after.map(|v| v[0])))
+    }
+
     /// The origin of every joint frame (in the root frame, metres), then the tip's: `n + 1`
     /// points, the arm's skeleton.
     pub fn joint_origins(&self, q: &[f64]) -> Vec<[f64; 3]> {

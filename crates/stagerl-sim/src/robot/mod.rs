@@ -289,6 +289,14 @@ impl Chain {
         self.kin.segment_frames(q, out)
     }
 
+    /// The tip's pose from the frames [`Chain::segment_frames`] gave for some joint values:
+    /// [`Chain::fk`] of those values, bit for bit, without a second pass over the chain (the
+    /// collision check's frames serve the task). `None` without all the frames.
+    pub fn tip_pose_from_frames(&self, frames: &[[f64; 12]]) -> Option<Pose> {
+        let last = frames.get(self.dof().checked_sub(1)?)?;
+        self.kin.tip_from_last_frame(last).map(|m| kin::pose_of(&m))
+    }
+
     /// Read and parse a URDF file (see [`Chain::from_urdf_str`]) and its collision meshes
     /// (found through `ROS_PACKAGE_PATH` and the URDF's folder; a mesh that cannot be read is an
     /// error); [`Error::Io`] if it cannot be read, URDF errors prefixed with the path.

@@ -95,6 +95,15 @@ impl ArmCollider {
         &self.frames
     }
 
+    /// The segment frames of the last placement when it was a whole one at joint values `q`
+    /// (bit for bit), else `None`: what [`Chain::tip_pose_from_frames`] needs for the tip's
+    /// pose at `q` without another pass.
+    pub fn frames_placed_at(&self, q: &[f64]) -> Option<&[[f64; 12]]> {
+        let same = self.placed_q.len() == q.len()
+            && self.placed_q.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits());
+        (self.placed && same).then_some(&self.frames[..])
+    }
+
     /// The bounding sphere of arm shape `k` at the last placement: its centre (world frame)
     /// and radius, metres.
     pub fn bounding_sphere(&self, k: usize) -> ([f64; 3], f64) {
