@@ -241,6 +241,43 @@ fn advance(m: &Cols, prismatic: bool, q: f64, sc: (f64, f64), k: &[V2; 12]) -> C
     o
 }
 
+/// `m * Z(q)`: the first half of [`advance`] (the same operations).
+#[inline(always)]
+fn moved(m: &Cols, prismatic: bool, q: f64, sc: (f64, f64)) -> Cols {
+    let [c0, c1, c2, mut t] = *m;
+    if prismatic {
+        let vq = splat(q);
+        for h in 0..2 {
+            t[h] = vadd(t[h], vmul(vq, c2[h]));
+        }
+        return [c0, c1, c2, t];
+    }
+    let (vs, vc) = (splat(sc.0), splat(sc.1));
+    let mut x = [[0.0; 2]; 2];
+    let mut y = [[0.0; 2]; 2];
+    for h in 0..2 {
+        x[h] = vadd(vmul(vc, c0[h]), vmul(vs, c1[h]));
+        y[h] = vsub(vmul(vc, c1[h]), vmul(vs, c0[h]));
+    }
+    [x, y, c2, t]
+}
+
+/// `f * after`: the second half of [`advance`] (the same operations).
+#[inline(always)]
+fn times_after(f: &Cols, k: &[V2; 12]) -> Cols {
+    let [x, y, c2, t] = *f;
+    let mut o = [[[0.0; 2]; 2]; 4];
+    for (j, oj) in o.iter_mut().enumerate() {
+        for h in 0..2 {
+            oj[h] = vadd(vadd(vmul(x[h], k[j]), vmul(y[h], k[4 + j])), vmul(c2[h], k[8 + j]));
+        }
+    }
+    for h in 0..2 {
+        o[3][h] = vadd(o[3][h], t[h]);
+    }
+    o
+}
+
 /// Joints per pass of the hot loops: the sines and cosines of a chunk are computed first, as
 /// independent work the CPU overlaps, instead of one long latency chain per joint.
 pub(crate) const CHUNK: usize = 8;
@@ -336,19 +373,27 @@ impl Kinematics {
         m
     }
 
-    /// Each joint's z-aligned frame after its motion, in the root frame (`out.len() >= n`).
+    /// Each joint's z-aligned frame after its motion, in the root frame (the first `out.len()`
+    /// when it is shorter than `n`): [`Kinematics::fk_tf`]'s pass with each frame kept between
+    /// the joint's motion and the constant after it (the same products in the same order).
     pub fn segment_frames(&self, q: &[f64], out: &mut [Tf]) {
-        let mut m = from_cols(&self.base);
-        for ((s, &qi), o) in self.steps.iter().zip(q).zip(out.iter_mut()) {
-            let motion = if s.prismatic {
-                [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, qi]
-            } else {
-                let (sn, c) = sin_cos(qi);
-                [c, -sn, 0.0, 0.0, sn, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]
-            };
-            *o = mul(&m, &motion);
-            m = mul(o, &s.after.map(|v| v[0]));
+        let mut m = self.base;
+        let mut sc = [(0.0, 1.0); CHUNK];
+        for (i, ((s, &qi), o)) in self.steps.iter().zip(q).zip(out.iter_mut()).enumerate() {
+            if i % CHUNK == 0 {
+                sc = sin_cos_chunk(&q[i..q.len().min(i + CHUNK)]);
+            }
+            let f = moved(&m, s.prismatic, qi, sc[i % CHUNK]);
+            *o = from_cols(&f);
+            m = times_after(&f, &s.after);
         }
+    }
+
+    /// The tip transform from the last of [`Kinematics::segment_frames`]: the same product in
+    /// the same order as [`Kinematics::fk_tf`], so the same transform to the bit (`None` for
+    /// a chain without joints).
+    pub fn tip_from_last_frame(&self, last: &Tf) -> Option<Tf> {
+        self.steps.last().map(|s| from_cols(&times_after(&to_cols(last), &s.after)))
     }
 
     /// The origin of every joint frame (in the root frame, metres), then the tip's: `n + 1`

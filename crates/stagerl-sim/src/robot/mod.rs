@@ -283,9 +283,18 @@ impl Chain {
 
     /// The frame each actuated joint moves, after its motion, for joint values `q` (one per
     /// joint, unchecked): `out[i]` is joint `i`'s z-aligned frame in the base frame, a row-major
-    /// 3 x 4 transform (metres). The frames [`LinkShape::segment`] refers to. No allocation.
+    /// 3 x 4 transform (metres). The frames [`LinkShape::segment`] refers to; a shorter `out`
+    /// gets the first `out.len()`. No allocation.
     pub fn segment_frames(&self, q: &[f64], out: &mut [[f64; 12]]) {
         self.kin.segment_frames(q, out)
+    }
+
+    /// The tip's pose from the frames [`Chain::segment_frames`] gave for some joint values:
+    /// [`Chain::fk`] of those values, bit for bit, without a second pass over the chain (the
+    /// collision check's frames serve the task). `None` without all the frames.
+    pub fn tip_pose_from_frames(&self, frames: &[[f64; 12]]) -> Option<Pose> {
+        let last = frames.get(self.dof().checked_sub(1)?)?;
+        self.kin.tip_from_last_frame(last).map(|m| kin::pose_of(&m))
     }
 
     /// Read and parse a URDF file (see [`Chain::from_urdf_str`]) and its collision meshes

@@ -817,3 +817,28 @@ fn effort_limits() {
         assert!(m.contains("joint `bad`") && m.contains("effort"), "{m}");
     }
 }
+
+/// The tip's pose from the segment frames is `fk`'s to the bit (the environment's step takes
+/// it from the collision check's frames), on the UR5, the Panda and the test arm with its
+/// prismatic joint, joint values past 1e5 rad included (the standard library's sine there).
+#[test]
+fn the_tip_from_the_segment_frames_is_fk_to_the_bit() {
+    let mut rng = Rng::new(21);
+    for chain in [Chain::ur5(), Chain::load("panda", None).unwrap(), test_arm()] {
+        let mut frames = vec![[0.0; 12]; chain.dof()];
+        for k in 0..2000 {
+            let mut q = random_q(&chain, &mut rng);
+            if k % 100 == 0 {
+                q[0] += 2.0e5;
+            }
+            chain.segment_frames(&q, &mut frames);
+            let (a, b) = (chain.tip_pose_from_frames(&frames).unwrap(), chain.fk(&q));
+            let bits = |p: &Pose| {
+                let (v, w) = (p.position, p.quaternion_xyzw());
+                [v.x, v.y, v.z, w[0], w[1], w[2], w[3]].map(f64::to_bits)
+            };
+            assert_eq!(bits(&a), bits(&b), "{q:?}");
+        }
+        assert!(chain.tip_pose_from_frames(&frames[..chain.dof() - 1]).is_none());
+    }
+}

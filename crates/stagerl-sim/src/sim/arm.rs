@@ -76,6 +76,11 @@ impl Arm {
         self.collider.as_mut()
     }
 
+    /// The collision checker, if the arm has collision shapes.
+    pub fn collider(&self) -> Option<&ArmCollider> {
+        self.collider.as_ref()
+    }
+
     /// Put the arm at joint positions `q` (checked against the limits by the caller) with joint
     /// velocities `v` (dynamic: the simulation's state; kinematic: unused), and look for its
     /// contacts.

@@ -1,8 +1,10 @@
 //! Collisions of the arm in the kinematic simulation: with the floor (the plane z = 0 of the base
 //! frame), with itself (links that no joint connects) and with obstacles (boxes and spheres at
 //! fixed poses). The arm's shapes are its URDF's `<collision>` primitives
-//! ([`crate::robot::LinkShape`]); the tests between shapes are parry3d's (f32), the floor test
-//! is exact (the lowest point of each shape).
+//! ([`crate::robot::LinkShape`]). The floor test is exact (the lowest point of each shape); so
+//! are the tests of a capsule or sphere against another, a sphere obstacle or a box obstacle
+//! (closed forms in f64, [`distance`]: parry's GJK in f32 saw contacts up to 6.5 mm apart for
+//! capsules and boxes); the others (boxes and mesh parts of the arm) are parry3d's (f32).
 //!
 //! Which links are adjacent: links move with the frame of the last actuated joint before them
 //! (their *segment*; the root link and the links fixed to it form segment -1). Two shapes are
@@ -174,12 +176,22 @@ pub enum CollisionKind {
     Obstacle,
 }
 
+/// An obstacle ready for the tests: parry's shape at its (f32) pose, its bounding sphere (and
+/// sphere centre) and, for a box, the f64 frame of the closed forms ([`distance::BoxFrame`]).
+#[derive(Clone, Debug)]
+struct PlacedObstacle {
+    pose: Pose3,
+    prim: Prim,
+    geo: Geo,
+    cuboid: Option<distance::BoxFrame>,
+}
+
 /// The arm's collision checker, with the obstacles it is tested against (scratch included: a
 /// check allocates nothing).
 #[derive(Clone, Debug)]
 pub struct ArmCollider {
     shapes: Vec<ArmShape>,
-    obstacles: Vec<(Pose3, Prim, Geo)>,
+    obstacles: Vec<PlacedObstacle>,
     /// Pairs of indices into `shapes` tested for self-collision.
     pairs: Vec<(usize, usize)>,
     checks: Checks,
@@ -190,6 +202,10 @@ pub struct ArmCollider {
     reach: Vec<f64>,
     /// Scratch joint values of [`ArmCollider::check_motion`].
     motion_q: Vec<f64>,
+    /// The joint values of the last placement, when `placed` (a placement at the same values,
+    /// bit for bit, is skipped: the shield places the arm where the last check left it).
+    placed_q: Vec<f64>,
+    placed: bool,
 }
 
 impl ArmCollider {
@@ -219,6 +235,8 @@ impl ArmCollider {
         ArmCollider {
             reach,
             motion_q: vec![0.0; chain.dof()],
+            placed_q: vec![0.0; chain.dof()],
+            placed: false,
             shapes,
             obstacles: Vec::new(),
             pairs,
@@ -251,37 +269,80 @@ impl ArmCollider {
         self.obstacles.extend(obstacles.iter().map(Self::prepare));
     }
 
-    fn prepare(o: &Obstacle) -> (Pose3, Prim, Geo) {
-        let (prim, m) = (o.primitive(), o.transform());
-        (pose3(&m), Prim::of(&prim), Geo::of(&prim, &m))
+    fn prepare(o: &Obstacle) -> PlacedObstacle {
+        let (shape, m) = (o.primitive(), o.transform());
+        let (pose, prim) = (pose3(&m), Prim::of(&shape));
+        let cuboid = match &prim {
+            Prim::Cuboid(c) => Some(distance::BoxFrame::of(&pose, c)),
+            _ => None,
+        };
+        PlacedObstacle { pose, prim, geo: Geo::of(&shape, &m), cuboid }
     }
 
     /// Put the arm's shapes where joint values `q` take them.
     fn place(&mut self, chain: &Chain, q: &[f64]) {
+        let same = |p: &[f64]| p.len() == q.len() && p.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits());
+        if self.placed && same(&self.placed_q) {
+            return;
+        }
+        self.placed = self.placed_q.len() == q.len();
+        if self.placed {
+            self.placed_q.copy_from_slice(q);
+        }
         chain.segment_frames(q, &mut self.frames);
-        for (k, s) in self.shapes.iter().enumerate() {
-            self.world[k] = match s.segment {
-                -1 => s.local,
-                i => crate::robot::mul_tf(&self.frames[i as usize], &s.local),
-            };
-            self.geo[k] = Geo::of(&s.shape, &self.world[k]);
+        for k in 0..self.shapes.len() {
+            self.place_shape(k);
+        }
+    }
+
+    /// Put arm shape `k` where the frames of the last placement take it.
+    #[inline(always)]
+    fn place_shape(&mut self, k: usize) {
+        let s = &self.shapes[k];
+        self.world[k] = match s.segment {
+            -1 => s.local,
+            i => crate::robot::mul_tf(&self.frames[i as usize], &s.local),
+        };
+        self.geo[k] = Geo::of(&s.shape, &self.world[k]);
+    }
+
+    /// Put only the arm shapes `k` with `needed[k]` where joint values `q` take them (the
+    /// segment frames up to the last of theirs): the others keep the placement they had, which
+    /// the next full placement replaces. For the samples of the shield's verification, which
+    /// look at a few pairs only. No allocation.
+    pub fn place_some_at(&mut self, chain: &Chain, q: &[f64], needed: &[bool]) {
+        let segments = self.shapes.iter().zip(needed).filter(|(_, &n)| n).map(|(s, _)| s.segment);
+        let Some(last) = segments.max() else { return };
+        self.placed = false;
+        let upto = usize::try_from(last + 1).unwrap_or(0).min(self.frames.len());
+        chain.segment_frames(q, &mut self.frames[..upto]);
+        for k in 0..self.shapes.len().min(needed.len()) {
+            if needed[k] {
+                self.place_shape(k);
+            }
         }
     }
 
     /// The first placed arm shape (index into `shapes`) that overlaps an obstacle.
-    fn hit_obstacle(&self, (pose, shape, geo): &(Pose3, Prim, Geo)) -> Option<usize> {
-        (0..self.shapes.len()).find(|&k| {
-            let g = &self.geo[k];
-            g.bounds_overlap(geo)
-                && match (&self.shapes[k].shape, geo.round) {
-                    // Capsules and spheres against a sphere: a segment's distance to a point.
-                    (Shape::Capsule { .. } | Shape::Sphere { .. }, true) => {
-                        let d2 = point_segment_distance2(geo.a, g.a, g.b);
-                        d2 < (g.radius + geo.radius).powi(2)
-                    }
-                    _ => overlap(&pose3(&self.world[k]), self.shapes[k].parry.shape(), pose, shape.shape()),
-                }
-        })
+    fn hit_obstacle(&self, o: &PlacedObstacle) -> Option<usize> {
+        (0..self.shapes.len()).find(|&k| self.overlap_obstacle(k, o))
+    }
+
+    /// Whether placed arm shape `k` overlaps obstacle `o`: bounding spheres first, then the
+    /// exact test: in closed form (f64) for a capsule or sphere against a sphere (a segment's
+    /// distance to a point) or a box ([`distance::round_box_overlap`]), parry's (f32) for a
+    /// mesh part or a box-shaped link.
+    #[inline(always)]
+    fn overlap_obstacle(&self, k: usize, o: &PlacedObstacle) -> bool {
+        let (g, geo) = (&self.geo[k], &o.geo);
+        if !g.bounds_overlap(geo) {
+            return false;
+        }
+        match (g.round, geo.round, &o.cuboid) {
+            (true, true, _) => point_segment_distance2(geo.a, g.a, g.b) < (g.radius + geo.radius).powi(2),
+            (true, false, Some(b)) => distance::round_box_overlap(g, b),
+            _ => overlap(&pose3(&self.world[k]), self.shapes[k].parry.shape(), &o.pose, o.prim.shape()),
+        }
     }
 
     /// Whether the arm at joint values `q` touches obstacle `o` (whatever the checks and the
@@ -374,11 +435,15 @@ impl ArmCollider {
                 }
             }
         }
-        for (i, (pose, prim, _)) in self.obstacles.iter().enumerate() {
+        for (i, o) in self.obstacles.iter().enumerate() {
             for (k, s) in self.shapes.iter().enumerate() {
-                let p = pose3(&self.world[k]);
-                seen(signed_distance(&p, s.parry.shape(), pose, prim.shape()));
-                if overlap(&p, s.parry.shape(), pose, prim.shape()) {
+                // The distance of the shield and the plans' clearance, the verdict of `check`.
+                let pair = distance::Pair::Obstacle { shape: k, obstacle: i };
+                seen(self.closest(pair).map_or_else(
+                    || signed_distance(&pose3(&self.world[k]), s.parry.shape(), &o.pose, o.prim.shape()),
+                    |c| c.distance_m,
+                ));
+                if self.overlap_obstacle(k, o) {
                     out.push(Contact::Obstacle { shape: s.index, obstacle: i });
                 }
             }

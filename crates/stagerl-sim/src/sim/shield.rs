@@ -203,6 +203,13 @@ pub struct Shield {
     /// `levers[k * dof + i]`: see [`ArmCollider::levers`].
     levers: Vec<f64>,
     pairs: Vec<Pair>,
+    /// The signed distance of each of `pairs` at `q` where step 2 computed it (`None`: not
+    /// computed; `Some(None)`: no answer), for step 4 at the same placement.
+    known: Vec<Option<Option<f64>>>,
+    /// The lower bound of each of `pairs` at `q` (step 2's, for step 4).
+    bounds: Vec<f64>,
+    /// The arm shapes of the pairs a sample of step 4 looks at.
+    needed: Vec<bool>,
     near: Vec<(Pair, Closest)>,
     watched: Vec<Watched>,
     qp: qp::Qp,
@@ -230,6 +237,9 @@ impl Shield {
             prismatic: chain.joints().iter().map(|j| j.kind == JointKind::Prismatic).collect(),
             levers: collider.levers(chain),
             pairs: Vec::with_capacity(max_pairs),
+            known: Vec::with_capacity(max_pairs),
+            bounds: Vec::with_capacity(max_pairs),
+            needed: vec![false; collider.len()],
             near: Vec::with_capacity(max_pairs),
             watched: Vec::with_capacity(max_pairs),
             qp: qp::Qp::new(n, max_pairs + 2 * n),
@@ -342,12 +352,20 @@ impl Shield {
     fn constrain(&mut self, collider: &ArmCollider, dt_s: f64) -> bool {
         let c = self.config;
         self.near.clear();
+        self.known.clear();
+        self.bounds.clear();
         for &p in &self.pairs {
-            if collider.lower_bound(p) < c.influence_m {
-                if let Some(cl) = collider.closest(p).filter(|cl| cl.distance_m < c.influence_m) {
+            let mut known = None;
+            let bound = collider.lower_bound(p);
+            self.bounds.push(bound);
+            if bound < c.influence_m {
+                let cl = collider.closest(p);
+                known = Some(cl.map(|cl| cl.distance_m));
+                if let Some(cl) = cl.filter(|cl| cl.distance_m < c.influence_m) {
                     self.near.push((p, cl));
                 }
             }
+            self.known.push(known);
         }
         self.qp.clear();
         let mut satisfied = true;
@@ -411,16 +429,18 @@ impl Shield {
             *m = self.reach[k * n..(k + 1) * n].iter().sum();
         }
         self.watched.clear();
-        for &pair in &self.pairs {
+        for (j, &pair) in self.pairs.iter().enumerate() {
             let motion_m = match pair.shape_b() {
                 None => self.motion[pair.shape_a()],
                 Some(b) => self.relative_motion(collider, pair.shape_a(), b),
             };
             let margin = self.margin(pair);
-            if collider.lower_bound(pair) - motion_m >= 0.5 * margin {
+            if self.bounds[j] - motion_m >= 0.5 * margin {
                 continue;
             }
-            let Some(d0) = collider.closest(pair).map(|c| c.distance_m) else { return false };
+            // Step 2 saw the same placement.
+            let known = self.known[j].unwrap_or_else(|| collider.distance(pair));
+            let Some(d0) = known else { return false };
             if d0 <= 0.0 {
                 continue;
             }
@@ -485,13 +505,21 @@ impl Shield {
                 for (i, v) in self.q_t.iter_mut().enumerate() {
                     *v = q[i] + t * self.dq[i];
                 }
-                collider.place_at(chain, &self.q_t);
+                // Only the shapes of the pairs still watched.
+                self.needed.fill(false);
+                for w in &self.watched {
+                    self.needed[w.pair.shape_a()] = true;
+                    if let Some(b) = w.pair.shape_b() {
+                        self.needed[b] = true;
+                    }
+                }
+                collider.place_some_at(chain, &self.q_t, &self.needed);
             }
             let mut step = f64::INFINITY;
             let mut k = 0;
             while k < self.watched.len() {
                 let w = self.watched[k];
-                let Some(d) = collider.closest(w.pair).map(|c| c.distance_m) else { return false };
+                let Some(d) = collider.distance(w.pair) else { return false };
                 if d.is_nan() || d < w.threshold_m {
                     return false;
                 }

@@ -634,7 +634,10 @@ impl ReachEnv {
             self.done = true;
             return Err(e);
         }
-        self.ee = self.chain.fk(&self.q);
+        // The check placed the arm at q: its frames give the tip (the same pose to the bit).
+        let frames = self.arm.collider().and_then(|c| c.frames_placed_at(&self.q));
+        self.ee =
+            frames.and_then(|f| self.chain.tip_pose_from_frames(f)).unwrap_or_else(|| self.chain.fk(&self.q));
         self.steps += 1;
         self.collision_steps += u32::from(self.arm.contact().is_some());
         let clearance = self.measure_proximity();

@@ -25,7 +25,10 @@
 //!    contact query (f32; a mesh part is its convex hull, the same hull the contact check
 //!    tests, so nothing is bounded loosely);
 //! 6. a lower bound for every pair from bounding spheres, `d >= |c_A - c_B| - R_A - R_B`
-//!    (floor: `c_A.z - R_A`), to skip far pairs without an exact query.
+//!    (floor: `c_A.z - R_A`), to skip far pairs without an exact query; for a capsule or sphere
+//!    and a box, the larger of that and the gap between the box and the segment along one of
+//!    the box's axes less the radius, when there is such a gap (a thin, long box's bounding
+//!    sphere is far larger than the box).
 //!
 //! The bound on how far a shape can move when the joints move by `dq` ([`ArmCollider::levers`]):
 //! a point `x` carried by joint `i` moves at `|z_i x (x - o_i)| <= |x - o_i|` per rad/s (1 per
@@ -92,6 +95,15 @@ impl ArmCollider {
         &self.frames
     }
 
+    /// The segment frames of the last placement when it was a whole one at joint values `q`
+    /// (bit for bit), else `None`: what [`Chain::tip_pose_from_frames`] needs for the tip's
+    /// pose at `q` without another pass.
+    pub fn frames_placed_at(&self, q: &[f64]) -> Option<&[[f64; 12]]> {
+        let same = self.placed_q.len() == q.len()
+            && self.placed_q.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits());
+        (self.placed && same).then_some(&self.frames[..])
+    }
+
     /// The bounding sphere of arm shape `k` at the last placement: its centre (world frame)
     /// and radius, metres.
     pub fn bounding_sphere(&self, k: usize) -> ([f64; 3], f64) {
@@ -126,7 +138,7 @@ impl ArmCollider {
     }
 
     /// A lower bound on the pair's signed distance at the last placement, from bounding
-    /// spheres (step 6).
+    /// spheres and the boxes' axes (step 6).
     pub fn lower_bound(&self, pair: Pair) -> f64 {
         let apart = |g: &Geo, o: &Geo| {
             let d = super::sub(g.centre, o.centre);
@@ -135,7 +147,19 @@ impl ArmCollider {
         match pair {
             Pair::Floor { shape } => self.geo[shape].centre[2] - self.geo[shape].bound,
             Pair::SelfPair { a, b } => apart(&self.geo[a], &self.geo[b]),
-            Pair::Obstacle { shape, obstacle } => apart(&self.geo[shape], &self.obstacles[obstacle].2),
+            Pair::Obstacle { shape, obstacle } => {
+                let (g, o) = (&self.geo[shape], &self.obstacles[obstacle]);
+                let spheres = apart(g, &o.geo);
+                // A capsule or sphere apart from a box along one of its axes: that gap too
+                // (overlapping, the signed distance is below -radius: the spheres' bound only).
+                match &o.cuboid {
+                    Some(b) if g.round => match b.gap(g) {
+                        gap if gap > 0.0 => spheres.max(gap - g.radius),
+                        _ => spheres,
+                    },
+                    _ => spheres,
+                }
+            }
         }
     }
 
@@ -153,15 +177,51 @@ impl ArmCollider {
                 self.parry_closest(a, &pb, self.shapes[b].parry.shape())
             }
             Pair::Obstacle { shape, obstacle } => {
-                let (pose, prim, geo) = &self.obstacles[obstacle];
+                let o = &self.obstacles[obstacle];
                 let g = &self.geo[shape];
-                match (g.round, geo.round, prim) {
-                    (true, true, _) => Some(round_closest(g, geo)),
-                    (true, false, Prim::Cuboid(c)) => round_box_closest(g, pose, c)
-                        .or_else(|| self.parry_closest(shape, pose, Prim::shape(prim))),
-                    _ => self.parry_closest(shape, pose, Prim::shape(prim)),
+                match (g.round, o.geo.round, &o.cuboid) {
+                    (true, true, _) => Some(round_closest(g, &o.geo)),
+                    (true, false, Some(b)) => round_box_closest(g, b)
+                        .or_else(|| self.parry_closest(shape, &o.pose, Prim::shape(&o.prim))),
+                    _ => self.parry_closest(shape, &o.pose, Prim::shape(&o.prim)),
                 }
             }
+        }
+    }
+
+    /// The pair's signed distance at the last placement: `closest(pair).map(|c| c.distance_m)`,
+    /// the same value to the bit, without the points and the direction where that is cheaper
+    /// (the floor, capsules and spheres against each other and against boxes).
+    pub fn distance(&self, pair: Pair) -> Option<f64> {
+        match pair {
+            Pair::Floor { shape } if self.geo[shape].round => {
+                let g = &self.geo[shape];
+                // The lowest end of the segment as `floor_closest` picks it, less the radius.
+                let low = match g.a[2] - g.b[2] {
+                    x if x.abs() <= 1e-12 || x < 0.0 => g.a[2],
+                    _ => g.b[2],
+                };
+                Some(low - g.radius)
+            }
+            Pair::SelfPair { a, b } if self.geo[a].round && self.geo[b].round => {
+                let (ga, gb) = (&self.geo[a], &self.geo[b]);
+                Some(super::segment_segment_distance2(ga.a, ga.b, gb.a, gb.b).sqrt() - ga.radius - gb.radius)
+            }
+            Pair::Obstacle { shape, obstacle } => {
+                let (o, g) = (&self.obstacles[obstacle], &self.geo[shape]);
+                match (g.round, o.geo.round, &o.cuboid) {
+                    (true, true, _) => {
+                        let d2 = super::segment_segment_distance2(g.a, g.b, o.geo.a, o.geo.b);
+                        Some(d2.sqrt() - g.radius - o.geo.radius)
+                    }
+                    (true, false, Some(b)) => match round_box_distance(g, b) {
+                        Some(d) => Some(d),
+                        None => self.closest(pair).map(|c| c.distance_m),
+                    },
+                    _ => self.closest(pair).map(|c| c.distance_m),
+                }
+            }
+            _ => self.closest(pair).map(|c| c.distance_m),
         }
     }
 
@@ -301,32 +361,107 @@ fn round_closest(ga: &Geo, gb: &Geo) -> Closest {
     }
 }
 
-/// Step 5: a capsule or sphere (segment and radius `g`) against a box of half extents `c` at
-/// `pose`: apart or overlapping, in closed form (`None` only for a degenerate box).
-fn round_box_closest(g: &Geo, pose: &parry3d::math::Pose3, c: &parry3d::shape::Cuboid) -> Option<Closest> {
-    let (qr, t) = (pose.rotation, pose.translation);
-    let (x, y, z, w) = (f64::from(qr.x), f64::from(qr.y), f64::from(qr.z), f64::from(qr.w));
-    let n2 = x * x + y * y + z * z + w * w;
-    let (x, y, z, w) = (x / n2.sqrt(), y / n2.sqrt(), z / n2.sqrt(), w / n2.sqrt());
-    // Rows of the box's rotation R (world from box).
-    let r = [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-    ];
-    let t = [f64::from(t.x), f64::from(t.y), f64::from(t.z)];
-    let local = |p: [f64; 3]| {
-        let d = super::sub(p, t);
+/// A box obstacle as the closed forms of step 5 use it: the rotation `r` (rows; world from
+/// box), the centre `t` and the half extents `h`, in f64, from the f32 pose and half extents
+/// parry holds (the box every test of the checker sees), computed once per scene.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct BoxFrame {
+    r: [[f64; 3]; 3],
+    t: [f64; 3],
+    h: [f64; 3],
+}
+
+impl BoxFrame {
+    pub(crate) fn of(pose: &parry3d::math::Pose3, c: &parry3d::shape::Cuboid) -> BoxFrame {
+        let (qr, t) = (pose.rotation, pose.translation);
+        let (x, y, z, w) = (f64::from(qr.x), f64::from(qr.y), f64::from(qr.z), f64::from(qr.w));
+        let n2 = x * x + y * y + z * z + w * w;
+        let (x, y, z, w) = (x / n2.sqrt(), y / n2.sqrt(), z / n2.sqrt(), w / n2.sqrt());
+        BoxFrame {
+            r: [
+                [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+                [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+                [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+            ],
+            t: [f64::from(t.x), f64::from(t.y), f64::from(t.z)],
+            h: [f64::from(c.half_extents.x), f64::from(c.half_extents.y), f64::from(c.half_extents.z)],
+        }
+    }
+
+    /// A lower bound on the distance of the segment of `g` from the box, metres: the largest
+    /// gap between the box and the segment's extent along one of the box's axes (0 when they
+    /// overlap along all three), a hair less (1e-12 m) for rounding.
+    #[inline]
+    fn gap(&self, g: &Geo) -> f64 {
+        let (a, b) = (self.local(g.a), self.local(g.b));
+        let mut gap = 0.0f64;
+        for j in 0..3 {
+            gap = gap.max(a[j].min(b[j]) - self.h[j]).max(-self.h[j] - a[j].max(b[j]));
+        }
+        if gap > 0.0 {
+            gap - 1e-12
+        } else {
+            0.0
+        }
+    }
+
+    /// A world point in the box's frame.
+    #[inline(always)]
+    fn local(&self, p: [f64; 3]) -> [f64; 3] {
+        let (r, d) = (&self.r, super::sub(p, self.t));
         [0, 1, 2].map(|j| r[0][j] * d[0] + r[1][j] * d[1] + r[2][j] * d[2])
-    };
-    let world = |p: [f64; 3]| [0, 1, 2].map(|i| t[i] + r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2]);
-    let h = [f64::from(c.half_extents.x), f64::from(c.half_extents.y), f64::from(c.half_extents.z)];
-    let (a, b) = (local(g.a), local(g.b));
-    let (p, on_box, d2) = segment_box(a, b, h);
+    }
+
+    /// A point of the box's frame in the world.
+    fn world(&self, p: [f64; 3]) -> [f64; 3] {
+        let r = &self.r;
+        [0, 1, 2].map(|i| self.t[i] + r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2])
+    }
+
+    /// A direction of the box's frame in the world.
+    fn turn(&self, v: [f64; 3]) -> [f64; 3] {
+        let r = &self.r;
+        [0, 1, 2].map(|i| r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2])
+    }
+}
+
+/// Whether a capsule or sphere (segment and radius `g`) overlaps the box `b`: the segment's
+/// squared distance to the box (step 5's closed form, exact in f64) below the radius squared;
+/// the contact test of [`ArmCollider::check`] for such pairs.
+#[inline]
+pub(super) fn round_box_overlap(g: &Geo, b: &BoxFrame) -> bool {
+    let (a, e) = (b.local(g.a), b.local(g.b));
+    // Apart along one of the box's axes by the radius or more: no contact, without the search.
+    for j in 0..3 {
+        if a[j].min(e[j]) - b.h[j] >= g.radius || -b.h[j] - a[j].max(e[j]) >= g.radius {
+            return false;
+        }
+    }
+    let (_, _, d2) = segment_box(a, e, b.h);
+    d2 < g.radius * g.radius
+}
+
+/// The distance of [`round_box_closest`] alone (the same value to the bit).
+#[inline]
+fn round_box_distance(g: &Geo, b: &BoxFrame) -> Option<f64> {
+    let (a, e) = (b.local(g.a), b.local(g.b));
+    let (_, _, d2) = segment_box(a, e, b.h);
     if d2 <= 1e-24 {
-        let (depth, n, deepest) = segment_in_box(a, b, h)?;
-        let normal = [0, 1, 2].map(|i| r[i][0] * n[0] + r[i][1] * n[1] + r[i][2] * n[2]);
-        let pa = world(deepest);
+        let (depth, _, _) = segment_in_box(a, e, b.h)?;
+        return Some(-(depth + g.radius));
+    }
+    Some(d2.sqrt() - g.radius)
+}
+
+/// Step 5: a capsule or sphere (segment and radius `g`) against the box `b`: apart or
+/// overlapping, in closed form (`None` only for a degenerate box).
+fn round_box_closest(g: &Geo, b: &BoxFrame) -> Option<Closest> {
+    let (a, e) = (b.local(g.a), b.local(g.b));
+    let (p, on_box, d2) = segment_box(a, e, b.h);
+    if d2 <= 1e-24 {
+        let (depth, n, deepest) = segment_in_box(a, e, b.h)?;
+        let normal = b.turn(n);
+        let pa = b.world(deepest);
         let pa = [0, 1, 2].map(|i| pa[i] - g.radius * normal[i]);
         let d = -(depth + g.radius);
         return Some(Closest {
@@ -337,14 +472,12 @@ fn round_box_closest(g: &Geo, pose: &parry3d::math::Pose3, c: &parry3d::shape::C
         });
     }
     let len = d2.sqrt();
-    let normal_local = [0, 1, 2].map(|j| (p[j] - on_box[j]) / len);
-    let normal =
-        [0, 1, 2].map(|i| r[i][0] * normal_local[0] + r[i][1] * normal_local[1] + r[i][2] * normal_local[2]);
-    let pw = world(p);
+    let normal = b.turn([0, 1, 2].map(|j| (p[j] - on_box[j]) / len));
+    let pw = b.world(p);
     Some(Closest {
         distance_m: len - g.radius,
         point_a_m: [0, 1, 2].map(|i| pw[i] - g.radius * normal[i]),
-        point_b_m: world(on_box),
+        point_b_m: b.world(on_box),
         normal,
     })
 }

@@ -98,10 +98,10 @@ impl ArmCollider {
         }
         self.place(chain, q);
         let mut best: Option<Closest> = None;
-        for (i, (pose, prim, _)) in self.obstacles.iter().enumerate() {
+        for (i, o) in self.obstacles.iter().enumerate() {
             for (k, s) in self.shapes.iter().enumerate() {
                 let p = pose3(&self.world[k]);
-                let Ok(Some(c)) = parry3d::query::contact(&p, s.parry.shape(), pose, prim.shape(), 1e3)
+                let Ok(Some(c)) = parry3d::query::contact(&p, s.parry.shape(), &o.pose, o.prim.shape(), 1e3)
                 else {
                     continue;
                 };
@@ -207,7 +207,7 @@ impl ArmCollider {
     /// skipped.
     fn placed_obstacle_distance(&self) -> f64 {
         let mut best = f64::INFINITY;
-        for (i, (_, _, geo)) in self.obstacles.iter().enumerate() {
+        for (i, geo) in self.obstacles.iter().map(|o| &o.geo).enumerate() {
             for k in 0..self.shapes.len() {
                 let g = &self.geo[k];
                 let c =
