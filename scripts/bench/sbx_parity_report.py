@@ -67,14 +67,16 @@ def main() -> None:
         rows = list(csv.DictReader(f))
     # (algo, impl, seed) -> {checkpoint: success}, and the run's last wall_s and env steps.
     curves: dict = defaultdict(dict)
+    dists: dict = defaultdict(dict)
     wall: dict = {}
     for r in rows:
         key = (r["algo"], r["impl"], int(r["seed"]))
         steps = int(r["env_steps"])
-        k = -(-steps // args.every) * args.every if steps % args.every else steps
-        # the first evaluation at or after a checkpoint: k = ceil(steps / every) * every, unless
-        # it falls exactly on one; the run's last (after the budget) goes to its own checkpoint.
+        # the first evaluation at or after checkpoint k (evaluations come after the episode that
+        # passes a multiple of `every`, so less than one episode late): floor(steps / every).
+        k = steps // args.every * args.every
         curves[key].setdefault(k, float(r["success_rate"]))
+        dists[key].setdefault(k, float(r["median_final_distance_m"]))
         if r["wall_s"]:
             wall[key] = (float(r["wall_s"]), steps)
     algos = sorted({k[0] for k in curves})
@@ -98,6 +100,39 @@ def main() -> None:
                     cells.append("-")
             diff = f"{means['stagerl'] - means['sbx']:+.1f}" if len(means) == 2 else "-"
             lines.append(f"| {k} | " + " | ".join(cells) + f" | {diff} |")
+        lines.append("")
+        lines.append("Median final distance, cm (mean ± sd over the seeds):\n")
+        lines.append("| env steps | " + " | ".join(impls) + " | difference, cm |")
+        lines.append("|---|" + "---|" * (len(impls) + 1))
+        for k in ks:
+            cells, means = [], {}
+            for i in impls:
+                xs = [dists[(algo, i, s)][k] * 100 for s in seeds[i] if k in dists[(algo, i, s)]]
+                if xs:
+                    m, sd = mean_sd(xs)
+                    means[i] = m
+                    cells.append(f"{m:.1f} ± {sd:.1f}")
+                else:
+                    cells.append("-")
+            diff = f"{means['stagerl'] - means['sbx']:+.1f}" if len(means) == 2 else "-"
+            lines.append(f"| {k} | " + " | ".join(cells) + f" | {diff} |")
+        # Each seed's mean over the second half of the budget (checkpoints >= half the last):
+        # one number per run, then Welch's t of the difference.
+        half = [k for k in ks if k >= ks[-1] / 2]
+        lines.append("")
+        lines.append(f"Per run, the mean over checkpoints {half[0]}-{half[-1]} (one value a seed):\n")
+        lines.append("| measure | stagerl | sbx | difference | Welch t |")
+        lines.append("|---|---|---|---|---|")
+        for name, table, scale in (("success %", curves, 100), ("median final distance, cm", dists, 100)):
+            per_impl = {}
+            for i in impls:
+                per_impl[i] = [sum(table[(algo, i, s)][k] for k in half) / len(half) * scale
+                               for s in seeds[i] if all(k in table[(algo, i, s)] for k in half)]
+            if all(len(per_impl[i]) >= 2 for i in impls):
+                (ma, sa), (mb, sb) = mean_sd(per_impl["stagerl"]), mean_sd(per_impl["sbx"])
+                se = math.sqrt(sa ** 2 / len(per_impl["stagerl"]) + sb ** 2 / len(per_impl["sbx"]))
+                t = (ma - mb) / se if se > 0 else float("nan")
+                lines.append(f"| {name} | {ma:.2f} ± {sa:.2f} | {mb:.2f} ± {sb:.2f} | {ma - mb:+.2f} | {t:+.2f} |")
         lines.append("")
         lines.append("| impl | wall s per run (seeds) | mean wall s | env steps | ms per env step |")
         lines.append("|---|---|---|---|---|")
@@ -123,26 +158,32 @@ def main() -> None:
     matplotlib.rcParams["svg.fonttype"] = "none"
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(algos), figsize=(5.2 * len(algos), 3.8), squeeze=False)
+    fig, axes = plt.subplots(2, len(algos), figsize=(5.2 * len(algos), 7.2), squeeze=False)
     colours = {"stagerl": "tab:blue", "sbx": "tab:orange"}
-    for ax, algo in zip(axes[0], algos):
-        for i in impls:
-            seeds = sorted(s for (a, im, s) in curves if a == algo and im == i)
-            if not seeds:
-                continue
-            for s in seeds:
-                c = curves[(algo, i, s)]
-                ks = sorted(c)
-                ax.plot(ks, [100 * c[k] for k in ks], color=colours[i], alpha=0.3, lw=0.8)
-            ks = sorted({k for s in seeds for k in curves[(algo, i, s)]})
-            ms = [sum(100 * curves[(algo, i, s)][k] for s in seeds if k in curves[(algo, i, s)])
-                  / sum(1 for s in seeds if k in curves[(algo, i, s)]) for k in ks]
-            ax.plot(ks, ms, color=colours[i], lw=2, marker="o", ms=3, label=f"{i} (mean of {len(seeds)} seeds)")
-        ax.set_title(f"{algo} on stagerl/Reach-v0 (SAR, 200 targets)")
-        ax.set_xlabel("environment steps")
-        ax.set_ylabel("success % (within 1 cm), deterministic policy")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+    for col, algo in enumerate(algos):
+        for row, (table, ylabel) in enumerate(((curves, "success % (within 1 cm), deterministic policy"),
+                                               (dists, "median final distance, cm"))):
+            ax = axes[row][col]
+            for i in impls:
+                seeds = sorted(s for (a, im, s) in table if a == algo and im == i)
+                if not seeds:
+                    continue
+                for s in seeds:
+                    c = table[(algo, i, s)]
+                    ks = sorted(c)
+                    ax.plot(ks, [100 * c[k] for k in ks], color=colours[i], alpha=0.3, lw=0.8)
+                ks = sorted({k for s in seeds for k in table[(algo, i, s)]})
+                ms = [sum(100 * table[(algo, i, s)][k] for s in seeds if k in table[(algo, i, s)])
+                      / sum(1 for s in seeds if k in table[(algo, i, s)]) for k in ks]
+                ax.plot(ks, ms, color=colours[i], lw=2, marker="o", ms=3, label=f"{i} (mean of {len(seeds)} seeds)")
+            if row == 0:
+                ax.set_title(f"{algo} on stagerl/Reach-v0 (SAR, 200 targets)")
+            else:
+                ax.set_yscale("log")
+            ax.set_xlabel("environment steps")
+            ax.set_ylabel(ylabel)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(os.path.join(args.dir, "success.svg"), metadata={"Date": None})
     fig.savefig(os.path.join(args.dir, "success.png"), dpi=90)
