@@ -88,7 +88,29 @@ class Evaluator:
         return float(success.mean()), float(np.median(dist))
 
 
-def sbx_model(algo: str, cfg: dict, env, seed: int, ups_override: int | None):
+def tanh_log_std_actor():
+    """sbx's SAC actor with stagerl's SAC log-std bound (``-5 + 3.5 (tanh s + 1)``, in [-5, 2],
+    CleanRL's) instead of sbx's clip to [-20, 2]: the one difference of the actors that no
+    setting removes (``--actor-log-std tanh``, a diagnostic)."""
+    import flax.linen as nn
+    import jax.numpy as jnp
+    from sbx.common.distributions import TanhTransformedDistribution
+    from sbx.common.policies import Flatten, SquashedGaussianActor, tfd
+
+    class TanhLogStdActor(SquashedGaussianActor):
+        @nn.compact
+        def __call__(self, x):
+            x = Flatten()(x)
+            for n_units in self.net_arch:
+                x = self.activation_fn(nn.Dense(n_units)(x))
+            mean = nn.Dense(self.action_dim)(x)
+            log_std = -5.0 + 3.5 * (jnp.tanh(nn.Dense(self.action_dim)(x)) + 1.0)
+            return TanhTransformedDistribution(tfd.MultivariateNormalDiag(loc=mean, scale_diag=jnp.exp(log_std)))
+
+    return TanhLogStdActor
+
+
+def sbx_model(algo: str, cfg: dict, env, seed: int, ups_override: int | None, actor_log_std: str = "clip"):
     import flax.linen as nn
     from sbx import SAC, CrossQ
 
@@ -154,6 +176,7 @@ def sbx_model(algo: str, cfg: dict, env, seed: int, ups_override: int | None):
             dropout_rate=s.get("critic_dropout", 0.0),
             layer_norm=s.get("critic_layer_norm", False),
             activation_fn=nn.relu,
+            **({"actor_class": tanh_log_std_actor()} if actor_log_std == "tanh" else {}),
         ),
         **common,
     )
@@ -166,6 +189,9 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--env-steps", type=int, help="default: the config's train.env_steps")
     p.add_argument("--updates-per-step", type=int, help="default: the config's agent.updates_per_step")
+    p.add_argument("--actor-log-std", choices=["clip", "tanh"], default="clip",
+                   help="DroQ: sbx's actor log-std clip to [-20, 2] (default), or stagerl SAC's tanh bound to [-5, 2] (a diagnostic)")
+    p.add_argument("--impl", default="sbx", help="the impl column of the CSV (default sbx)")
     p.add_argument("--targets", help="CSV of the evaluation targets (target_x, target_y, target_z)")
     p.add_argument("--out", help="CSV to append the evaluations to (default: stdout)")
     p.add_argument("--check-stagerl", metavar="RUN_DIR",
@@ -210,7 +236,9 @@ def main() -> None:
     budget = args.env_steps or int(train["env_steps"])
     every = int(train.get("eval_every_env_steps", 1000))
     env = gym.make("stagerl/Reach-v0", config=args.config)
-    model = sbx_model(args.algo, cfg, env, args.seed, args.updates_per_step)
+    if args.actor_log_std != "clip" and args.algo != "droq":
+        sys.exit("--actor-log-std is for DroQ (sbx's SAC) only")
+    model = sbx_model(args.algo, cfg, env, args.seed, args.updates_per_step, args.actor_log_std)
 
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -224,7 +252,7 @@ def main() -> None:
         t = time.perf_counter()
         ok, d = evaluate(lambda o: model.predict(o, deterministic=True)[0])
         eval_s[0] += time.perf_counter() - t
-        writer.writerow(dict(algo=args.algo, impl="sbx", seed=args.seed, env_steps=steps, success_rate=f"{ok:.4f}",
+        writer.writerow(dict(algo=args.algo, impl=args.impl, seed=args.seed, env_steps=steps, success_rate=f"{ok:.4f}",
                              median_final_distance_m=f"{d:.5f}", wall_s=f"{time.perf_counter() - T0:.2f}",
                              eval_s=f"{eval_s[0]:.2f}"))
         out.flush()
