@@ -80,9 +80,11 @@ def main() -> None:
         if r["wall_s"]:
             wall[key] = (float(r["wall_s"]), steps)
     algos = sorted({k[0] for k in curves})
-    impls = ["stagerl", "sbx"]
     lines = []
     for algo in algos:
+        # stagerl, sbx, then any diagnostic variant (an `impl` of another name, e.g. sbx with
+        # stagerl's log-std bound).
+        impls = ["stagerl", "sbx"] + sorted({im for (a, im, _) in curves if a == algo} - {"stagerl", "sbx"})
         seeds = {i: sorted(s for (a, im, s) in curves if a == algo and im == i) for i in impls}
         ks = sorted({k for (a, _, _), c in curves.items() if a == algo for k in c})
         lines.append(f"### {algo}\n")
@@ -98,7 +100,7 @@ def main() -> None:
                     cells.append(f"{m:.1f} ± {sd:.1f} ({' / '.join(f'{x:.1f}' for x in xs)})")
                 else:
                     cells.append("-")
-            diff = f"{means['stagerl'] - means['sbx']:+.1f}" if len(means) == 2 else "-"
+            diff = f"{means['stagerl'] - means['sbx']:+.1f}" if "stagerl" in means and "sbx" in means else "-"
             lines.append(f"| {k} | " + " | ".join(cells) + f" | {diff} |")
         lines.append("")
         lines.append("Median final distance, cm (mean ± sd over the seeds):\n")
@@ -114,25 +116,27 @@ def main() -> None:
                     cells.append(f"{m:.1f} ± {sd:.1f}")
                 else:
                     cells.append("-")
-            diff = f"{means['stagerl'] - means['sbx']:+.1f}" if len(means) == 2 else "-"
+            diff = f"{means['stagerl'] - means['sbx']:+.1f}" if "stagerl" in means and "sbx" in means else "-"
             lines.append(f"| {k} | " + " | ".join(cells) + f" | {diff} |")
         # Each seed's mean over the second half of the budget (checkpoints >= half the last):
         # one number per run, then Welch's t of the difference.
         half = [k for k in ks if k >= ks[-1] / 2]
         lines.append("")
         lines.append(f"Per run, the mean over checkpoints {half[0]}-{half[-1]} (one value a seed):\n")
-        lines.append("| measure | stagerl | sbx | difference | Welch t |")
-        lines.append("|---|---|---|---|---|")
+        lines.append("| measure | stagerl | other | other's value | difference (stagerl - other) | Welch t |")
+        lines.append("|---|---|---|---|---|---|")
         for name, table, scale in (("success %", curves, 100), ("median final distance, cm", dists, 100)):
             per_impl = {}
             for i in impls:
                 per_impl[i] = [sum(table[(algo, i, s)][k] for k in half) / len(half) * scale
                                for s in seeds[i] if all(k in table[(algo, i, s)] for k in half)]
-            if all(len(per_impl[i]) >= 2 for i in impls):
-                (ma, sa), (mb, sb) = mean_sd(per_impl["stagerl"]), mean_sd(per_impl["sbx"])
-                se = math.sqrt(sa ** 2 / len(per_impl["stagerl"]) + sb ** 2 / len(per_impl["sbx"]))
+            for other in impls[1:]:
+                if len(per_impl["stagerl"]) < 2 or len(per_impl[other]) < 2:
+                    continue
+                (ma, sa), (mb, sb) = mean_sd(per_impl["stagerl"]), mean_sd(per_impl[other])
+                se = math.sqrt(sa ** 2 / len(per_impl["stagerl"]) + sb ** 2 / len(per_impl[other]))
                 t = (ma - mb) / se if se > 0 else float("nan")
-                lines.append(f"| {name} | {ma:.2f} ± {sa:.2f} | {mb:.2f} ± {sb:.2f} | {ma - mb:+.2f} | {t:+.2f} |")
+                lines.append(f"| {name} | {ma:.2f} ± {sa:.2f} | {other} | {mb:.2f} ± {sb:.2f} | {ma - mb:+.2f} | {t:+.2f} |")
         lines.append("")
         lines.append("| impl | wall s per run (seeds) | mean wall s | env steps | ms per env step |")
         lines.append("|---|---|---|---|---|")
@@ -145,7 +149,7 @@ def main() -> None:
             st = sum(n for _, n in ws) / len(ws)
             per[i] = (m, m / st)
             lines.append(f"| {i} | {' / '.join(f'{w:.1f}' for w, _ in ws)} | {m:.1f} | {st:.0f} | {1000 * m / st:.2f} |")
-        if len(per) == 2:
+        if "stagerl" in per and "sbx" in per:
             lines.append(f"\nWall-clock ratio sbx / stagerl: {per['sbx'][0] / per['stagerl'][0]:.2f}x per run, "
                          f"{per['sbx'][1] / per['stagerl'][1]:.2f}x per env step.\n")
     with open(os.path.join(args.dir, "table.md"), "w") as f:
@@ -159,8 +163,9 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, len(algos), figsize=(5.2 * len(algos), 7.2), squeeze=False)
-    colours = {"stagerl": "tab:blue", "sbx": "tab:orange"}
+    colours = defaultdict(lambda: "tab:green", {"stagerl": "tab:blue", "sbx": "tab:orange"})
     for col, algo in enumerate(algos):
+        impls = ["stagerl", "sbx"] + sorted({im for (a, im, _) in curves if a == algo} - {"stagerl", "sbx"})
         for row, (table, ylabel) in enumerate(((curves, "success % (within 1 cm), deterministic policy"),
                                                (dists, "median final distance, cm"))):
             ax = axes[row][col]
@@ -175,7 +180,8 @@ def main() -> None:
                 ks = sorted({k for s in seeds for k in table[(algo, i, s)]})
                 ms = [sum(100 * table[(algo, i, s)][k] for s in seeds if k in table[(algo, i, s)])
                       / sum(1 for s in seeds if k in table[(algo, i, s)]) for k in ks]
-                ax.plot(ks, ms, color=colours[i], lw=2, marker="o", ms=3, label=f"{i} (mean of {len(seeds)} seeds)")
+                ax.plot(ks, ms, color=colours[i], lw=2, marker="o", ms=3, ls="-" if i in ("stagerl", "sbx") else "--",
+                        label=f"{i} (mean of {len(seeds)} seeds)")
             if row == 0:
                 ax.set_title(f"{algo} on stagerl/Reach-v0 (SAR, 200 targets)")
             else:
