@@ -88,10 +88,25 @@ class Evaluator:
         return float(success.mean()), float(np.median(dist))
 
 
-def tanh_log_std_actor():
+def torch_dense(fan_in: int, features: int):
+    """A flax Dense layer initialised as PyTorch's ``nn.Linear`` (stagerl's): weights and biases
+    from U(-1/sqrt(fan_in), 1/sqrt(fan_in))."""
+    import flax.linen as nn
+    import jax
+
+    bound = 1.0 / fan_in ** 0.5
+
+    def uniform(key, shape, dtype=None):
+        return jax.random.uniform(key, shape, minval=-bound, maxval=bound)
+
+    return nn.Dense(features, kernel_init=uniform, bias_init=uniform)
+
+
+def tanh_log_std_actor(torch_init: bool = False):
     """sbx's SAC actor with stagerl's SAC log-std bound (``-5 + 3.5 (tanh s + 1)``, in [-5, 2],
     CleanRL's) instead of sbx's clip to [-20, 2]: the one difference of the actors that no
-    setting removes (``--actor-log-std tanh``, a diagnostic)."""
+    setting removes (``--actor-log-std tanh``, a diagnostic); with ``torch_init``, its layers
+    initialised as stagerl's (PyTorch's) instead of flax's."""
     import flax.linen as nn
     import jax.numpy as jnp
     from sbx.common.distributions import TanhTransformedDistribution
@@ -101,16 +116,57 @@ def tanh_log_std_actor():
         @nn.compact
         def __call__(self, x):
             x = Flatten()(x)
+            dense = (lambda n: torch_dense(x.shape[-1], n)) if torch_init else nn.Dense
             for n_units in self.net_arch:
-                x = self.activation_fn(nn.Dense(n_units)(x))
-            mean = nn.Dense(self.action_dim)(x)
-            log_std = -5.0 + 3.5 * (jnp.tanh(nn.Dense(self.action_dim)(x)) + 1.0)
+                x = self.activation_fn(dense(n_units)(x))
+            mean = dense(self.action_dim)(x)
+            log_std = -5.0 + 3.5 * (jnp.tanh(dense(self.action_dim)(x)) + 1.0)
             return TanhTransformedDistribution(tfd.MultivariateNormalDiag(loc=mean, scale_diag=jnp.exp(log_std)))
 
     return TanhLogStdActor
 
 
-def sbx_model(algo: str, cfg: dict, env, seed: int, ups_override: int | None, actor_log_std: str = "clip"):
+def torch_init_critics():
+    """sbx's critic ensemble (dropout, layer norm as ``VectorCritic``) with every layer
+    initialised as PyTorch's (``--torch-init``, a diagnostic)."""
+    import flax.linen as nn
+    import jax.numpy as jnp
+    from sbx.common.policies import Flatten, VectorCritic
+
+    class TorchInitCritic(nn.Module):
+        net_arch: tuple
+        use_layer_norm: bool = False
+        dropout_rate: float = 0.0
+        activation_fn: object = nn.relu
+        output_dim: int = 1
+
+        @nn.compact
+        def __call__(self, x, action):
+            x = jnp.concatenate([Flatten()(x), action], -1)
+            for n_units in self.net_arch:
+                x = torch_dense(x.shape[-1], n_units)(x)
+                if self.dropout_rate is not None and self.dropout_rate > 0:
+                    x = nn.Dropout(rate=self.dropout_rate)(x, deterministic=False)
+                if self.use_layer_norm:
+                    x = nn.LayerNorm()(x)
+                x = self.activation_fn(x)
+            return torch_dense(x.shape[-1], self.output_dim)(x)
+
+    class TorchInitVectorCritic(VectorCritic):
+        @nn.compact
+        def __call__(self, obs, action):
+            vmap_critic = nn.vmap(TorchInitCritic, variable_axes={"params": 0},
+                                  split_rngs={"params": True, "dropout": True}, in_axes=None, out_axes=0,
+                                  axis_size=self.n_critics)
+            return vmap_critic(use_layer_norm=self.use_layer_norm, dropout_rate=self.dropout_rate,
+                               net_arch=tuple(self.net_arch), activation_fn=self.activation_fn,
+                               output_dim=self.output_dim)(obs, action)
+
+    return TorchInitVectorCritic
+
+
+def sbx_model(algo: str, cfg: dict, env, seed: int, ups_override: int | None, actor_log_std: str = "clip",
+              torch_init: bool = False):
     import flax.linen as nn
     from sbx import SAC, CrossQ
 
@@ -176,7 +232,8 @@ def sbx_model(algo: str, cfg: dict, env, seed: int, ups_override: int | None, ac
             dropout_rate=s.get("critic_dropout", 0.0),
             layer_norm=s.get("critic_layer_norm", False),
             activation_fn=nn.relu,
-            **({"actor_class": tanh_log_std_actor()} if actor_log_std == "tanh" else {}),
+            **({"actor_class": tanh_log_std_actor(torch_init)} if actor_log_std == "tanh" else {}),
+            **({"vector_critic_class": torch_init_critics()} if torch_init else {}),
         ),
         **common,
     )
@@ -191,6 +248,8 @@ def main() -> None:
     p.add_argument("--updates-per-step", type=int, help="default: the config's agent.updates_per_step")
     p.add_argument("--actor-log-std", choices=["clip", "tanh"], default="clip",
                    help="DroQ: sbx's actor log-std clip to [-20, 2] (default), or stagerl SAC's tanh bound to [-5, 2] (a diagnostic)")
+    p.add_argument("--torch-init", action="store_true",
+                   help="DroQ with --actor-log-std tanh: initialise every layer as stagerl (PyTorch) does (a diagnostic)")
     p.add_argument("--impl", default="sbx", help="the impl column of the CSV (default sbx)")
     p.add_argument("--targets", help="CSV of the evaluation targets (target_x, target_y, target_z)")
     p.add_argument("--out", help="CSV to append the evaluations to (default: stdout)")
@@ -238,7 +297,9 @@ def main() -> None:
     env = gym.make("stagerl/Reach-v0", config=args.config)
     if args.actor_log_std != "clip" and args.algo != "droq":
         sys.exit("--actor-log-std is for DroQ (sbx's SAC) only")
-    model = sbx_model(args.algo, cfg, env, args.seed, args.updates_per_step, args.actor_log_std)
+    if args.torch_init and args.actor_log_std != "tanh":
+        sys.exit("--torch-init needs --actor-log-std tanh (it replaces that actor's initialisation)")
+    model = sbx_model(args.algo, cfg, env, args.seed, args.updates_per_step, args.actor_log_std, args.torch_init)
 
     from stable_baselines3.common.callbacks import BaseCallback
 
