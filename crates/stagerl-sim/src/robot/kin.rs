@@ -212,36 +212,10 @@ fn sin_cos_std(x: f64) -> (f64, f64) {
 /// (prismatic, `sc` unused), applied to the first two columns (or the translation) on the fly.
 #[inline(always)]
 fn advance(m: &Cols, prismatic: bool, q: f64, sc: (f64, f64), k: &[V2; 12]) -> Cols {
-    let [c0, c1, c2, mut t] = *m;
-    let (x, y) = if prismatic {
-        let vq = splat(q);
-        for h in 0..2 {
-            t[h] = vadd(t[h], vmul(vq, c2[h]));
-        }
-        (c0, c1)
-    } else {
-        let (vs, vc) = (splat(sc.0), splat(sc.1));
-        let mut x = [[0.0; 2]; 2];
-        let mut y = [[0.0; 2]; 2];
-        for h in 0..2 {
-            x[h] = vadd(vmul(vc, c0[h]), vmul(vs, c1[h]));
-            y[h] = vsub(vmul(vc, c1[h]), vmul(vs, c0[h]));
-        }
-        (x, y)
-    };
-    let mut o = [[[0.0; 2]; 2]; 4];
-    for (j, oj) in o.iter_mut().enumerate() {
-        for h in 0..2 {
-            oj[h] = vadd(vadd(vmul(x[h], k[j]), vmul(y[h], k[4 + j])), vmul(c2[h], k[8 + j]));
-        }
-    }
-    for h in 0..2 {
-        o[3][h] = vadd(o[3][h], t[h]);
-    }
-    o
+    times_after(&moved(m, prismatic, q, sc), k)
 }
 
-/// `m * Z(q)`: the first half of [`advance`] (the same operations).
+/// `m * Z(q)`: the first half of [`advance`].
 #[inline(always)]
 fn moved(m: &Cols, prismatic: bool, q: f64, sc: (f64, f64)) -> Cols {
     let [c0, c1, c2, mut t] = *m;
@@ -262,7 +236,7 @@ fn moved(m: &Cols, prismatic: bool, q: f64, sc: (f64, f64)) -> Cols {
     [x, y, c2, t]
 }
 
-/// `f * after`: the second half of [`advance`] (the same operations).
+/// `f * after`: the second half of [`advance`].
 #[inline(always)]
 fn times_after(f: &Cols, k: &[V2; 12]) -> Cols {
     let [x, y, c2, t] = *f;
