@@ -69,7 +69,7 @@ pub fn run(args: Args) -> Result<()> {
     for g in &r.groups {
         outln!(
             "  {:<5} {:<8} {} seed(s), {} converged{}",
-            g.algo.name(),
+            g.algo.to_string(),
             g.reward.name(),
             g.seeds,
             g.converged,

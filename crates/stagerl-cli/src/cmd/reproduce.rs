@@ -6,7 +6,7 @@ use std::sync::Arc;
 #[derive(clap::Args)]
 #[command(after_help = "Example:\n  stagerl reproduce --preset quick --out runs/quick --jobs 2")]
 pub struct Args {
-    /// `smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long` (bundled, see configs/presets/), or a path to a preset TOML file.
+    /// `smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long`, `sample-efficiency`, `crossq-rewards` (bundled, see configs/presets/), or a path to a preset TOML file.
     #[arg(long)]
     preset: String,
     /// Output directory: one run directory per algorithm x reward x seed.

@@ -207,3 +207,52 @@ fn the_committed_reports_regenerate_from_the_committed_runs() {
         std::fs::remove_dir_all(&out).ok();
     }
 }
+
+/// A preset with a variant of SAC (REDQ) and a budget of environment steps: the variant's runs
+/// are named after it, Table 1 has a REDQ row of its own beside SAC's, and the report adds the
+/// steps to 95 % success (`sample_efficiency.md`, `table1.json`'s `sample_efficiency`).
+#[test]
+fn a_sweep_with_a_variant_on_a_step_budget_reports_each_method() {
+    let root = std::env::temp_dir().join(format!("stagerl-cli-report-variants-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).unwrap();
+    let preset = root.join("p.toml");
+    std::fs::write(
+        &preset,
+        "[sweep]\nalgorithms = [\"sac\"]\nrewards = [\"sar\"]\nseeds = [1, 2]\neval_trials = 5\n\
+         [[sweep.variants]]\nname = \"redq\"\nalgorithm = \"sac\"\n\
+         [sweep.variants.agent]\nupdates_per_step = 2\n[sweep.variants.agent.sac]\nn_critics = 3\ncritic_subset = 2\n\
+         [agent]\nhidden = [16, 16]\nlearning_starts = 100\n\
+         [train]\nenv_steps = 400\neval_every_env_steps = 200\neval_trials = 4\n",
+    )
+    .unwrap();
+    let sweep = root.join("sweep");
+    ok(&stagerl(&["reproduce", "--preset", preset.to_str().unwrap(), "--out", sweep.to_str().unwrap()]));
+    for name in ["sac-sar-seed1", "sac-sar-seed2", "redq-sar-seed1", "redq-sar-seed2"] {
+        assert!(sweep.join(name).join("eval.csv").is_file(), "{name}");
+    }
+    let text = ok(&stagerl(&["report", sweep.to_str().unwrap(), "--trajectories", "0"]));
+    assert!(text.contains("4 run(s) in 2 group(s)"), "{text}");
+    let out = sweep.join("report");
+    let table = std::fs::read_to_string(out.join("table1.md")).unwrap();
+    assert!(table.contains("| SAC | SAR | ours | 2 "), "{table}");
+    assert!(table.contains("| REDQ | SAR | ours | 2 "), "{table}");
+    assert!(!table.contains("## Other configurations"), "{table}");
+    let se = std::fs::read_to_string(out.join("sample_efficiency.md")).unwrap();
+    for needle in ["| SAC | SAR |", "| REDQ | SAR |", "- REDQ + SAR: "] {
+        assert!(se.contains(needle), "{needle}: {se}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table1.json")).unwrap()).unwrap();
+    let rows = json["sample_efficiency"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    assert_eq!(rows[1]["method"], "redq");
+    // Each seed's evaluations are at 200 and 400 steps or just past them (at most an episode).
+    for r in rows {
+        assert_eq!(r["budget"], 400);
+        assert_eq!(r["steps_to_threshold"].as_array().unwrap().len(), 2);
+        let end = r["success_end"][0].as_u64().unwrap();
+        assert!((400..450).contains(&end), "{r}");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 
 use super::claims::Metric;
 use super::table::{algo_title, primary, reward_title, GroupSummary, ALGO_ORDER};
-use crate::agent::Algo;
+use crate::report::method::Method;
 use crate::report::stats;
 use crate::reward::RewardFunction;
 
@@ -32,7 +32,7 @@ pub struct Estimate {
 /// The IQM of one indicator for one (algorithm, reward function).
 #[derive(Clone, Debug, Serialize)]
 pub struct GroupIqm {
-    pub algo: Algo,
+    pub algo: Method,
     pub reward: RewardFunction,
     pub metric: Metric,
     pub seeds: usize,
@@ -42,7 +42,7 @@ pub struct GroupIqm {
 /// P(a run with SAR scores above a run with `other`), same algorithm and indicator.
 #[derive(Clone, Debug, Serialize)]
 pub struct Improvement {
-    pub algo: Algo,
+    pub algo: Method,
     pub other: RewardFunction,
     pub metric: Metric,
     pub probability: Estimate,
@@ -51,7 +51,7 @@ pub struct Improvement {
 /// The fraction of runs scoring above each threshold (success rate).
 #[derive(Clone, Debug, Serialize)]
 pub struct Profile {
-    pub algo: Algo,
+    pub algo: Method,
     pub reward: RewardFunction,
     /// Runs behind the profile.
     pub runs: usize,
@@ -68,7 +68,7 @@ pub struct Aggregates {
 }
 
 /// Per-seed values of `metric` for the primary group of `(algo, reward)` (empty if none).
-fn values(groups: &[GroupSummary], algo: Algo, reward: RewardFunction, metric: Metric) -> Vec<f64> {
+fn values(groups: &[GroupSummary], algo: Method, reward: RewardFunction, metric: Metric) -> Vec<f64> {
     primary(groups, algo, reward).map(|g| metric.per_seed(g).0).unwrap_or_default()
 }
 
@@ -168,7 +168,7 @@ pub fn render_markdown(a: &Aggregates) -> String {
     );
     let _ = writeln!(s, "{RESAMPLES} resamples, seeded. Definitions as in the `rliable` package.\n");
     s.push_str("## Interquartile mean\n\n| Method | Reward | Seeds | Success rate IQM [95 % CI] | Evaluation reward IQM [95 % CI] |\n|---|---|---|---|---|\n");
-    let mut rows: Vec<(Algo, RewardFunction)> = a.iqm.iter().map(|g| (g.algo, g.reward)).collect();
+    let mut rows: Vec<(Method, RewardFunction)> = a.iqm.iter().map(|g| (g.algo, g.reward)).collect();
     rows.dedup();
     for (algo, reward) in rows {
         let cell = |m: Metric| {
@@ -188,7 +188,7 @@ pub fn render_markdown(a: &Aggregates) -> String {
         );
     }
     s.push_str("\n## Probability of improvement of SAR\n\n| Method | SAR over | P(improvement), success rate [95 % CI] | P(improvement), evaluation reward [95 % CI] |\n|---|---|---|---|\n");
-    let mut pairs: Vec<(Algo, RewardFunction)> = a.improvement.iter().map(|i| (i.algo, i.other)).collect();
+    let mut pairs: Vec<(Method, RewardFunction)> = a.improvement.iter().map(|i| (i.algo, i.other)).collect();
     pairs.dedup();
     for (algo, other) in pairs {
         let cell = |m: Metric| {

@@ -25,7 +25,7 @@ use std::fmt::Write as _;
 
 use super::paper::{self, PaperRow};
 use super::table::{algo_title, primary, reward_title, GroupSummary};
-use crate::agent::Algo;
+use crate::report::method::Method;
 use crate::report::metrics::MeanStd;
 use crate::report::stats::{self, BOOTSTRAP_RESAMPLES};
 use crate::reward::RewardFunction::{self, Basic, Har, Posture, Sar, Stride};
@@ -266,8 +266,8 @@ pub struct Stats {
 #[derive(Clone, Debug, Serialize)]
 pub struct Comparison {
     pub metric: Metric,
-    pub better: (Algo, RewardFunction),
-    pub worse: (Algo, RewardFunction),
+    pub better: (Method, RewardFunction),
+    pub worse: (Method, RewardFunction),
     pub verdict: Verdict,
     /// Our numbers, e.g. `SAC+SAR 812 ± 95 vs SAC+HAR 1032 ± 40: 21.3 % lower`.
     pub ours: String,
@@ -295,7 +295,7 @@ pub struct Claim {
     pub detail: String,
 }
 
-fn label((a, r): (Algo, RewardFunction)) -> String {
+fn label((a, r): (Method, RewardFunction)) -> String {
     format!("{}+{}", algo_title(a), reward_title(r))
 }
 
@@ -441,7 +441,7 @@ fn compare(
 }
 
 /// An (algorithm, reward function) pair: one row of Table 1.
-type Cell = (Algo, RewardFunction);
+type Cell = (Method, RewardFunction);
 /// `(metric, better, worse)`.
 type Check = (Metric, Cell, Cell);
 
@@ -456,7 +456,7 @@ struct Spec {
 /// The id of the basic reward's claim.
 const BASIC_CLAIM: &str = "basic-does-not-converge";
 
-const ALGOS: [Algo; 2] = [Algo::Sac, Algo::Ddpg];
+const ALGOS: [Method; 2] = [Method::Sac, Method::Ddpg];
 
 fn per_algo(metric: Metric, better: RewardFunction, worse: &[RewardFunction]) -> Vec<Check> {
     ALGOS.iter().flat_map(|&a| worse.iter().map(move |&w| (metric, (a, better), (a, w)))).collect()
@@ -487,7 +487,7 @@ fn specs_vi_a() -> Vec<Spec> {
             section: "VI.A",
             statement: "SAC converges faster than DDPG (smaller E_start) with every dense reward".into(),
             paper_text: "\"SAC converged faster in general\"; 10.8 % faster with posture, 17.9 % with stride",
-            checks: dense.iter().map(|&r| (EStart, (Algo::Sac, r), (Algo::Ddpg, r))).collect(),
+            checks: dense.iter().map(|&r| (EStart, (Method::Sac, r), (Method::Ddpg, r))).collect(),
         },
         Spec {
             id: "posture-faster-than-stride",
@@ -508,7 +508,7 @@ fn specs_vi_a() -> Vec<Spec> {
             section: "VI.A",
             statement: "With DDPG, stride has a higher mean training reward than posture".into(),
             paper_text: "\"the mean reward of the stride reward function was 3.2 % higher than that of the posture reward function in DDPG\"",
-            checks: vec![(TrainReward, (Algo::Ddpg, Stride), (Algo::Ddpg, Posture))],
+            checks: vec![(TrainReward, (Method::Ddpg, Stride), (Method::Ddpg, Posture))],
         },
         Spec {
             id: "posture-fewer-steps",
@@ -591,7 +591,7 @@ fn specs_vi_c() -> Vec<Spec> {
         section: "VI.C",
         statement: "With SAR, SAC converges faster than DDPG".into(),
         paper_text: "\"The convergence rate of SAR in DDPG was slower than that of SAR in SAC\"",
-        checks: vec![(EStart, (Algo::Sac, Sar), (Algo::Ddpg, Sar))],
+        checks: vec![(EStart, (Method::Sac, Sar), (Method::Ddpg, Sar))],
     });
     v.push(Spec {
         id: "sar-ddpg-better-otherwise",
@@ -600,7 +600,7 @@ fn specs_vi_c() -> Vec<Spec> {
         paper_text: "\"but other indicators were better in DDPG than in SAC\"",
         checks: [TrainReward, TrainSteps, VStdev, EvalReward, EvalSteps, SuccessRate]
             .iter()
-            .map(|&m| (m, (Algo::Ddpg, Sar), (Algo::Sac, Sar)))
+            .map(|&m| (m, (Method::Ddpg, Sar), (Method::Sac, Sar)))
             .collect(),
     });
     v
@@ -618,11 +618,11 @@ fn comparison_seed(i: usize) -> u64 {
 /// bootstrap CIs over seeds lie on the paper's side of both thresholds, contradicted when
 /// either lies wholly on the other side, else inconclusive.
 fn headline(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Claim {
-    let p = paper::row(paper_rows, Algo::Ddpg, Sar);
+    let p = paper::row(paper_rows, Method::Ddpg, Sar);
     let target_s = p.and_then(|p| p.success_rate).unwrap_or(0.996);
     let target_steps = p.and_then(|p| p.eval_steps).unwrap_or(5.0);
     let (need_s, need_steps) = (target_s - HEADLINE_TOLERANCE, target_steps + 0.5);
-    let g = primary(groups, Algo::Ddpg, Sar).filter(|g| g.seeds > 0);
+    let g = primary(groups, Method::Ddpg, Sar).filter(|g| g.seeds > 0);
     let (verdict, detail) = match g {
         None => (Verdict::NotMeasurable, "DDPG+SAR not run".to_string()),
         Some(g) => {

@@ -14,11 +14,13 @@
 pub mod aggregate;
 pub mod archive;
 pub mod claims;
+pub mod method;
 pub mod metrics;
 pub mod paper;
 pub mod plot;
 pub mod reference;
 pub mod runs;
+pub mod sample_efficiency;
 pub mod stats;
 pub mod table;
 pub mod trajectory;
@@ -76,7 +78,7 @@ pub struct TrajectorySummary {
 /// E_start of one group under another band width `band_k` (the other criterion fields as given).
 #[derive(Clone, Debug, Serialize)]
 pub struct Sensitivity {
-    pub algo: crate::agent::Algo,
+    pub algo: crate::report::method::Method,
     pub reward: crate::reward::RewardFunction,
     pub variant: String,
     /// `(band_k, mean E_start over the converged seeds, converged seeds)`.
@@ -153,6 +155,9 @@ pub struct Report {
     pub claims: Vec<Claim>,
     /// IQM, probability of improvement and performance profiles over seeds.
     pub aggregates: aggregate::Aggregates,
+    /// Environment steps to 95 % success, for runs on a budget of environment steps.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sample_efficiency: Vec<sample_efficiency::Row>,
     /// The study in one line: regime, seeds, episodes.
     pub study: String,
     /// The scripted Jacobian controller on the same targets, per reward function.
@@ -196,6 +201,7 @@ pub fn analyze(
     let paper_rows = paper::table1();
     let claims = claims::evaluate(&summaries, &paper_rows);
     let aggregates = aggregate::compute(&summaries);
+    let sample_efficiency = sample_efficiency::compute(&groups);
     let sensitivity = sensitivity(&groups, criterion)?;
     let name = dir.file_name().map_or_else(|| ".".into(), |n| n.to_string_lossy().into_owned());
     let study = reference::study_line(&groups, &name);
@@ -206,6 +212,7 @@ pub fn analyze(
         groups: summaries,
         paper: paper_rows,
         aggregates,
+        sample_efficiency,
         study,
         reference,
         claims,
@@ -342,6 +349,12 @@ fn generate_from(dir: &Path, opts: &ReportOptions, clock: crate::run::provenance
     claims_md.push_str(&reference::render_markdown(&report.reference));
     write("claims.md", &claims_md)?;
     write("aggregates.md", &aggregate::render_markdown(&report.aggregates))?;
+    if !report.sample_efficiency.is_empty() {
+        write(
+            "sample_efficiency.md",
+            &sample_efficiency::render_markdown(&report.sample_efficiency, &report.study),
+        )?;
+    }
 
     let figure7 = plot::figure7(&groups, &report.groups, opts.criterion.window, &report.study);
     files.extend(plot::save(&figure7, &out("figure7"))?);

@@ -85,8 +85,12 @@ pub fn table1() -> Vec<PaperRow> {
 }
 
 /// The paper's row for `(algo, reward)`, if the paper has one.
-pub fn row(rows: &[PaperRow], algo: Algo, reward: RewardFunction) -> Option<&PaperRow> {
-    rows.iter().find(|r| r.algo == algo && r.reward == reward)
+pub fn row(
+    rows: &[PaperRow],
+    method: crate::report::method::Method,
+    reward: RewardFunction,
+) -> Option<&PaperRow> {
+    rows.iter().find(|r| crate::report::method::Method::from(r.algo) == method && r.reward == reward)
 }
 
 #[cfg(test)]
@@ -97,13 +101,13 @@ mod tests {
     fn the_compiled_table_parses() {
         let rows = parse_table1(TABLE1_CSV).unwrap();
         assert_eq!(rows.len(), 10);
-        let sar = row(&rows, Algo::Ddpg, RewardFunction::Sar).unwrap();
+        let sar = row(&rows, Algo::Ddpg.into(), RewardFunction::Sar).unwrap();
         assert_eq!(sar.e_start, Some(4781.0));
         assert_eq!(sar.train_reward, Some((18.076, 0.166)));
         assert_eq!(sar.success_rate, Some(0.996));
-        let basic = row(&rows, Algo::Sac, RewardFunction::Basic).unwrap();
+        let basic = row(&rows, Algo::Sac.into(), RewardFunction::Basic).unwrap();
         assert!(!basic.converged() && basic.eval_reward.is_none());
-        assert!(row(&rows, Algo::Td3, RewardFunction::Sar).is_none());
+        assert!(row(&rows, Algo::Td3.into(), RewardFunction::Sar).is_none());
         assert!(parse_table1("nope\n").is_err());
         assert!(parse_table1(&TABLE1_CSV.replace("sac,sar,3593", "sac,sar,x")).is_err());
     }

@@ -12,8 +12,8 @@ use std::sync::Once;
 use super::runs::RunData;
 use super::table::{algo_title, reward_title, Group, GroupSummary, ALGO_ORDER};
 use super::trajectory::Rollouts;
-use crate::agent::Algo;
 use crate::io::csv::EvalPoint;
+use crate::report::method::Method;
 use crate::report::metrics::trailing_moving_average;
 use crate::reward::RewardFunction;
 use crate::train::eval::EvalSummary;
@@ -387,7 +387,7 @@ fn tick(v: f64, span: f64) -> String {
 }
 
 /// Algorithms that have a primary group, in Table 1's order.
-fn algos(groups: &[Group]) -> Vec<Algo> {
+fn algos(groups: &[Group]) -> Vec<Method> {
     ALGO_ORDER
         .into_iter()
         .filter(|a| groups.iter().any(|g| g.primary && g.algo == *a && !g.runs.is_empty()))
@@ -420,7 +420,7 @@ fn thin(curve: Vec<(f64, f64)>, max_points: usize) -> Vec<(f64, f64)> {
 /// the min-max band over the runs.
 fn algo_series(
     groups: &[Group],
-    a: Algo,
+    a: Method,
     curve: impl Fn(&RunData) -> Vec<(f64, f64)>,
 ) -> Vec<(RewardFunction, String, Band)> {
     groups
@@ -545,7 +545,7 @@ pub fn figure8(groups: &[Group], study: &str, reference: Option<&EvalSummary>) -
 /// tau, the share of runs whose success rate exceeds it; one panel per algorithm, one line per
 /// reward function. A curve further up and to the right is better throughout.
 pub fn profile_figure(a: &super::aggregate::Aggregates, study: &str) -> CurveFigure {
-    let algos: Vec<Algo> =
+    let algos: Vec<Method> =
         ALGO_ORDER.into_iter().filter(|al| a.profiles.iter().any(|p| p.algo == *al)).collect();
     let panels = algos
         .iter()

@@ -84,7 +84,13 @@ pub fn study_line(groups: &[Group], input: &str) -> String {
     let mut seeds: Vec<u64> = primary.iter().map(|r| r.seed()).collect();
     seeds.sort_unstable();
     seeds.dedup();
-    let mut episodes: Vec<u64> = primary.iter().map(|r| r.config.train.episodes).collect();
+    // A budget of environment steps replaces the episode count (`train.env_steps`).
+    let (budgets, unit): (Vec<u64>, &str) = if primary.iter().any(|r| r.config.train.env_steps.is_some()) {
+        (primary.iter().map(|r| r.config.train.env_steps.unwrap_or(0)).collect(), "environment steps")
+    } else {
+        (primary.iter().map(|r| r.config.train.episodes).collect(), "episodes")
+    };
+    let mut episodes = budgets;
     episodes.sort_unstable();
     episodes.dedup();
     let list = |v: &[u64]| v.iter().map(u64::to_string).collect::<Vec<_>>().join(", ");
@@ -94,7 +100,7 @@ pub fn study_line(groups: &[Group], input: &str) -> String {
         format!("{} seed(s) ({})", seeds.len(), list(&seeds))
     };
     format!(
-        "Study `{input}`: {}; {seeds_text}; {} episodes per run.",
+        "Study `{input}`: {}; {seeds_text}; {} {unit} per run.",
         Regime::of_groups(groups).describe(),
         list(&episodes)
     )

@@ -8,9 +8,9 @@ use std::fmt::Write as _;
 
 use super::paper::{self, PaperRow};
 use super::runs::RunData;
-use crate::agent::Algo;
 use crate::config::Config;
 use crate::io::csv::{to_csv, CsvRow};
+use crate::report::method::Method;
 use crate::report::metrics::{self, Convergence, ConvergenceCriterion, MeanStd, TrainMetrics};
 use crate::reward::RewardFunction;
 use crate::train::eval::EvalSummary;
@@ -89,7 +89,7 @@ pub struct Excluded {
 /// Runs of one (algorithm, reward function, configuration), one per seed.
 #[derive(Clone, Debug)]
 pub struct Group {
-    pub algo: Algo,
+    pub algo: Method,
     pub reward: RewardFunction,
     /// See [`variant_label`].
     pub variant: String,
@@ -107,7 +107,7 @@ pub struct Group {
 pub fn group_runs(runs: Vec<RunData>, include_incomplete: bool) -> Vec<Group> {
     let mut map: BTreeMap<(usize, usize, String), Group> = BTreeMap::new();
     for run in runs {
-        let (algo, reward) = (run.config.agent.algo, run.config.reward.function);
+        let (algo, reward) = (Method::of(&run.config), run.config.reward.function);
         let variant = variant_label(&run.config);
         let ai = ALGO_ORDER.iter().position(|a| *a == algo).unwrap_or(usize::MAX);
         let ri = RewardFunction::ALL.iter().position(|r| *r == reward).unwrap_or(usize::MAX);
@@ -166,7 +166,7 @@ pub fn group_runs(runs: Vec<RunData>, include_incomplete: bool) -> Vec<Group> {
 }
 
 /// The algorithms in Table 1's order (the paper's SAC and DDPG, then ours).
-pub const ALGO_ORDER: [Algo; 5] = [Algo::Sac, Algo::Ddpg, Algo::Td3, Algo::Ppo, Algo::Crossq];
+pub const ALGO_ORDER: [Method; 7] = Method::ORDER;
 
 /// One run's indicators.
 #[derive(Clone, Debug, Serialize)]
@@ -192,11 +192,12 @@ pub struct RunSummary {
 /// A group's indicators: per run and mean ± std over seeds.
 #[derive(Clone, Debug, Serialize)]
 pub struct GroupSummary {
-    pub algo: Algo,
+    pub algo: Method,
     pub reward: RewardFunction,
     pub variant: String,
     pub primary: bool,
-    /// Configured training episodes.
+    /// Configured training episodes (on a budget of environment steps, `train.env_steps`: the
+    /// most episodes a seed trained).
     pub episodes: u64,
     pub runs: Vec<RunSummary>,
     pub excluded: Vec<Excluded>,
@@ -288,7 +289,13 @@ pub fn summarize(group: &Group, criterion: &ConvergenceCriterion) -> Result<Grou
         reward: group.reward,
         variant: group.variant.clone(),
         primary: group.primary,
-        episodes: group.runs.first().map_or(0, |r| r.config.train.episodes),
+        // On a budget of environment steps, the most episodes a seed took to spend it.
+        episodes: match group.runs.first() {
+            Some(r) if r.config.train.env_steps.is_some() => {
+                group.runs.iter().filter_map(|r| r.episodes.last().map(|e| e.episode)).max().unwrap_or(0)
+            }
+            r => r.map_or(0, |r| r.config.train.episodes),
+        },
         seeds: n,
         converged: conv.len(),
         e_start: tm(&|t| Some(t.e_start as f64)),
@@ -357,19 +364,13 @@ fn group_notes(group: &Group, runs: &[RunSummary], converged: usize) -> (Vec<Str
 }
 
 /// The primary group of `(algo, reward)`, if any.
-pub fn primary(groups: &[GroupSummary], algo: Algo, reward: RewardFunction) -> Option<&GroupSummary> {
+pub fn primary(groups: &[GroupSummary], algo: Method, reward: RewardFunction) -> Option<&GroupSummary> {
     groups.iter().find(|g| g.primary && g.algo == algo && g.reward == reward)
 }
 
-/// Algorithm names as the paper prints them.
-pub fn algo_title(a: Algo) -> &'static str {
-    match a {
-        Algo::Sac => "SAC",
-        Algo::Ddpg => "DDPG",
-        Algo::Td3 => "TD3",
-        Algo::Ppo => "PPO",
-        Algo::Crossq => "CrossQ",
-    }
+/// Method names as the papers print them.
+pub fn algo_title(a: Method) -> &'static str {
+    a.title()
 }
 
 /// Reward-function names as the paper prints them.
@@ -596,9 +597,11 @@ pub fn checkpoints_markdown(groups: &[GroupSummary]) -> String {
 /// Our row above the paper's, for every algorithm and reward function.
 fn primary_markdown(s: &mut String, groups: &[GroupSummary], paper_rows: &[PaperRow], notes: &mut Notes) {
     s.push_str(HEADER);
-    let algos: Vec<Algo> = ALGO_ORDER
+    let algos: Vec<Method> = ALGO_ORDER
         .into_iter()
-        .filter(|a| groups.iter().any(|g| g.algo == *a) || paper_rows.iter().any(|p| p.algo == *a))
+        .filter(|a| {
+            groups.iter().any(|g| g.algo == *a) || paper_rows.iter().any(|p| Method::from(p.algo) == *a)
+        })
         .collect();
     for algo in algos {
         for reward in RewardFunction::ALL {
@@ -816,7 +819,7 @@ mod tests {
         let mut c = Config::default();
         assert_eq!(variant_label(&c), "defaults");
         c.train.seed = 9;
-        c.agent.algo = Algo::Ddpg;
+        c.agent.algo = crate::agent::Algo::Ddpg;
         c.train.eval_trials = 7;
         assert_eq!(variant_label(&c), "defaults");
         c.agent.gamma = 0.99;

@@ -83,7 +83,7 @@ pub fn rollout(run: &RunData, trials: u32, eval_seed: u64) -> Result<Rollouts> {
     Ok(Rollouts {
         title: format!(
             "{} + {} ({}, seed {}): {reached} of {trials} trials reached",
-            algo_title(cfg.agent.algo),
+            algo_title(crate::report::method::Method::of(cfg)),
             reward_title(cfg.reward.function),
             run.name,
             run.seed()

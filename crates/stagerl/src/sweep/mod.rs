@@ -66,6 +66,67 @@ pub struct SweepSpec {
     /// custom settings.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub regime: Option<Regime>,
+    /// Named variants of the sweep's algorithms (DroQ and REDQ as settings of SAC, say): each
+    /// runs beside its algorithm, with its own settings over the preset's, under its own name.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variants: Vec<SweepVariant>,
+    /// Combinations left out of the sweep: each entry's keys (`algorithm`, an algorithm's or a
+    /// variant's name; `reward`; `her`, an entry of `sweep.her`) all match the runs it removes.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub exclude: Vec<Exclude>,
+}
+
+/// One of `[[sweep.variants]]`: an algorithm of the sweep under another name, with settings of
+/// its own (sections of a config: `agent`, `task`, `reward`, `train`) over the preset's.
+///
+/// ```toml
+/// [[sweep.variants]]
+/// name = "droq"            # run directories droq-<reward>-seed<seed>
+/// algorithm = "sac"
+/// [sweep.variants.agent]
+/// updates_per_step = 20
+/// [sweep.variants.agent.sac]
+/// critic_dropout = 0.01
+/// critic_layer_norm = true
+/// ```
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepVariant {
+    pub name: String,
+    pub algorithm: Algo,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub agent: Option<toml::Table>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task: Option<toml::Table>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reward: Option<toml::Table>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train: Option<toml::Table>,
+}
+
+/// One of `[[sweep.exclude]]` (see [`SweepSpec::exclude`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Exclude {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub algorithm: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reward: Option<RewardFunction>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub her: Option<String>,
+}
+
+impl Exclude {
+    fn matches(&self, learner: &str, reward: RewardFunction, her: &str) -> bool {
+        self.algorithm.as_deref().is_none_or(|a| a == learner)
+            && self.reward.is_none_or(|r| r == reward)
+            && self.her.as_deref().is_none_or(|h| h == her)
+    }
+}
+
+/// The name `sweep.her` gives a relabelling setting.
+fn her_name(her: Option<HerConfig>) -> &'static str {
+    her.map_or("off", |h| h.strategy.name())
 }
 
 impl SweepSpec {
@@ -107,6 +168,9 @@ fn default_trials() -> u32 {
 pub struct Preset {
     pub sweep: SweepSpec,
     pub base: Config,
+    /// The config each of `sweep.variants` starts from (the preset's with the variant's
+    /// settings over it), in the same order.
+    pub variant_bases: Vec<Config>,
 }
 
 /// One run of a sweep.
@@ -135,17 +199,20 @@ pub enum RunStatus {
 }
 
 /// The presets bundled with the library (the files in `configs/presets/`), by name.
-pub const BUNDLED_PRESETS: [(&str, &str); 6] = [
+pub const BUNDLED_PRESETS: [(&str, &str); 8] = [
     ("smoke", include_str!("../../../../configs/presets/smoke.toml")),
     ("quick", include_str!("../../../../configs/presets/quick.toml")),
     ("tuned", include_str!("../../../../configs/presets/tuned.toml")),
     ("paper", include_str!("../../../../configs/presets/paper.toml")),
     ("learners", include_str!("../../../../configs/presets/learners.toml")),
     ("learners-long", include_str!("../../../../configs/presets/learners-long.toml")),
+    ("sample-efficiency", include_str!("../../../../configs/presets/sample-efficiency.toml")),
+    ("crossq-rewards", include_str!("../../../../configs/presets/crossq-rewards.toml")),
 ];
 
 impl Preset {
-    /// A bundled preset by name (`smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long`), else the preset file at that path;
+    /// A bundled preset by name (`smoke`, `quick`, `tuned`, `paper`, `learners`, `learners-long`,
+    /// `sample-efficiency`, `crossq-rewards`), else the preset file at that path;
     /// with the preset's text (written to the sweep directory as `preset.toml`).
     pub fn resolve(name_or_path: &str) -> Result<(Preset, String)> {
         if let Some((_, text)) = BUNDLED_PRESETS.iter().find(|(n, _)| *n == name_or_path) {
@@ -173,7 +240,24 @@ impl Preset {
         let sweep: SweepSpec = sweep.try_into().map_err(|e: toml::de::Error| bad(format!("[sweep]: {e}")))?;
         let rest = toml::to_string(&table).map_err(|e| bad(e.to_string()))?;
         let base = Config::from_toml_str(&rest, origin)?;
-        let preset = Preset { sweep, base };
+        let mut variant_bases = Vec::new();
+        for (i, v) in sweep.variants.iter().enumerate() {
+            let mut t = table.clone();
+            for (section, over) in
+                [("agent", &v.agent), ("task", &v.task), ("reward", &v.reward), ("train", &v.train)]
+            {
+                if let Some(over) = over {
+                    let into = t.entry(section).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+                    if let toml::Value::Table(into) = into {
+                        merge_table(into, over);
+                    }
+                }
+            }
+            let text = toml::to_string(&t).map_err(|e| bad(e.to_string()))?;
+            let named = PathBuf::from(format!("{} (sweep.variants[{i}], `{}`)", origin.display(), v.name));
+            variant_bases.push(Config::from_toml_str(&text, &named)?);
+        }
+        let preset = Preset { sweep, base, variant_bases };
         preset.validate()?;
         Ok(preset)
     }
@@ -215,23 +299,115 @@ impl Preset {
             self.base.agent.for_algo(algo).validate()?;
         }
         s.her_variants(self.base.agent.her)?;
-        self.check_regime()
+        self.check_variants()?;
+        self.check_regime()?;
+        self.check_excludes()
     }
 
-    /// A named regime's settings are the preset's.
+    /// Variants are named safely and distinctly, of an algorithm of the sweep, and do not
+    /// change it.
+    fn check_variants(&self) -> Result<()> {
+        let s = &self.sweep;
+        for (i, (v, base)) in s.variants.iter().zip(&self.variant_bases).enumerate() {
+            let field = format!("sweep.variants[{i}].name");
+            let ok = |c: char| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_';
+            if v.name.is_empty() || v.name.len() > 40 || !v.name.chars().all(ok) {
+                return Err(Error::config(
+                    field,
+                    &v.name,
+                    "1-40 characters a-z, 0-9 or _ (it names run directories)",
+                ));
+            }
+            if Algo::ALL.iter().any(|a| a.name() == v.name)
+                || s.variants[..i].iter().any(|w| w.name == v.name)
+            {
+                return Err(Error::config(field, &v.name, "a name no algorithm and no other variant has"));
+            }
+            if !s.algorithms.contains(&v.algorithm) {
+                let algos: Vec<&str> = s.algorithms.iter().map(|a| a.name()).collect();
+                return Err(Error::config(
+                    format!("sweep.variants[{i}].algorithm"),
+                    v.algorithm.name(),
+                    format!("one of the sweep's algorithms ({})", algos.join(", ")),
+                ));
+            }
+            if v.agent.as_ref().is_some_and(|a| a.contains_key("algo")) {
+                return Err(Error::config(
+                    format!("sweep.variants[{i}].agent.algo"),
+                    "set",
+                    "unset: a variant's algorithm is `sweep.variants[].algorithm`",
+                ));
+            }
+            base.agent.for_algo(v.algorithm).validate()?;
+            s.her_variants(base.agent.her)?;
+        }
+        Ok(())
+    }
+
+    /// Each `sweep.exclude` entry has a key and removes at least one run (else it is a typo).
+    fn check_excludes(&self) -> Result<()> {
+        for (i, x) in self.sweep.exclude.iter().enumerate() {
+            let field = format!("sweep.exclude[{i}]");
+            if x.algorithm.is_none() && x.reward.is_none() && x.her.is_none() {
+                return Err(Error::config(field, "{}", "at least one of `algorithm`, `reward`, `her`"));
+            }
+            let mut any = false;
+            self.combinations(|learner, _, _, reward, her| {
+                any |= x.matches(learner, reward, her_name(her));
+            });
+            if !any {
+                return Err(Error::config(
+                    field,
+                    format!("{x:?}"),
+                    "an entry that matches some run of the sweep (algorithm or variant names, rewards and \
+                     `sweep.her` entries of the sweep)",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Every (learner name, algorithm, base config, reward, relabelling) of the sweep before
+    /// `sweep.exclude`, in the sweep's order: each algorithm, then its variants.
+    fn combinations(&self, mut f: impl FnMut(&str, Algo, &Config, RewardFunction, Option<HerConfig>)) {
+        for &algo in &self.sweep.algorithms {
+            let variants =
+                self.sweep.variants.iter().zip(&self.variant_bases).filter(|(v, _)| v.algorithm == algo);
+            let learners =
+                std::iter::once((algo.name(), &self.base)).chain(variants.map(|(v, b)| (v.name.as_str(), b)));
+            for (learner, base) in learners {
+                // Checked by `validate`, which every constructor runs.
+                let hers = self.sweep.her_variants(base.agent.her).unwrap_or_else(|_| vec![base.agent.her]);
+                for &reward in &self.sweep.rewards {
+                    // Relabelling is for the off-policy agents: PPO runs once, without.
+                    let hers: &[Option<HerConfig>] = if algo.is_off_policy() { &hers } else { &[None] };
+                    for &her in hers {
+                        f(learner, algo, base, reward, her);
+                    }
+                }
+            }
+        }
+    }
+
+    /// A named regime's settings are the preset's (and its variants').
     fn check_regime(&self) -> Result<()> {
         let Some(regime) = self.sweep.regime else { return Ok(()) };
         let Some((gamma, scale)) = regime.settings() else { return Ok(()) };
-        let (agent, task) = (&self.base.agent, &self.base.task);
-        for (field, value, want) in
-            [("agent.gamma", agent.gamma, gamma), ("task.obs_delta_scale", task.obs_delta_scale, scale)]
-        {
-            if value != want {
-                return Err(Error::config(
-                    field,
-                    value,
-                    format!("{want}: the value of the regime `sweep.regime` names ({})", regime.describe()),
-                ));
+        for base in std::iter::once(&self.base).chain(&self.variant_bases) {
+            let (agent, task) = (&base.agent, &base.task);
+            for (field, value, want) in
+                [("agent.gamma", agent.gamma, gamma), ("task.obs_delta_scale", task.obs_delta_scale, scale)]
+            {
+                if value != want {
+                    return Err(Error::config(
+                        field,
+                        value,
+                        format!(
+                            "{want}: the value of the regime `sweep.regime` names ({})",
+                            regime.describe()
+                        ),
+                    ));
+                }
             }
         }
         Ok(())
@@ -247,29 +423,24 @@ impl Preset {
         }
     }
 
-    /// Every run of the sweep, in order.
+    /// Every run of the sweep, in order: algorithm-major (each followed by its variants), then
+    /// reward, relabelling and seed; without the combinations `sweep.exclude` removes.
     pub fn runs(&self) -> Vec<RunSpec> {
-        // Checked by `validate`, which every constructor runs.
-        let variants =
-            self.sweep.her_variants(self.base.agent.her).unwrap_or_else(|_| vec![self.base.agent.her]);
         let mut out = Vec::new();
-        for &algo in &self.sweep.algorithms {
-            for &reward in &self.sweep.rewards {
-                // Relabelling is for the off-policy agents: PPO runs once, without.
-                let algo_variants: &[Option<HerConfig>] =
-                    if algo.is_off_policy() { &variants } else { &[None] };
-                for &her in algo_variants {
-                    for &seed in &self.sweep.seeds {
-                        let mut config = self.base.clone();
-                        config.agent = self.base.agent.for_algo(algo);
-                        config.agent.her = her;
-                        config.reward.function = reward;
-                        config.train.seed = seed;
-                        out.push(RunSpec { index: out.len(), name: run_name(&config), config });
-                    }
-                }
+        self.combinations(|learner, algo, base, reward, her| {
+            if self.sweep.exclude.iter().any(|x| x.matches(learner, reward, her_name(her))) {
+                return;
             }
-        }
+            for &seed in &self.sweep.seeds {
+                let mut config = base.clone();
+                config.agent = base.agent.for_algo(algo);
+                config.agent.her = her;
+                config.reward.function = reward;
+                config.train.seed = seed;
+                let name = run_name_as(learner, &config);
+                out.push(RunSpec { index: out.len(), name, config });
+            }
+        });
         out
     }
 }
@@ -289,8 +460,25 @@ pub fn write_preset(out: &Path, text: &str) -> Result<()> {
 /// The name of a config's run directory: `<algo>-<reward>-seed<seed>`, with hindsight
 /// relabelling `<algo>-<reward>-her-<strategy>-seed<seed>`.
 pub fn run_name(cfg: &Config) -> String {
+    run_name_as(cfg.agent.algo.name(), cfg)
+}
+
+/// [`run_name`] with `learner` (a variant's name) in place of the algorithm's.
+fn run_name_as(learner: &str, cfg: &Config) -> String {
     let her = cfg.agent.her.map(|h| format!("-her-{}", h.strategy.name())).unwrap_or_default();
-    format!("{}-{}{her}-seed{}", cfg.agent.algo, cfg.reward.function, cfg.train.seed)
+    format!("{learner}-{}{her}-seed{}", cfg.reward.function, cfg.train.seed)
+}
+
+/// `over`'s values into `into`, tables merged key by key (the rest replaced).
+fn merge_table(into: &mut toml::Table, over: &toml::Table) {
+    for (k, v) in over {
+        match (into.get_mut(k), v) {
+            (Some(toml::Value::Table(a)), toml::Value::Table(b)) => merge_table(a, b),
+            _ => {
+                into.insert(k.clone(), v.clone());
+            }
+        }
+    }
 }
 
 /// The shard a process runs, `(index, count)`: the flags when given; for each flag that is

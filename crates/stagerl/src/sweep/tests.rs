@@ -170,6 +170,50 @@ fn her_variants_multiply_the_runs() {
     }
 }
 
+#[test]
+fn variants_run_beside_their_algorithm_and_excludes_remove_runs() {
+    let text = "[sweep]\nalgorithms = [\"sac\", \"ddpg\"]\nrewards = [\"basic\", \"sar\"]\nseeds = [1]\n\
+                her = [\"off\", \"future\"]\n\
+                exclude = [{ reward = \"basic\", her = \"off\" }, { reward = \"sar\", her = \"future\" }, \
+                { algorithm = \"ddpg\" }]\n\
+                [[sweep.variants]]\nname = \"redq\"\nalgorithm = \"sac\"\n\
+                [sweep.variants.agent]\nupdates_per_step = 3\n[sweep.variants.agent.sac]\nn_critics = 5\ncritic_subset = 2\n\
+                [agent]\ngamma = 0.9\n[agent.sac]\ninit_alpha = 0.5\n[train]\nepisodes = 7\n";
+    let p = Preset::from_toml_str(text, Path::new("t.toml")).unwrap();
+    let runs = p.runs();
+    let names: Vec<&str> = runs.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["sac-basic-her-future-seed1", "sac-sar-seed1", "redq-basic-her-future-seed1", "redq-sar-seed1"]
+    );
+    assert_eq!(runs.iter().map(|r| r.index).collect::<Vec<_>>(), [0, 1, 2, 3]);
+    for r in &runs {
+        r.config.validate().unwrap();
+        // The preset's settings reach every run; the variant's only its own, over them.
+        assert_eq!((r.config.agent.gamma, r.config.agent.sac().init_alpha), (0.9, 0.5), "{}", r.name);
+        let redq = r.name.starts_with("redq");
+        assert_eq!(r.config.agent.updates_per_step, if redq { 3 } else { 1 }, "{}", r.name);
+        assert_eq!(r.config.agent.sac().n_critics, if redq { 5 } else { 2 }, "{}", r.name);
+        assert_eq!(r.config.agent.sac().critic_subset, redq.then_some(2), "{}", r.name);
+        assert_eq!(r.config.agent.algo, Algo::Sac);
+    }
+    // Errors name the field.
+    let cases = [
+        (text.replace("name = \"redq\"", "name = \"sac\""), "sweep.variants[0].name"),
+        (text.replace("name = \"redq\"", "name = \"../x\""), "sweep.variants[0].name"),
+        (text.replace("algorithm = \"sac\"\n", "algorithm = \"td3\"\n"), "sweep.variants[0].algorithm"),
+        (text.replace("n_critics = 5", "n_critics = 500"), "agent.sac.n_critics"),
+        (text.replace("updates_per_step = 3", "algo = \"td3\""), "sweep.variants[0].agent.algo"),
+        (text.replace("{ algorithm = \"ddpg\" }", "{ algorithm = \"droq\" }"), "sweep.exclude[2]"),
+        (text.replace("{ algorithm = \"ddpg\" }", "{}"), "sweep.exclude[2]"),
+        (text.replace("{ algorithm = \"ddpg\" }", "{ seed = 1 }"), "seed"),
+    ];
+    for (t, needle) in cases {
+        let e = Preset::from_toml_str(&t, Path::new("t.toml")).unwrap_err().to_string();
+        assert!(e.contains(needle), "{needle}: {e}");
+    }
+}
+
 /// Every file of `configs/` (presets, studies), a preset (bundled or run by path) or a config (`--config`),
 /// parses, and each config validates, so that a documented command never meets a config error.
 #[test]
@@ -201,7 +245,10 @@ fn every_config_file_parses() {
 
 #[test]
 fn bundled_presets_parse() {
-    for (name, _) in BUNDLED_PRESETS.iter().filter(|(n, _)| !n.starts_with("learners")) {
+    let issue_36 = ["sample-efficiency", "crossq-rewards"];
+    for (name, _) in
+        BUNDLED_PRESETS.iter().filter(|(n, _)| !n.starts_with("learners") && !issue_36.contains(n))
+    {
         let (p, _) = Preset::resolve(name).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(p.sweep.algorithms, vec![Algo::Ddpg, Algo::Sac], "{name}");
         // The paper's presets cover its five rewards.
@@ -216,6 +263,29 @@ fn bundled_presets_parse() {
         .all(|r| r.config.agent.algo.is_off_policy() || r.config.agent.her.is_none()));
     let (long, _) = Preset::resolve("learners-long").unwrap();
     assert_eq!((long.runs().len(), long.base.train.episodes), (6, 30000));
+    // Issue 36: SAC, DroQ, REDQ and CrossQ on SAR and on basic + HER, 5 seeds, 30 000 env steps.
+    let (se, _) = Preset::resolve("sample-efficiency").unwrap();
+    let runs = se.runs();
+    assert_eq!(runs.len(), 4 * 2 * 5);
+    for r in &runs {
+        assert_eq!(r.config.train.env_steps, Some(30_000), "{}", r.name);
+        assert_eq!(
+            r.config.agent.her.is_some(),
+            r.config.reward.function == RewardFunction::Basic,
+            "{}",
+            r.name
+        );
+    }
+    let droq = runs.iter().find(|r| r.name == "droq-sar-seed1").unwrap();
+    assert_eq!((droq.config.agent.updates_per_step, droq.config.agent.sac().critic_layer_norm), (20, true));
+    let redq = runs.iter().find(|r| r.name == "redq-basic-her-future-seed5").unwrap();
+    assert_eq!((redq.config.agent.sac().n_critics, redq.config.agent.sac().critic_subset), (10, Some(2)));
+    let (cr, _) = Preset::resolve("crossq-rewards").unwrap();
+    assert_eq!(cr.runs().len(), 5 * 5);
+    assert!(cr
+        .runs()
+        .iter()
+        .all(|r| r.config.agent.algo == Algo::Crossq && r.config.train.env_steps == Some(30_000)));
     let (paper, _) = Preset::resolve("paper").unwrap();
     assert_eq!(
         (paper.sweep.seeds.len(), paper.base.train.episodes, paper.sweep.eval_trials),
@@ -252,7 +322,16 @@ fn a_named_regime_must_be_the_presets_settings() {
     assert!(named("custom", "[agent]\ngamma = 0.9\n").is_ok());
     assert!(named("fast", "").is_err(), "an unknown regime");
     // Every bundled preset's regime holds (each constructor checks it).
-    for name in ["paper", "tuned", "quick", "smoke", "learners", "learners-long"] {
+    for name in [
+        "paper",
+        "tuned",
+        "quick",
+        "smoke",
+        "learners",
+        "learners-long",
+        "sample-efficiency",
+        "crossq-rewards",
+    ] {
         Preset::resolve(name).unwrap();
     }
 }

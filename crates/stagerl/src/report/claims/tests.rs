@@ -45,7 +45,7 @@ fn the_papers_own_table_on_its_claims() {
 
 /// A group of `values.len()` seeds whose runs converged at `e_start[i]` (None: did not) with
 /// evaluation success rates `success[i]`.
-fn group(algo: Algo, reward: RewardFunction, e_start: &[Option<f64>], success: &[f64]) -> GroupSummary {
+fn group(algo: Method, reward: RewardFunction, e_start: &[Option<f64>], success: &[f64]) -> GroupSummary {
     let runs: Vec<RunSummary> = e_start
         .iter()
         .zip(success)
@@ -125,7 +125,7 @@ fn sac_vs_ddpg_sar(shift: f64, n: usize, seed: u64) -> Claim {
     let sac = normal(n, 1000.0 - 100.0 * shift, 100.0, &mut rng);
     let ddpg = normal(n, 1000.0, 100.0, &mut rng);
     let ok = vec![0.99; n];
-    let groups = [group(Algo::Sac, Sar, &sac, &ok), group(Algo::Ddpg, Sar, &ddpg, &ok)];
+    let groups = [group(Method::Sac, Sar, &sac, &ok), group(Method::Ddpg, Sar, &ddpg, &ok)];
     evaluate(&groups, &paper::table1()).into_iter().find(|c| c.id == "sar-sac-faster-than-ddpg").unwrap()
 }
 
@@ -152,13 +152,13 @@ fn a_group_that_never_converges_loses_on_e_start_and_convergence_counts() {
     let ok = vec![0.99; 20];
     let dense = normal(20, 1500.0, 200.0, &mut rng);
     let never = vec![None; 20];
-    let mut groups = vec![group(Algo::Ddpg, Basic, &never, &[0.0; 20])];
+    let mut groups = vec![group(Method::Ddpg, Basic, &never, &[0.0; 20])];
     for a in ALGOS {
         for r in [Posture, Stride, Har, Sar] {
             groups.push(group(a, r, &dense, &ok));
         }
     }
-    groups.push(group(Algo::Sac, Basic, &never, &[0.0; 20]));
+    groups.push(group(Method::Sac, Basic, &never, &[0.0; 20]));
     let claims = evaluate(&groups, &paper::table1());
     let basic = claims.iter().find(|c| c.id == BASIC_CLAIM).unwrap();
     assert_eq!(basic.verdict, Verdict::Supported, "{:#?}", basic.comparisons[0]);
