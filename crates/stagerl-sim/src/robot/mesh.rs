@@ -101,6 +101,9 @@ pub struct ConvexPart {
     /// The centre and radius (metres) of a sphere around the hull.
     pub centre_m: [f64; 3],
     pub radius_m: f64,
+    /// A capsule around the hull (segment ends and radius, metres), for the checks' broad phase:
+    /// along the hull's principal axis, as thin as holds every vertex, 0.1 mm wider.
+    pub capsule_m: ([f64; 3], [f64; 3], f64),
     hull: ConvexPolyhedron,
 }
 
@@ -139,8 +142,57 @@ impl ConvexPart {
             // The f32 hull is tested against it: a hair of room for the rounding.
             * (1.0 + 1e-6)
             + 1e-9;
-        Some(ConvexPart { source: source.to_string(), part, points_m, centre_m, radius_m, hull })
+        let capsule_m = enclosing_capsule(&points_m, centre_m);
+        Some(ConvexPart { source: source.to_string(), part, points_m, centre_m, radius_m, capsule_m, hull })
     }
+}
+
+/// The margin of [`ConvexPart::capsule_m`] over the vertices, metres: room for the f32 hull the
+/// exact test uses (its points are within about 1e-7 m of these) and its tolerances.
+pub const CAPSULE_MARGIN_M: f64 = 1e-4;
+
+/// A capsule that holds every point: its axis the points' principal direction (power iteration
+/// on their covariance about `centre`), its radius the largest distance from that axis, its
+/// ends as far in as the radius lets them (a point past an end must lie in that end's ball).
+fn enclosing_capsule(points: &[[f64; 3]], centre: [f64; 3]) -> ([f64; 3], [f64; 3], f64) {
+    let d = |p: &[f64; 3]| [p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]];
+    let mut cov = [[0.0; 3]; 3];
+    for p in points {
+        let v = d(p);
+        for r in 0..3 {
+            for c in 0..3 {
+                cov[r][c] += v[r] * v[c];
+            }
+        }
+    }
+    let mut axis = [1.0, 1e-3, 1e-6];
+    for _ in 0..100 {
+        let n = [0, 1, 2].map(|r| cov[r][0] * axis[0] + cov[r][1] * axis[1] + cov[r][2] * axis[2]);
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if !(len > 0.0 && len.is_finite()) {
+            break;
+        }
+        axis = n.map(|x| x / len);
+    }
+    let len = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+    let axis = axis.map(|x| x / len);
+    let along = |v: [f64; 3]| v[0] * axis[0] + v[1] * axis[1] + v[2] * axis[2];
+    let tr: Vec<(f64, f64)> = points
+        .iter()
+        .map(|p| {
+            let v = d(p);
+            let t = along(v);
+            let q = [v[0] - t * axis[0], v[1] - t * axis[1], v[2] - t * axis[2]];
+            (t, (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt())
+        })
+        .collect();
+    let r = tr.iter().map(|x| x.1).fold(0.0, f64::max);
+    let room = |dist: f64| (r * r - dist * dist).max(0.0).sqrt();
+    let hi = tr.iter().map(|&(t, dist)| t - room(dist)).fold(f64::NEG_INFINITY, f64::max);
+    let lo = tr.iter().map(|&(t, dist)| t + room(dist)).fold(f64::INFINITY, f64::min);
+    let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.5 * (lo + hi), 0.5 * (lo + hi)) };
+    let end = |t: f64| [centre[0] + t * axis[0], centre[1] + t * axis[1], centre[2] + t * axis[2]];
+    (end(lo), end(hi), r * (1.0 + 1e-6) + CAPSULE_MARGIN_M)
 }
 
 /// Whether `points` lie on a plane (or a line, or a point), to a millionth of their extent.

@@ -15,10 +15,16 @@
 use std::sync::Arc;
 
 use parry3d::math::{Pose3, Rot3, Vec3};
+use parry3d::query::details::intersection_test_support_map_support_map_with_params;
+use parry3d::query::gjk::VoronoiSimplex;
 use parry3d::query::intersection_test;
-use parry3d::shape::{Ball, Capsule, Cuboid, Shape as ParryShape};
+use parry3d::shape::{Ball, Capsule, Cuboid, Shape as ParryShape, SupportMap};
+use std::sync::atomic::AtomicU32;
+
+use climb::{Climber, Warm};
 use serde::{Deserialize, Serialize};
 
+mod climb;
 pub mod distance;
 
 use super::scene::Obstacle;
@@ -93,6 +99,26 @@ impl Prim {
             Prim::Convex(p) => p.hull(),
         }
     }
+
+    fn support_map(&self) -> &dyn SupportMap {
+        match self {
+            Prim::Capsule(c) => c,
+            Prim::Ball(b) => b,
+            Prim::Cuboid(c) => c,
+            Prim::Convex(p) => p.hull(),
+        }
+    }
+}
+
+/// Warm starts of [`climb`] (hull vertex indices; unused for primitives).
+#[derive(Debug, Default)]
+struct WarmStarts(Vec<AtomicU32>);
+
+impl Clone for WarmStarts {
+    fn clone(&self) -> Self {
+        use std::sync::atomic::Ordering::Relaxed;
+        WarmStarts(self.0.iter().map(|a| AtomicU32::new(a.load(Relaxed))).collect())
+    }
 }
 
 /// One of the arm's shapes, ready for the tests.
@@ -105,6 +131,8 @@ struct ArmShape {
     local: [f64; 12],
     shape: Shape,
     parry: Prim,
+    /// A mesh part's hull for the support by hill climbing.
+    climber: Option<Arc<Climber>>,
 }
 
 /// The lowest z of a primitive at the row-major 3 x 4 pose `m`, metres.
@@ -206,6 +234,9 @@ pub struct ArmCollider {
     /// bit for bit, is skipped: the shield places the arm where the last check left it).
     placed_q: Vec<f64>,
     placed: bool,
+    /// Where the support searches of mesh parts start ([`climb`]): each self pair's two sides
+    /// (`2 p`, `2 p + 1`), then each shape's against the obstacles (`2 pairs + k`).
+    warm: WarmStarts,
 }
 
 impl ArmCollider {
@@ -220,6 +251,10 @@ impl ArmCollider {
                 local: s.pose,
                 shape: s.shape.clone(),
                 parry: Prim::of(&s.shape),
+                climber: match &s.shape {
+                    Shape::Convex(part) => Some(Arc::new(Climber::of(part.hull()))),
+                    _ => None,
+                },
             })
             .collect();
         let mut pairs = Vec::new();
@@ -233,6 +268,7 @@ impl ArmCollider {
         let n = shapes.len();
         let reach = motion::joint_reach(chain, &shapes);
         ArmCollider {
+            warm: WarmStarts((0..2 * pairs.len() + n).map(|_| AtomicU32::new(0)).collect()),
             reach,
             motion_q: vec![0.0; chain.dof()],
             placed_q: vec![0.0; chain.dof()],
@@ -341,7 +377,15 @@ impl ArmCollider {
         match (g.round, geo.round, &o.cuboid) {
             (true, true, _) => point_segment_distance2(geo.a, g.a, g.b) < (g.radius + geo.radius).powi(2),
             (true, false, Some(b)) => distance::round_box_overlap(g, b),
-            _ => overlap(&pose3(&self.world[k]), self.shapes[k].parry.shape(), &o.pose, o.prim.shape()),
+            // A mesh part whose capsule is clear of the obstacle is too.
+            (false, true, _)
+                if g.enclosed
+                    && point_segment_distance2(geo.a, g.a, g.b) >= (g.radius + geo.radius).powi(2) =>
+            {
+                false
+            }
+            (false, false, Some(b)) if g.enclosed && !distance::round_box_overlap(g, b) => false,
+            _ => self.exact_overlap(k, &self.warm.0[2 * self.pairs.len() + k], &o.pose, &o.prim, None),
         }
     }
 
@@ -372,8 +416,8 @@ impl ArmCollider {
             }
         }
         if self.checks.self_collision {
-            for &(a, b) in &self.pairs {
-                if self.overlap_arm(a, b) {
+            for (p, &(a, b)) in self.pairs.iter().enumerate() {
+                if self.overlap_arm(p, a, b) {
                     let (sa, sb) = (&self.shapes[a], &self.shapes[b]);
                     return Some(Contact::SelfCollision { shape_a: sa.index, shape_b: sb.index });
                 }
@@ -394,7 +438,9 @@ impl ArmCollider {
         match &self.shapes[k].shape {
             Shape::Convex(_) => {
                 let g = &self.geo[k];
-                g.centre[2] - g.bound < 0.0 && lowest_z(&self.shapes[k].shape, &self.world[k]) < 0.0
+                g.centre[2] - g.bound < 0.0
+                    && g.a[2].min(g.b[2]) - g.radius < 0.0
+                    && lowest_z(&self.shapes[k].shape, &self.world[k]) < 0.0
             }
             s => lowest_z(s, &self.world[k]) < 0.0,
         }
@@ -424,10 +470,10 @@ impl ArmCollider {
             }
         }
         if self.checks.self_collision {
-            for &(a, b) in &self.pairs {
+            for (p, &(a, b)) in self.pairs.iter().enumerate() {
                 let d = self.distance_arm(a, b);
                 seen(d);
-                if self.overlap_arm(a, b) {
+                if self.overlap_arm(p, a, b) {
                     out.push(Contact::SelfCollision {
                         shape_a: self.shapes[a].index,
                         shape_b: self.shapes[b].index,
@@ -465,11 +511,12 @@ impl ArmCollider {
         )
     }
 
-    /// Whether arm shapes `a` and `b` overlap: bounding spheres first, then the exact test
-    /// (segments for capsules and spheres, parry for anything with a box).
+    /// Whether the arm shapes `a` and `b` of self pair `p` overlap: bounding spheres first, then the exact
+    /// test (segments for capsules and spheres; a mesh part's capsule, then GJK; parry for the
+    /// rest).
     // Inlined into `check` as it was when `check` was its only caller (a step's hot loop).
     #[inline(always)]
-    fn overlap_arm(&self, a: usize, b: usize) -> bool {
+    fn overlap_arm(&self, p: usize, a: usize, b: usize) -> bool {
         let (ga, gb) = (&self.geo[a], &self.geo[b]);
         if !ga.bounds_overlap(gb) {
             return false;
@@ -477,12 +524,64 @@ impl ArmCollider {
         if ga.round && gb.round {
             return segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) < (ga.radius + gb.radius).powi(2);
         }
-        overlap(
-            &pose3(&self.world[a]),
-            self.shapes[a].parry.shape(),
-            &pose3(&self.world[b]),
-            self.shapes[b].parry.shape(),
+        if (ga.round || ga.enclosed)
+            && (gb.round || gb.enclosed)
+            && segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) >= (ga.radius + gb.radius).powi(2)
+        {
+            // A mesh part's capsule clear of the other shape (or its capsule): so is the part.
+            return false;
+        }
+        self.exact_overlap_arm(p, a, b)
+    }
+
+    /// [`ArmCollider::overlap_arm`]'s exact test of a pair with a box or a mesh part (out of
+    /// line: the capsules' path stays as small as it was).
+    #[inline(never)]
+    fn exact_overlap_arm(&self, p: usize, a: usize, b: usize) -> bool {
+        let (sb, pb) = (&self.shapes[b], pose3(&self.world[b]));
+        // Each pair's walks start where that pair's last ended (GJK's directions are the pair's).
+        let (wa, wb) = (&self.warm.0[2 * p], &self.warm.0[2 * p + 1]);
+        self.exact_overlap(a, wa, &pb, &sb.parry, sb.climber.as_deref().map(|c| (c, wb)))
+    }
+
+    /// parry's exact test of placed arm shape `a` against shape `other` at `pose` (with its
+    /// hull's climber and warm start when it is a mesh part): a mesh part against a mesh part,
+    /// a capsule or a box by GJK with the parts' supports by hill climbing ([`climb`]), the
+    /// rest by parry's dispatcher.
+    #[inline]
+    fn exact_overlap(
+        &self,
+        a: usize,
+        warm_a: &AtomicU32,
+        pose: &Pose3,
+        other: &Prim,
+        climbing: Option<(&Climber, &AtomicU32)>,
+    ) -> bool {
+        let sa = &self.shapes[a];
+        let pa = pose3(&self.world[a]);
+        let ball = matches!(sa.parry, Prim::Ball(_)) || matches!(other, Prim::Ball(_));
+        if ball || (sa.climber.is_none() && climbing.is_none()) {
+            return overlap(&pa, sa.parry.shape(), pose, other.shape());
+        }
+        let wa = sa.climber.as_deref().map(|c| Warm { climber: c, at: warm_a });
+        let wb = climbing.map(|(c, at)| Warm { climber: c, at });
+        let ga: &dyn SupportMap = match &wa {
+            Some(w) => w,
+            None => sa.parry.support_map(),
+        };
+        let gb: &dyn SupportMap = match &wb {
+            Some(w) => w,
+            None => other.support_map(),
+        };
+        let pos12 = pa.inv_mul(pose);
+        intersection_test_support_map_support_map_with_params(
+            &pos12,
+            ga,
+            gb,
+            &mut VoronoiSimplex::new(),
+            None,
         )
+        .0
     }
 }
 
@@ -491,6 +590,9 @@ impl ArmCollider {
 #[derive(Clone, Copy, Debug, Default)]
 struct Geo {
     round: bool,
+    /// A mesh part: `a`-`b` and `radius` are then the capsule around its hull
+    /// ([`ConvexPart::capsule_m`]), for the broad phase only.
+    enclosed: bool,
     a: [f64; 3],
     b: [f64; 3],
     radius: f64,
@@ -507,6 +609,7 @@ impl Geo {
                 let z = [m[2] * h, m[6] * h, m[10] * h];
                 Geo {
                     round: true,
+                    enclosed: false,
                     a: [c[0] - z[0], c[1] - z[1], c[2] - z[2]],
                     b: [c[0] + z[0], c[1] + z[1], c[2] + z[2]],
                     radius: radius_m,
@@ -515,7 +618,7 @@ impl Geo {
                 }
             }
             Shape::Sphere { radius_m } => {
-                Geo { round: true, a: c, b: c, radius: radius_m, centre: c, bound: radius_m }
+                Geo { round: true, enclosed: false, a: c, b: c, radius: radius_m, centre: c, bound: radius_m }
             }
             Shape::Cuboid { half_extents_m: [x, y, z] } => {
                 Geo { round: false, centre: c, bound: (x * x + y * y + z * z).sqrt(), ..Geo::default() }
@@ -527,10 +630,19 @@ impl Geo {
     /// [`Geo::of`] a mesh part: its bounding sphere placed (out of line, as [`convex_lowest_z`]).
     #[inline(never)]
     fn of_convex(part: &ConvexPart, m: &[f64; 12]) -> Geo {
-        let l = part.centre_m;
-        let centre =
-            [0, 1, 2].map(|r| m[4 * r] * l[0] + m[4 * r + 1] * l[1] + m[4 * r + 2] * l[2] + m[4 * r + 3]);
-        Geo { round: false, centre, bound: part.radius_m, ..Geo::default() }
+        let place = |l: [f64; 3]| {
+            [0, 1, 2].map(|r| m[4 * r] * l[0] + m[4 * r + 1] * l[1] + m[4 * r + 2] * l[2] + m[4 * r + 3])
+        };
+        let (a, b, radius) = part.capsule_m;
+        Geo {
+            round: false,
+            enclosed: true,
+            a: place(a),
+            b: place(b),
+            radius,
+            centre: place(part.centre_m),
+            bound: part.radius_m,
+        }
     }
     fn bounds_overlap(&self, o: &Geo) -> bool {
         let d = [self.centre[0] - o.centre[0], self.centre[1] - o.centre[1], self.centre[2] - o.centre[2]];

@@ -363,3 +363,51 @@ fn a_urdf_given_as_text_lists_its_meshes_as_unloaded() {
     assert_eq!(chain.mesh_collision_links(), ["l1"]);
     assert!(chain.unloaded_collision()[0].reason.contains("as text"));
 }
+
+/// The capsule around a part holds every hull vertex with its margin to spare, and is thin:
+/// for a long box its radius is about the box's half diagonal across, not its half length.
+#[test]
+fn the_capsule_around_a_part_holds_every_vertex() {
+    let mut rng = crate::base::rng::Rng::new(5);
+    for case in 0..50 {
+        let (len, w) = (rng.uniform_range(0.01, 1.0), rng.uniform_range(0.005, 0.3));
+        let pts: Vec<[f64; 3]> = (0..100)
+            .map(|_| {
+                let p =
+                    [len * rng.uniform_range(-0.5, 0.5), w * rng.normal(), w * rng.uniform_range(-1.0, 1.0)];
+                // Turned about z by the case's angle.
+                let t = case as f64;
+                [p[0] * t.cos() - p[1] * t.sin(), p[0] * t.sin() + p[1] * t.cos(), p[2] + 0.3]
+            })
+            .collect();
+        let part = ConvexPart::of_points("p.obj", 0, &pts).unwrap();
+        let (a, b, r) = part.capsule_m;
+        for p in &part.points_m {
+            let (ab, ap) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [p[0] - a[0], p[1] - a[1], p[2] - a[2]]);
+            let l2 = ab.iter().map(|x| x * x).sum::<f64>();
+            let t = if l2 > 0.0 {
+                ((0..3).map(|k| ap[k] * ab[k]).sum::<f64>() / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = (0..3).map(|k| (ap[k] - t * ab[k]).powi(2)).sum::<f64>().sqrt();
+            assert!(
+                d <= r - 0.99 * CAPSULE_MARGIN_M,
+                "case {case}: a vertex {d} m from the axis, radius {r}"
+            );
+        }
+        assert!(r <= part.radius_m + CAPSULE_MARGIN_M + 1e-9, "case {case}: {r} vs sphere {}", part.radius_m);
+    }
+    // A 1 m x 0.1 m x 0.1 m box: radius about 0.0707 m (+ margin), not 0.5 m.
+    let corners: Vec<[f64; 3]> = (0..8)
+        .map(|i| {
+            [
+                if i & 1 == 1 { 0.5 } else { -0.5 },
+                if i & 2 == 2 { 0.05 } else { -0.05 },
+                if i & 4 == 4 { 0.05 } else { -0.05 },
+            ]
+        })
+        .collect();
+    let (_, _, r) = ConvexPart::of_points("box.obj", 0, &corners).unwrap().capsule_m;
+    assert!((r - (0.05f64.hypot(0.05) + CAPSULE_MARGIN_M)).abs() < 1e-6, "{r}");
+}

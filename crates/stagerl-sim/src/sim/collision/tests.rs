@@ -294,3 +294,90 @@ fn mesh_links_collide_with_each_other_as_the_gap_between_them_says() {
     let mut none = ArmCollider::new(&chain, Checks { floor: false, self_collision: false });
     assert_eq!(none.contacts(&chain, &[0.0, 0.0], &mut all), None);
 }
+
+/// A three-joint arm whose four links are random elongated blobs (OBJ files of vertices, each
+/// loaded as its hull), with obstacles: the capsules around the hulls (the broad phase) never
+/// change a verdict. Over 4000 random poses every contact `contacts` reports, and `check`'s
+/// first, are those of parry's exact test on every pair without the capsules.
+#[test]
+fn the_capsules_around_mesh_parts_never_change_a_verdict() {
+    let d = std::env::temp_dir().join(format!("stagerl-collision-{}-blobs", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let mut rng = Rng::new(17);
+    for (i, (len, width)) in [(0.12, 0.08), (0.35, 0.06), (0.3, 0.05), (0.2, 0.04)].iter().enumerate() {
+        let mut obj = String::new();
+        for _ in 0..200 {
+            let p = [len * rng.uniform_range(-0.5, 0.5), width * rng.normal(), width * rng.normal()];
+            obj.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+        }
+        std::fs::write(d.join(format!("blob{i}.obj")), obj).unwrap();
+    }
+    let link = |name: &str, i: usize, at: &str, rpy: &str| {
+        format!(
+            r#"<link name="{name}"><collision><origin xyz="{at}" rpy="{rpy}"/><geometry><mesh filename="blob{i}.obj"/></geometry></collision></link>"#
+        )
+    };
+    let joint = |name: &str, parent: &str, child: &str, at: &str, axis: &str| {
+        format!(
+            r#"<joint name="{name}" type="revolute"><parent link="{parent}"/><child link="{child}"/><origin xyz="{at}"/><axis xyz="{axis}"/><limit lower="-3.1" upper="3.1" velocity="1"/></joint>"#
+        )
+    };
+    let urdf = format!(
+        "<robot name=\"blobs\">{}{}{}{}{}{}{}</robot>",
+        link("base", 0, "0 0 0.05", "0 1.5708 0"),
+        link("l1", 1, "0 0 0.2", "0 1.5708 0"),
+        link("l2", 2, "0.15 0 0", "0 0 0"),
+        link("l3", 3, "0.1 0 0", "0 0 0"),
+        joint("j1", "base", "l1", "0 0 0.1", "0 0 1"),
+        joint("j2", "l1", "l2", "0 0 0.4", "0 1 0"),
+        joint("j3", "l2", "l3", "0.3 0 0", "0 1 0"),
+    );
+    std::fs::write(d.join("blobs.urdf"), urdf).unwrap();
+    let chain = Chain::from_urdf_file(&d.join("blobs.urdf"), None).unwrap();
+    assert_eq!(chain.collision_shapes().len(), 4);
+    let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
+    c.set_obstacles(&[
+        Obstacle::sphere(0.08, [0.3, 0.1, 0.3]),
+        Obstacle::cuboid([0.1, 0.05, 0.2], [-0.25, 0.0, 0.35], Some([0.0, 0.0, 0.38268343, 0.92387953])),
+    ]);
+    let (mut out, mut want) = (Vec::new(), Vec::new());
+    let (mut contacts, mut near_misses) = (0, 0);
+    for _ in 0..4000 {
+        let q: Vec<f64> = (0..3).map(|_| rng.uniform_range(-3.1, 3.1)).collect();
+        c.contacts(&chain, &q, &mut out);
+        want.clear();
+        for (k, s) in c.shapes.iter().enumerate().filter(|(_, s)| s.segment >= 0) {
+            if lowest_z(&s.shape, &c.world[k]) < 0.0 {
+                want.push(Contact::Floor { shape: s.index });
+            }
+        }
+        let exact = |c: &ArmCollider, a: usize, pose: &Pose3, s: &dyn ParryShape| {
+            overlap(&pose3(&c.world[a]), c.shapes[a].parry.shape(), pose, s)
+        };
+        for &(a, b) in &c.pairs {
+            let (pb, sb) = (pose3(&c.world[b]), c.shapes[b].parry.shape());
+            let hit = exact(&c, a, &pb, sb);
+            let (ga, gb) = (&c.geo[a], &c.geo[b]);
+            let capsules_meet =
+                segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) < (ga.radius + gb.radius).powi(2);
+            near_misses += usize::from(capsules_meet && !hit);
+            if hit {
+                want.push(Contact::SelfCollision { shape_a: c.shapes[a].index, shape_b: c.shapes[b].index });
+            }
+        }
+        for (i, o) in c.obstacles.iter().enumerate() {
+            for k in 0..c.shapes.len() {
+                if exact(&c, k, &o.pose, o.prim.shape()) {
+                    want.push(Contact::Obstacle { shape: c.shapes[k].index, obstacle: i });
+                }
+            }
+        }
+        assert_eq!(out, want, "q = {q:?}");
+        assert_eq!(c.check(&chain, &q), want.first().copied(), "q = {q:?}");
+        contacts += usize::from(!want.is_empty());
+    }
+    // Both kinds of pose are common: contacts, and capsules that meet where the hulls do not
+    // (the exact test decides those).
+    assert!(contacts > 400 && near_misses > 200, "{contacts} {near_misses}");
+}

@@ -203,7 +203,7 @@ fn segment_box_distance_by_search(a: [f64; 3], b: [f64; 3], m: &[f64; 12], h: [f
 
 /// A capsule (or a sphere: `a == b`) of radius `r` as the checks place it.
 fn round_geo(a: [f64; 3], b: [f64; 3], r: f64) -> Geo {
-    Geo { round: true, a, b, radius: r, centre: a, bound: 0.0 }
+    Geo { round: true, enclosed: false, a, b, radius: r, centre: a, bound: 0.0 }
 }
 
 /// The contact verdict of `check` for a capsule or sphere against a box (closed form, f64)
