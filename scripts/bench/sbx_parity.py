@@ -5,7 +5,8 @@ Reads a stagerl config (``docs/results/sbx-parity/crossq.toml`` or ``droq.toml``
 environment is built from the same file (robot, task, reward, observation), and sbx gets the
 file's ``[agent]`` settings (network sizes, learning rates, gamma, tau, batch size, buffer size,
 learning starts, updates per step, policy delay, entropy coefficient, CrossQ's batch
-renormalisation, DroQ's dropout and layer norm). Every ``[train] eval_every_env_steps`` the
+renormalisation, DroQ's dropout and layer norm, SAC's policy delay and, when the file sets it,
+its actor's log-std bound: unset, sbx keeps its own clip). Every ``[train] eval_every_env_steps`` the
 deterministic policy is evaluated, as ``stagerl train`` does, after the episode that passes a
 multiple of it and after the last, on the same ``[train] eval_trials`` targets: the targets of
 ``stagerl train``'s periodic evaluations (seed ``train.eval_seed``), read from ``--targets``
@@ -223,7 +224,7 @@ def sbx_model(algo: str, cfg: dict, env, seed: int, ups_override: int | None, ac
     return SAC(
         "MlpPolicy", env,
         tau=a.get("tau", 0.005),
-        policy_delay=1,  # stagerl's SAC steps the actor at every update
+        policy_delay=s.get("policy_delay", 1),  # stagerl's agent.sac.policy_delay, counted as sbx's
         ent_coef=ent,
         target_entropy=float(s.get("target_entropy_per_dim", -1.0)) * act_dim,
         policy_kwargs=dict(
@@ -246,8 +247,9 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--env-steps", type=int, help="default: the config's train.env_steps")
     p.add_argument("--updates-per-step", type=int, help="default: the config's agent.updates_per_step")
-    p.add_argument("--actor-log-std", choices=["clip", "tanh"], default="clip",
-                   help="DroQ: sbx's actor log-std clip to [-20, 2] (default), or stagerl SAC's tanh bound to [-5, 2] (a diagnostic)")
+    p.add_argument("--actor-log-std", choices=["clip", "tanh"],
+                   help="DroQ: sbx's actor log-std clip to [-20, 2], or stagerl SAC's tanh bound to [-5, 2] "
+                        "(default: the config's agent.sac.actor_log_std if set, else sbx's clip)")
     p.add_argument("--torch-init", action="store_true",
                    help="DroQ with --actor-log-std tanh: initialise every layer as stagerl (PyTorch) does (a diagnostic)")
     p.add_argument("--impl", default="sbx", help="the impl column of the CSV (default sbx)")
@@ -295,6 +297,8 @@ def main() -> None:
     budget = args.env_steps or int(train["env_steps"])
     every = int(train.get("eval_every_env_steps", 1000))
     env = gym.make("stagerl/Reach-v0", config=args.config)
+    if args.actor_log_std is None:
+        args.actor_log_std = cfg.get("agent", {}).get("sac", {}).get("actor_log_std", "clip") if args.algo == "droq" else "clip"
     if args.actor_log_std != "clip" and args.algo != "droq":
         sys.exit("--actor-log-std is for DroQ (sbx's SAC) only")
     if args.torch_init and args.actor_log_std != "tanh":

@@ -58,6 +58,19 @@ fn sigkill_then_resume_with_droq_gives_the_uninterrupted_run() {
     sigkills_then_resume("resume-kill-droq", &config);
 }
 
+/// The same with DroQ as sbx's recipe has it: its actor's log-std clip to [-20, 2] and the
+/// actor and entropy coefficient stepped every 2nd update at 3 updates per step, so that the
+/// policy delay's phase runs across environment steps (its update count is in the checkpoint).
+#[test]
+fn sigkill_then_resume_with_droq_clip_and_policy_delay_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[agent.sac]\ncritic_dropout = 0.01\ncritic_layer_norm = true\nactor_log_std = \"clip\"\npolicy_delay = 2\n",
+        CONFIG.replace("[agent]\n", "[agent]\nupdates_per_step = 3\n")
+    );
+    assert!(config.contains("updates_per_step = 3"));
+    sigkills_then_resume("resume-kill-droq-clip-delay", &config);
+}
+
 /// The same with CrossQ (batch-renormalised critics and actor: their running statistics and
 /// the update count of the policy delay are in the checkpoint), its renormalisation's warm-up
 /// short enough that the kills land after it, at 2 updates per step.

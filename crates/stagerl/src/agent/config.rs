@@ -192,7 +192,7 @@ const MOVED_KEYS: [(&str, &str); 21] = [
     ("noise", "[agent.ddpg] or [agent.td3]"),
     ("noise_sigma", "[agent.ddpg] or [agent.td3]"),
     ("ou_theta", "[agent.ddpg] or [agent.td3]"),
-    ("policy_delay", "[agent.td3]"),
+    ("policy_delay", "[agent.td3], [agent.sac] or [agent.crossq]"),
     ("target_noise", "[agent.td3]"),
     ("target_noise_clip", "[agent.td3]"),
     ("alpha_lr", "[agent.sac]"),

@@ -27,7 +27,7 @@ pub use ddpg::DdpgConfig;
 pub use her_config::{HerConfig, HerStrategy, MAX_HER_K};
 pub use parts::Learned;
 pub use ppo::{Ppo, PpoConfig, Rollout};
-pub use sac::{ActorQ, Sac, SacConfig, MAX_CRITICS};
+pub use sac::{ActorLogStd, ActorQ, Sac, SacConfig, MAX_CRITICS};
 pub use td3::{Family, Td3, Td3Config};
 
 use crate::agent::replay::Batch;

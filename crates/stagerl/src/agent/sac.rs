@@ -3,7 +3,8 @@
 //! et al., ICLR 2022: dropout and layer normalisation in the critics and their targets).
 //!
 //! Networks: a tanh-squashed Gaussian actor `obs -> [mean | s]` (log-std `l = -5 + 3.5 (tanh s + 1)`,
-//! in [-5, 2]), `N = n_critics` critics `Q_i: [obs | act] -> 1` (2, SAC's twins, by default) and
+//! in [-5, 2], CleanRL's; with `actor_log_std = "clip"`, `l = clamp(s, -20, 2)`, sbx's and
+//! SB3's), `N = n_critics` critics `Q_i: [obs | act] -> 1` (2, SAC's twins, by default) and
 //! their Polyak-averaged targets (a [`Critics`] ensemble).
 //!
 //! One update on a batch `(s, a, r, s', d)`:
@@ -16,6 +17,10 @@
 //!    `(1/N) sum_i Q_i` (`actor_q = "mean"`, REDQ's and DroQ's);
 //! 3. `log alpha` minimises `-log alpha * mean(log pi(a~|s) + H_target)`, `H_target = -act_dim`
 //!    (times `target_entropy_per_dim`);
+//!
+//!    steps 2 and 3 run at every `policy_delay`-th update only (default 1: every update), the
+//!    updates counted across environment steps (the `k`-th, `2k`-th, ...: sbx's
+//!    `(n_updates + 1) % policy_delay` offset); skipped, they draw nothing;
 //! 4. targets `theta' <- (1 - tau) theta' + tau theta`.
 //!
 //! REDQ is `n_critics = 10`, `critic_subset = 2` with `agent.updates_per_step = 20`; DroQ is
@@ -55,7 +60,31 @@ pub enum ActorQ {
     Mean,
 }
 
-/// `[agent.sac]`: SAC's entropy coefficient and its critic ensemble.
+/// How the actor's raw output `s` becomes its log standard deviation `l`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ActorLogStd {
+    /// `l = -5 + 3.5 (tanh s + 1)`, in [-5, 2], smooth (CleanRL's; an untrained actor's std
+    /// is about 0.22).
+    #[default]
+    Tanh,
+    /// `l = clamp(s, -20, 2)`, gradient 1 inside and 0 outside (sbx's and SB3's `clip`; an
+    /// untrained actor's std is about 1).
+    Clip,
+}
+
+impl ActorLogStd {
+    /// The head's bound.
+    pub fn bound(self) -> LogStdBound {
+        match self {
+            ActorLogStd::Tanh => LogStdBound::Tanh { min: -5.0, max: 2.0 },
+            ActorLogStd::Clip => LogStdBound::Clamp { min: -20.0, max: 2.0 },
+        }
+    }
+}
+
+/// `[agent.sac]`: SAC's entropy coefficient, its critic ensemble, its actor's log-std bound and
+/// policy delay.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SacConfig {
@@ -85,6 +114,23 @@ pub struct SacConfig {
     /// dropout (DroQ's).
     #[serde(skip_serializing_if = "is_false")]
     pub critic_layer_norm: bool,
+    /// The actor's log-std bound: `"tanh"` (`-5 + 3.5 (tanh s + 1)`, in [-5, 2], CleanRL's) or
+    /// `"clip"` (`clamp(s, -20, 2)`, sbx's and SB3's).
+    #[serde(skip_serializing_if = "is_tanh")]
+    pub actor_log_std: ActorLogStd,
+    /// Critic updates per actor and entropy-coefficient update, >= 1: they step at every
+    /// `policy_delay`-th update, counted across environment steps (sbx's; its DroQ: the updates
+    /// per step).
+    #[serde(skip_serializing_if = "is_one")]
+    pub policy_delay: u32,
+}
+
+fn is_tanh(b: &ActorLogStd) -> bool {
+    *b == ActorLogStd::Tanh
+}
+
+fn is_one(n: &u32) -> bool {
+    *n == 1
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -111,6 +157,8 @@ impl Default for SacConfig {
             actor_q: None,
             critic_dropout: 0.0,
             critic_layer_norm: false,
+            actor_log_std: ActorLogStd::Tanh,
+            policy_delay: 1,
         }
     }
 }
@@ -145,6 +193,13 @@ impl SacConfig {
                 "a probability in [0, 1) (0: no dropout; DroQ: 0.01)",
             ));
         }
+        if self.policy_delay == 0 {
+            return Err(Error::config(
+                "agent.sac.policy_delay",
+                0,
+                "an integer >= 1 (critic updates per actor and entropy-coefficient update; 1: every update)",
+            ));
+        }
         Ok(())
     }
 
@@ -166,9 +221,6 @@ impl SacConfig {
     }
 }
 
-/// The log-std range of the actor (CleanRL's).
-const LOG_STD: LogStdBound = LogStdBound::Tanh { min: -5.0, max: 2.0 };
-
 pub struct Sac {
     cfg: AgentConfig,
     obs_dim: usize,
@@ -180,6 +232,10 @@ pub struct Sac {
     /// Critics in each update's target (`N`: all, no draw).
     subset: usize,
     actor_q: ActorQ,
+    /// `policy_delay`: the actor and alpha step at every this many updates.
+    policy_delay: u32,
+    /// Updates so far (the policy delay counts them; in the checkpoint when it is above 1).
+    updates: u64,
     actor_opt: Adam<f32>,
     log_alpha: [f32; 1],
     alpha_opt: Adam<f32>,
@@ -216,11 +272,13 @@ impl Sac {
             log_alpha: [own.init_alpha.ln() as f32],
             alpha_opt: Adam::new(1, own.alpha_lr),
             target_entropy: (own.target_entropy_per_dim * act_dim as f64) as f32,
-            head: SquashedGaussian::new(act_dim, LOG_STD),
+            head: SquashedGaussian::new(act_dim, own.actor_log_std.bound()),
             rng: Rng::derived(seed, 0x5AC1),
             norm: cfg.norm_obs.map(|n| OffPolicyNorm::new(obs_dim, &n, b)),
             subset: own.subset(),
             actor_q: own.actor_q(),
+            policy_delay: own.policy_delay,
+            updates: 0,
             eps: vec![0.0; b * act_dim],
             critic_in: vec![0.0; b * (obs_dim + act_dim)],
             next_act: vec![0.0; b * act_dim],
@@ -306,48 +364,56 @@ impl OffPolicy for Sac {
         let losses = self.critics.fit(&self.critic_in, &self.y[..b], self.cfg.max_grad_norm);
         let critic_loss = critics::mean(losses);
 
-        // 2. Actor, through the reparameterised sample and dQ/da of the smallest critic per row
-        //    (or of every critic, weighted 1/N, for their mean).
-        let raw = self.actor.forward(obs, b);
-        Self::fill_normal(&mut self.rng, &mut self.eps[..b * ad]);
-        let (a, logp) = self.head.forward(raw, &self.eps[..b * ad], b);
-        self.next_logp[..b].copy_from_slice(logp); // reuse: log pi(a~|s)
-        concat_cols(obs, od, a, ad, b, &mut self.critic_in);
-        let q = match self.actor_q {
-            ActorQ::Min => self.critics.forward_min(&self.critic_in, b),
-            ActorQ::Mean => self.critics.forward_mean(&self.critic_in, b),
-        };
-        let inv_b = 1.0 / b as f32;
-        let mut actor_loss = 0.0f64;
-        for i in 0..b {
-            actor_loss += f64::from(alpha * self.next_logp[i] - q[i]);
-            self.dlogp[i] = alpha * inv_b;
-        }
-        actor_loss /= b as f64;
-        let da = match self.actor_q {
-            ActorQ::Min => self.critics.input_grad_min(-inv_b, od..od + ad),
-            ActorQ::Mean => self.critics.input_grad_mean(-inv_b, od..od + ad),
-        };
-        let d_raw = self.head.backward(da, &self.dlogp[..b]);
-        self.actor.zero_grad();
-        self.actor.backward(d_raw);
-        step(&mut self.actor, &mut self.actor_opt, self.cfg.max_grad_norm);
+        // 2-3. Actor and entropy coefficient, at every `policy_delay`-th update (the count
+        //    runs across environment steps, as sbx's `(n_updates + 1) % policy_delay`).
+        self.updates += 1;
+        let actor = if self.updates.is_multiple_of(u64::from(self.policy_delay)) {
+            // 2. Actor, through the reparameterised sample and dQ/da of the smallest critic per row
+            //    (or of every critic, weighted 1/N, for their mean).
+            let raw = self.actor.forward(obs, b);
+            Self::fill_normal(&mut self.rng, &mut self.eps[..b * ad]);
+            let (a, logp) = self.head.forward(raw, &self.eps[..b * ad], b);
+            self.next_logp[..b].copy_from_slice(logp); // reuse: log pi(a~|s)
+            concat_cols(obs, od, a, ad, b, &mut self.critic_in);
+            let q = match self.actor_q {
+                ActorQ::Min => self.critics.forward_min(&self.critic_in, b),
+                ActorQ::Mean => self.critics.forward_mean(&self.critic_in, b),
+            };
+            let inv_b = 1.0 / b as f32;
+            let mut actor_loss = 0.0f64;
+            for i in 0..b {
+                actor_loss += f64::from(alpha * self.next_logp[i] - q[i]);
+                self.dlogp[i] = alpha * inv_b;
+            }
+            actor_loss /= b as f64;
+            let da = match self.actor_q {
+                ActorQ::Min => self.critics.input_grad_min(-inv_b, od..od + ad),
+                ActorQ::Mean => self.critics.input_grad_mean(-inv_b, od..od + ad),
+            };
+            let d_raw = self.head.backward(da, &self.dlogp[..b]);
+            self.actor.zero_grad();
+            self.actor.backward(d_raw);
+            step(&mut self.actor, &mut self.actor_opt, self.cfg.max_grad_norm);
 
-        // 3. Entropy coefficient.
-        let mean_logp = self.next_logp[..b].iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64;
-        if !self.cfg.sac().fixed_alpha {
-            let grad = [-(mean_logp as f32 + self.target_entropy)];
-            self.alpha_opt.step(&mut self.log_alpha, &grad);
-        }
+            // 3. Entropy coefficient.
+            let mean_logp = self.next_logp[..b].iter().map(|&x| f64::from(x)).sum::<f64>() / b as f64;
+            if !self.cfg.sac().fixed_alpha {
+                let grad = [-(mean_logp as f32 + self.target_entropy)];
+                self.alpha_opt.step(&mut self.log_alpha, &grad);
+            }
+            Some((actor_loss, mean_logp))
+        } else {
+            None
+        };
 
         // 4. Targets.
         self.critics.polyak(self.cfg.tau as f32);
 
         UpdateStats {
             critic_loss,
-            actor_loss: Some(actor_loss),
+            actor_loss: actor.map(|a| a.0),
             alpha: Some(f64::from(alpha)),
-            entropy: Some(-mean_logp),
+            entropy: actor.map(|a| -a.1),
         }
     }
 }
@@ -368,6 +434,10 @@ learned_parts!(Sac, |s, f| {
     }
     f("alpha_opt", P::Adam(r!(s.alpha_opt)));
     f("agent_rng", P::State(r!(s.rng)));
+    // The update count of the policy delay (listed only when it is above 1).
+    if s.policy_delay > 1 {
+        f("agent_updates", P::State(r!(s.updates)));
+    }
     // DroQ: the dropout streams (listed only when the critics drop out).
     let drops = s.critics.drops_out();
     for (name, c) in DROPOUT_RNG.iter().zip(each!(s.critics.scratch)).filter(|_| drops) {
@@ -383,3 +453,121 @@ learned_parts!(Sac, |s, f| {
         f(super::obs_norm::STD_TENSOR, P::Tensor(r!(n.norm.std)));
     }
 });
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(own: SacConfig) -> AgentConfig {
+        AgentConfig { hidden: vec![16, 16], batch_size: 8, sac: Some(own), ..AgentConfig::new(Algo::Sac) }
+    }
+
+    fn batch(rng: &mut Rng, b: usize, od: usize, ad: usize) -> Batch {
+        let mut batch = Batch::new(b, od, ad);
+        for x in batch.obs.iter_mut().chain(&mut batch.next_obs).chain(&mut batch.act) {
+            *x = rng.uniform_range(-1.0, 1.0) as f32;
+        }
+        for (i, r) in batch.reward.iter_mut().enumerate() {
+            *r = i as f32 * 0.1 - 0.3;
+        }
+        batch
+    }
+
+    /// `"clip"` is sbx's `jnp.clip(s, -20, 2)`: the log-std, the sample and its log-density
+    /// against their formulas written out here, and dL/ds against central differences inside
+    /// the range and 0 outside it; `"tanh"` stays CleanRL's map.
+    #[test]
+    fn the_clip_log_std_is_sbx_clip_with_its_gradient() {
+        assert_eq!(ActorLogStd::default(), ActorLogStd::Tanh);
+        assert_eq!(ActorLogStd::Tanh.bound(), LogStdBound::Tanh { min: -5.0, max: 2.0 });
+        assert_eq!(ActorLogStd::Clip.bound(), LogStdBound::Clamp { min: -20.0, max: 2.0 });
+        let bound = ActorLogStd::Clip.bound();
+        // One action; s inside and on either side of [-20, 2], mean 0.3, noise 0.7.
+        let (mean, eps) = (0.3f64, 0.7f64);
+        for s in [-25.0f64, -20.5, -19.5, -3.0, -0.4, 0.0, 1.2, 1.99, 2.01, 2.5, 7.0] {
+            let l = s.clamp(-20.0, 2.0);
+            let u = mean + l.exp() * eps;
+            let logp = -0.5 * eps * eps
+                - l
+                - 0.5 * (2.0 * std::f64::consts::PI).ln()
+                - (1.0 - u.tanh().powi(2)).ln();
+            let mut head = SquashedGaussian::<f64>::new(1, bound);
+            let (a, lp) = head.forward(&[mean, s], &[eps], 1);
+            assert!((a[0] - u.tanh()).abs() < 1e-14, "s = {s}");
+            assert!((lp[0] - logp).abs() < 1e-9 * logp.abs().max(1.0), "s = {s}: {} vs {logp}", lp[0]);
+            // L = 0.6 a - 1.3 log p; its derivative in s through the head's backward pass.
+            let g = head.backward(&[0.6], &[-1.3])[1];
+            let loss = |s: f64| {
+                let mut h = SquashedGaussian::<f64>::new(1, bound);
+                let (a, lp) = h.forward(&[mean, s], &[eps], 1);
+                0.6 * a[0] - 1.3 * lp[0]
+            };
+            let inside = (-20.0..=2.0).contains(&s);
+            if inside {
+                let h = 1e-6;
+                let num = (loss(s + h) - loss(s - h)) / (2.0 * h);
+                assert!((g - num).abs() < 1e-6 * num.abs().max(1.0), "s = {s}: {g} vs {num}");
+                // dl/ds = 1: dL/ds = dL/du std eps - dL/dlogp (independent formula).
+                let dl_du = 0.6 * (1.0 - u.tanh().powi(2)) - 1.3 * 2.0 * u.tanh();
+                assert!((g - (dl_du * l.exp() * eps + 1.3)).abs() < 1e-12, "s = {s}");
+            } else {
+                assert_eq!(g, 0.0, "s = {s}: no gradient outside the clip");
+                assert_eq!(loss(s), loss(s + 0.25 * s.signum()), "s = {s}: flat outside");
+            }
+        }
+    }
+
+    /// With `policy_delay = 3` the actor and alpha step at the 3rd, 6th, ... update only,
+    /// counted across calls (environment steps), and the count is a learned part; with 1 (the
+    /// default) at every update, and no count is saved.
+    #[test]
+    fn the_actor_and_alpha_step_every_policy_delay_updates() {
+        let (od, ad, b) = (5, 2, 8);
+        let mut rng = Rng::new(4);
+        let batch = batch(&mut rng, b, od, ad);
+        let obs = [0.3f32; 5];
+        for delay in [1u32, 3] {
+            let own =
+                SacConfig { policy_delay: delay, actor_log_std: ActorLogStd::Clip, ..SacConfig::default() };
+            own.validate().unwrap();
+            let mut agent = Sac::new(&cfg(own), od, ad, 3);
+            assert_eq!(agent.head.bound(), LogStdBound::Clamp { min: -20.0, max: 2.0 });
+            let (mut before, mut after) = ([0.0f32; 2], [0.0f32; 2]);
+            for k in 1..=7u64 {
+                agent.predict(&obs, &mut before);
+                let alpha = agent.alpha();
+                let s = agent.update(&batch);
+                agent.predict(&obs, &mut after);
+                let due = k % u64::from(delay) == 0;
+                assert_eq!(
+                    (s.actor_loss.is_some(), s.entropy.is_some()),
+                    (due, due),
+                    "delay {delay}, update {k}"
+                );
+                assert_eq!(
+                    before != after,
+                    due,
+                    "delay {delay}, update {k}: the actor moves only at its steps"
+                );
+                assert_eq!(agent.alpha() != alpha, due, "delay {delay}, update {k}: alpha too");
+            }
+            let mut names = Vec::new();
+            crate::agent::parts::Learned::parts(&agent, &mut |name, _| names.push(name.to_string()));
+            assert_eq!(names.iter().any(|n| n == "agent_updates"), delay > 1, "{names:?}");
+        }
+        let bad = SacConfig { policy_delay: 0, ..SacConfig::default() }.validate().unwrap_err().to_string();
+        assert!(bad.contains("agent.sac.policy_delay") && bad.contains('0') && bad.contains(">= 1"), "{bad}");
+        // The defaults are left out of a written config; the others are written.
+        let written = toml::to_string(&SacConfig::default()).unwrap();
+        assert!(!written.contains("actor_log_std") && !written.contains("policy_delay"), "{written}");
+        let own = SacConfig { policy_delay: 20, actor_log_std: ActorLogStd::Clip, ..SacConfig::default() };
+        let written = toml::to_string(&own).unwrap();
+        assert!(
+            written.contains("actor_log_std = \"clip\"") && written.contains("policy_delay = 20"),
+            "{written}"
+        );
+        assert_eq!(toml::from_str::<SacConfig>(&written).unwrap(), own);
+        let e = toml::from_str::<SacConfig>("actor_log_std = \"softplus\"\n").unwrap_err().to_string();
+        assert!(e.contains("actor_log_std") && e.contains("softplus") && e.contains("clip"), "{e}");
+    }
+}

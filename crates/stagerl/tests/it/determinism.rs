@@ -2,7 +2,7 @@
 //! time) and identical final networks, for every algorithm.
 
 use stagerl::agent::obs_norm::ObsNormConfig;
-use stagerl::agent::{ActorQ, Algo, CrossqConfig, PpoConfig, SacConfig};
+use stagerl::agent::{ActorLogStd, ActorQ, Algo, CrossqConfig, PpoConfig, SacConfig};
 use stagerl::agent::{HerConfig, HerStrategy};
 use stagerl::config::Config;
 use stagerl::io::checkpoint::Checkpoint;
@@ -210,11 +210,15 @@ fn redq_and_droq_runs_are_deterministic_on_any_thread_count_and_differ_from_sac(
         actor_q: Some(ActorQ::Mean),
         ..SacConfig::default()
     };
+    // sbx's DroQ recipe: its actor's log-std clip and the actor stepped once every 3 updates
+    // (policy delay, counted across environment steps).
+    let droq_sbx = SacConfig { actor_log_std: ActorLogStd::Clip, policy_delay: 3, ..droq };
     let (_, sac) = run(Algo::Sac, 5, "ens-sac");
     let (sac_rows, _) = run(Algo::Sac, 5, "ens-sac");
     for (name, own, parts) in [
         ("redq", redq, vec!["q10.layer0.weight", "q10_target.layer2.bias"]),
         ("droq", droq, vec!["q2.ln1.scale", "q2_target.ln0.bias", "q1_dropout_rng", "q2_target_dropout_rng"]),
+        ("droq-sbx", droq_sbx, vec!["q2.ln1.scale", "q1_dropout_rng", "agent_updates"]),
     ] {
         let tweak = |cfg: &mut Config| {
             cfg.agent.sac = Some(own);
@@ -237,8 +241,9 @@ fn redq_and_droq_runs_are_deterministic_on_any_thread_count_and_differ_from_sac(
         assert_ne!(a, c, "{name}: another seed gives another run");
         assert_ne!(a, sac_rows, "{name} is not SAC");
     }
-    // Plain SAC saves no dropout stream.
+    // Plain SAC saves no dropout stream and no update count.
     assert!(sac.json::<serde_json::Value>("q1_dropout_rng").is_err());
+    assert!(sac.json::<serde_json::Value>("agent_updates").is_err());
 }
 
 /// The loop's collector is chosen from the agent: the off-policy one saves its replay buffer and

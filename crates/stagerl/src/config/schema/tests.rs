@@ -56,6 +56,8 @@ critic_subset = 2
 actor_q = "min"
 critic_dropout = 0.01
 critic_layer_norm = true
+actor_log_std = "clip"
+policy_delay = 3
 [agent.ppo]
 norm_obs = { clip = 10.0 }
 [agent.crossq]
