@@ -278,6 +278,7 @@ fn bundled_presets_parse() {
     }
     let droq = runs.iter().find(|r| r.name == "droq-sar-seed1").unwrap();
     assert_eq!((droq.config.agent.updates_per_step, droq.config.agent.sac().critic_layer_norm), (20, true));
+    assert_eq!(droq.config.agent.sac().policy_delay, 20);
     let redq = runs.iter().find(|r| r.name == "redq-basic-her-future-seed5").unwrap();
     assert_eq!((redq.config.agent.sac().n_critics, redq.config.agent.sac().critic_subset), (10, Some(2)));
     let (cr, _) = Preset::resolve("crossq-rewards").unwrap();
