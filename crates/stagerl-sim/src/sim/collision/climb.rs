@@ -4,7 +4,9 @@
 //! neighbour beats is a farthest vertex (a linear function has no other local maximum on it),
 //! so the answer is parry's linear scan's; from the last answer (the shapes move a little
 //! between steps and GJK's directions a little between iterations) the walk is a few edges
-//! instead of a pass over all vertices. Ties may give another vertex as far along.
+//! instead of a pass over all vertices. Of vertices equally far (a face square to the
+//! direction), the lowest index is returned, as parry's scan does: GJK then takes the same
+//! steps as with parry's own support function, whatever the walk's start.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
@@ -65,7 +67,9 @@ impl Climber {
         Climber { points, offsets, neighbours, anchors }
     }
 
-    /// The index of a vertex farthest along `dir`, walking from vertex `start`.
+    /// The index of the first (lowest-index) vertex farthest along `dir`, as parry's linear
+    /// scan gives it, walking from vertex `start`: the answer does not depend on the start, so
+    /// neither do GJK's steps nor its verdict (a resumed run checks as the uninterrupted one).
     #[inline]
     pub(crate) fn support(&self, dir: Vec3, start: u32) -> u32 {
         let mut at = if (start as usize) < self.points.len() { start } else { 0 };
@@ -79,20 +83,62 @@ impl Climber {
         }
         // Each move is to a vertex strictly farther along: the walk ends (at most once per vertex).
         loop {
-            let (lo, hi) = (self.offsets[at as usize] as usize, self.offsets[at as usize + 1] as usize);
-            let mut next = at;
-            for &j in &self.neighbours[lo..hi] {
+            let (mut next, mut tied) = (at, false);
+            for &j in self.neighbours_of(at) {
                 let d = self.points[j as usize].dot(dir);
                 if d > best {
                     best = d;
                     next = j;
+                } else {
+                    tied |= d == best;
                 }
             }
             if next == at {
-                return at;
+                // No neighbour is farther; one as far means a plateau to search.
+                return if tied { self.lowest_on_plateau(at, best, dir) } else { at };
             }
             at = next;
         }
+    }
+
+    fn neighbours_of(&self, i: u32) -> &[u32] {
+        let (lo, hi) = (self.offsets[i as usize] as usize, self.offsets[i as usize + 1] as usize);
+        &self.neighbours[lo..hi]
+    }
+
+    /// The lowest index among the vertices as far along as `at` (`best`): they form a face, an
+    /// edge or a vertex of the hull, connected by its edges. A plateau larger than the search's
+    /// fixed room (no allocation) falls back to the linear scan.
+    #[cold]
+    fn lowest_on_plateau_slow(&self, dir: Vec3) -> u32 {
+        let mut best = (0, f32::NEG_INFINITY);
+        for (i, p) in self.points.iter().enumerate() {
+            let d = p.dot(dir);
+            if d > best.1 {
+                best = (i as u32, d);
+            }
+        }
+        best.0
+    }
+
+    fn lowest_on_plateau(&self, at: u32, best: f32, dir: Vec3) -> u32 {
+        const ROOM: usize = 64;
+        let (mut seen, mut len, mut next) = ([0u32; ROOM], 1, 0);
+        seen[0] = at;
+        while next < len {
+            let v = seen[next];
+            next += 1;
+            for &j in self.neighbours_of(v) {
+                if self.points[j as usize].dot(dir) == best && !seen[..len].contains(&j) {
+                    if len == ROOM {
+                        return self.lowest_on_plateau_slow(dir);
+                    }
+                    seen[len] = j;
+                    len += 1;
+                }
+            }
+        }
+        seen[..len].iter().copied().min().unwrap_or(at)
     }
 
     pub(crate) fn point(&self, i: u32) -> Vec3 {
@@ -123,7 +169,8 @@ mod tests {
     use crate::base::rng::Rng;
 
     /// On random hulls (round, tessellated finely, and blobs) and random directions, from any
-    /// start, the walk ends at a vertex as far along as parry's linear scan finds.
+    /// start, the walk ends at the vertex parry's linear scan finds; on a box, whose faces tie
+    /// along the axes, too.
     #[test]
     fn the_walk_finds_a_farthest_vertex_from_any_start() {
         let mut rng = Rng::new(9);
@@ -147,6 +194,21 @@ mod tests {
                 let got = c.point(c.support(dir, start)).dot(dir);
                 let want = hull.points().iter().map(|p| p.dot(dir)).fold(f32::NEG_INFINITY, f32::max);
                 assert_eq!(got, want, "case {case}");
+                // The very vertex parry's scan gives (the first of the farthest), from any start.
+                let first = hull.points().iter().position(|p| p.dot(dir) == want).unwrap() as u32;
+                assert_eq!(c.support(dir, start), first, "case {case}");
+            }
+        }
+        let corners: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32 - 0.5, (i >> 1 & 1) as f32 - 0.5, (i >> 2 & 1) as f32 - 0.5))
+            .collect();
+        let hull = ConvexPolyhedron::from_convex_hull(&corners).unwrap();
+        let c = Climber::of(&hull);
+        for dir in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z, Vec3::new(1.0, 1.0, 0.0)] {
+            let want = hull.points().iter().map(|p| p.dot(dir)).fold(f32::NEG_INFINITY, f32::max);
+            let first = hull.points().iter().position(|p| p.dot(dir) == want).unwrap() as u32;
+            for start in 0..8 {
+                assert_eq!(c.support(dir, start), first, "{dir:?} from {start}");
             }
         }
     }
