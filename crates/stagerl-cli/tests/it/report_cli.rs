@@ -242,6 +242,9 @@ fn a_sweep_with_a_variant_on_a_step_budget_reports_each_method() {
     for needle in ["| SAC | SAR |", "| REDQ | SAR |", "- REDQ + SAR: "] {
         assert!(se.contains(needle), "{needle}: {se}");
     }
+    // Figure 8 is drawn against the environment steps, one panel column per method.
+    let fig8 = std::fs::read_to_string(out.join("figure8.svg")).unwrap();
+    assert!(fig8.contains("environment steps") && fig8.contains("REDQ — success rate"), "figure8.svg");
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("table1.json")).unwrap()).unwrap();
     let rows = json["sample_efficiency"].as_array().unwrap();

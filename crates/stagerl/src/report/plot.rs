@@ -492,6 +492,8 @@ pub fn figure7(groups: &[Group], summaries: &[GroupSummary], window: usize, stud
 /// seeds with the min-max band.
 pub fn figure8(groups: &[Group], study: &str, reference: Option<&EvalSummary>) -> CurveFigure {
     let algos = algos(groups);
+    // Runs on a budget of environment steps are drawn against the steps.
+    let on_steps = groups.iter().flat_map(|g| g.runs.iter()).any(|r| r.config.train.env_steps.is_some());
     let trials =
         groups.iter().flat_map(|g| g.runs.iter()).map(|r| r.config.train.eval_trials).max().unwrap_or(0);
     let mut panels = Vec::new();
@@ -509,7 +511,7 @@ pub fn figure8(groups: &[Group], study: &str, reference: Option<&EvalSummary>) -
                     1 => p.mean_reward,
                     _ => p.mean_steps.unwrap_or(f64::NAN),
                 };
-                r.eval_points.iter().map(|p| (p.episode as f64, y(p))).collect()
+                r.eval_points.iter().map(|p| (eval_x(r, p), y(p))).collect()
             });
             series.retain(|(_, _, band)| band.mean.iter().any(|m| m.is_finite()));
             // The scripted controller's success rate and steps do not depend on the reward.
@@ -520,7 +522,7 @@ pub fn figure8(groups: &[Group], study: &str, reference: Option<&EvalSummary>) -
             };
             panels.push(Panel {
                 title: format!("{} — {what}", algo_title(a)),
-                x_label: "episode".into(),
+                x_label: if on_steps { "environment steps".into() } else { "episode".into() },
                 y_label: unit.to_string(),
                 y_range: (row == 0).then_some((0.0, 102.0)),
                 series,
@@ -538,6 +540,17 @@ pub fn figure8(groups: &[Group], study: &str, reference: Option<&EvalSummary>) -
         rows: 3,
         cols: algos.len(),
         panels,
+    }
+}
+
+/// Where Figure 8 puts an evaluation: its episode; for a run on a budget of environment steps
+/// evaluated every `K` steps, the multiple of `K` it was due at (it runs after the episode that
+/// passes it: at most one episode later), so that the seeds' points line up.
+fn eval_x(r: &RunData, p: &EvalPoint) -> f64 {
+    match (r.config.train.env_steps, r.config.train.eval_every_env_steps) {
+        (Some(_), Some(k)) if k > 0 => (p.env_steps / k * k) as f64,
+        (Some(_), _) => p.env_steps as f64,
+        _ => p.episode as f64,
     }
 }
 
