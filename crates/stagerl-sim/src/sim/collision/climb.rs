@@ -108,19 +108,7 @@ impl Climber {
 
     /// The lowest index among the vertices as far along as `at` (`best`): they form a face, an
     /// edge or a vertex of the hull, connected by its edges. A plateau larger than the search's
-    /// fixed room (no allocation) falls back to the linear scan.
-    #[cold]
-    fn lowest_on_plateau_slow(&self, dir: Vec3) -> u32 {
-        let mut best = (0, f32::NEG_INFINITY);
-        for (i, p) in self.points.iter().enumerate() {
-            let d = p.dot(dir);
-            if d > best.1 {
-                best = (i as u32, d);
-            }
-        }
-        best.0
-    }
-
+    /// fixed room (no allocation) falls back to parry's linear scan.
     fn lowest_on_plateau(&self, at: u32, best: f32, dir: Vec3) -> u32 {
         const ROOM: usize = 64;
         let (mut seen, mut len, mut next) = ([0u32; ROOM], 1, 0);
@@ -131,7 +119,7 @@ impl Climber {
             for &j in self.neighbours_of(v) {
                 if self.points[j as usize].dot(dir) == best && !seen[..len].contains(&j) {
                     if len == ROOM {
-                        return self.lowest_on_plateau_slow(dir);
+                        return parry3d::utils::point_cloud_support_point_id(dir, &self.points) as u32;
                     }
                     seen[len] = j;
                     len += 1;
