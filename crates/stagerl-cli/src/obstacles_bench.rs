@@ -13,8 +13,8 @@
 use anyhow::{Context, Result};
 use stagerl::config::Config;
 use stagerl::plan::problems::{draw_problems, Problem, ProblemSet};
-use stagerl::plan::rrt_connect::{RrtConnect, DEFAULT_ITERATIONS};
 use stagerl::plan::{Plan, Planner};
+use stagerl::sim::rrt_connect::{RrtConnect, DEFAULT_ITERATIONS};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -52,7 +52,7 @@ pub struct ObstaclesArgs {
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
     /// RRT-Connect's wall-time budget per plan in the table, seconds.
-    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_BUDGET_S)]
+    #[arg(long, default_value_t = stagerl::sim::rrt_connect::DEFAULT_BUDGET_S)]
     planner_budget_s: f64,
     /// RRT-Connect's wall-time budget when it decides whether a candidate problem is solvable,
     /// seconds (with 100 times the table's iterations).

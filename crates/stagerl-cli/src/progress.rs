@@ -102,6 +102,17 @@ impl<'a> Reporter<'a> {
 
     pub fn episode(&mut self, p: &Progress<'_>) {
         let r = p.record;
+        if let Some(d) = &p.demonstrations {
+            let line = format!(
+                "demonstrations: {} episode(s) planned by RRT-Connect, {} solved and stored ({} reached the \
+                 target, {} with a contact): {} transitions in the replay buffer",
+                d.episodes, d.solved, d.reached, d.collided, d.transitions
+            );
+            match &self.bar {
+                Some(b) => b.println(line),
+                None => self.output.line(format_args!("{line}")),
+            }
+        }
         if let Some(a) = &p.stage_advance {
             let line = format!(
                 "episode {}: curriculum stage {} of 0-{} from the next episode ({}/{} successes over \

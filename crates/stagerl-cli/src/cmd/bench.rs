@@ -38,10 +38,10 @@ pub struct RrtArgs {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Wall-time budget per plan, seconds.
-    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_BUDGET_S)]
+    #[arg(long, default_value_t = stagerl::sim::rrt_connect::DEFAULT_BUDGET_S)]
     planner_budget_s: f64,
     /// Most tree extensions per plan, 1 to 100 000 000.
-    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_ITERATIONS,
+    #[arg(long, default_value_t = stagerl::sim::rrt_connect::DEFAULT_ITERATIONS,
           value_parser = clap::value_parser!(u32).range(1..=100_000_000))]
     planner_iterations: u32,
 }
@@ -163,8 +163,8 @@ fn quantile(v: &[f64], q: f64) -> f64 {
 }
 
 fn rrt_connect(a: RrtArgs) -> Result<()> {
-    use stagerl::plan::rrt_connect::RrtConnect;
     use stagerl::plan::{problems, Planner};
+    use stagerl::sim::rrt_connect::RrtConnect;
     let cfg = Config::default();
     let set = problems::obstacle_in_path(&cfg, a.problems as usize, a.problem_seed)?;
     let rrt = RrtConnect {

@@ -1,7 +1,7 @@
 use anyhow::{bail, Context, Result};
-use stagerl::plan::rrt_connect::RrtConnect;
 use stagerl::plan::Planner;
 use stagerl::run::dir::RunDir;
+use stagerl::sim::rrt_connect::RrtConnect;
 use stagerl::view::View;
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -32,10 +32,10 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// RRT-Connect's wall-time budget per plan, seconds (0 < s <= 3600); an unsolved plan says why.
-    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_BUDGET_S)]
+    #[arg(long, default_value_t = stagerl::sim::rrt_connect::DEFAULT_BUDGET_S)]
     planner_budget_s: f64,
     /// RRT-Connect's most tree extensions per plan, 1 to 100 000 000.
-    #[arg(long, default_value_t = stagerl::plan::rrt_connect::DEFAULT_ITERATIONS,
+    #[arg(long, default_value_t = stagerl::sim::rrt_connect::DEFAULT_ITERATIONS,
           value_parser = clap::value_parser!(u32).range(1..=100_000_000))]
     planner_iterations: u32,
     /// Target X,Y,Z, metres, base frame.

@@ -145,6 +145,28 @@ fn sigkill_then_resume_with_a_curriculum_gives_the_uninterrupted_run() {
     std::fs::remove_dir_all(&root).ok();
 }
 
+/// The same with demonstrations from RRT-Connect in the replay buffer
+/// (`[train.demonstrations]`): planned once before the first episode, then part of the
+/// checkpoints' buffer (a resumed run does not plan them again), reported in one line.
+#[test]
+fn sigkill_then_resume_with_demonstrations_gives_the_uninterrupted_run() {
+    let config = format!(
+        "{}[task]\non_collision = \"terminate\"\nobserve_obstacles = true\nobstacle_observation = \"per_link\"\n\
+         [task.random_obstacles]\ncount = [1, 2]\n[reward]\ncollision_penalty = 10.0\n\
+         [train.demonstrations]\nepisodes = 40\nobstacles_in_path = 1.0\n",
+        CONFIG.replace("[train]\n", "[train]\nobstacles_in_path = 0.5\n")
+    );
+    let (root, printed) = sigkills_then_resume_keeping("resume-kill-demos", &config, 300, 3);
+    let lines: Vec<&str> = printed.lines().filter(|l| l.starts_with("demonstrations:")).collect();
+    assert_eq!(lines.len(), 1, "{printed}");
+    assert!(
+        lines[0].contains("40 episode(s) planned by RRT-Connect") && lines[0].contains("0 with a contact"),
+        "{}",
+        lines[0]
+    );
+    std::fs::remove_dir_all(&root).ok();
+}
+
 fn sigkills_then_resume(name: &str, config: &str) {
     sigkills_then_resume_expecting(name, config, 300, 3);
 }

@@ -5,5 +5,6 @@
 pub mod arm;
 pub mod collision;
 pub mod physics;
+pub mod rrt_connect;
 pub mod scene;
 pub mod shield;

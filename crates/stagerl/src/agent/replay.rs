@@ -15,6 +15,9 @@ pub struct ReplayBuffer {
     len: usize,
     /// Next slot to write.
     pos: usize,
+    /// The first `protected` slots are never overwritten (demonstrations,
+    /// [`ReplayBuffer::protect_filled`]): the ring wraps to the slot after them.
+    protected: usize,
     obs: Vec<f32>,
     act: Vec<f32>,
     reward: Vec<f32>,
@@ -31,6 +34,8 @@ pub struct Batch {
     pub reward: Vec<f32>,
     pub next_obs: Vec<f32>,
     pub terminal: Vec<f32>,
+    /// 1 where the row is a protected transition (a demonstration), else 0.
+    pub demo: Vec<f32>,
 }
 
 impl Batch {
@@ -43,6 +48,7 @@ impl Batch {
             reward: vec![0.0; size],
             next_obs: vec![0.0; size * obs_dim],
             terminal: vec![0.0; size],
+            demo: vec![0.0; size],
         }
     }
 }
@@ -70,6 +76,7 @@ impl ReplayBuffer {
             act_dim,
             len: 0,
             pos: 0,
+            protected: 0,
             obs: vec![0.0; capacity * obs_dim],
             act: vec![0.0; capacity * act_dim],
             reward: vec![0.0; capacity],
@@ -87,7 +94,7 @@ impl ReplayBuffer {
         self.reward[i] = reward as f32;
         self.next_obs[i * od..(i + 1) * od].copy_from_slice(next_obs);
         self.terminal[i] = f32::from(u8::from(terminal));
-        self.pos = (self.pos + 1) % self.capacity;
+        self.pos = if self.pos + 1 == self.capacity { self.protected } else { self.pos + 1 };
         self.len = (self.len + 1).min(self.capacity);
     }
 
@@ -103,6 +110,7 @@ impl ReplayBuffer {
             batch.reward[b] = self.reward[i];
             copy_row(&mut batch.next_obs[b * od..(b + 1) * od], &self.next_obs[i * od..(i + 1) * od]);
             batch.terminal[b] = self.terminal[i];
+            batch.demo[b] = f32::from(u8::from(i < self.protected));
         }
     }
 
@@ -124,6 +132,36 @@ impl ReplayBuffer {
     /// The write position (next slot), for checkpoints.
     pub fn position(&self) -> usize {
         self.pos
+    }
+    /// Slots never overwritten ([`ReplayBuffer::protect_filled`]).
+    pub fn protected(&self) -> usize {
+        self.protected
+    }
+
+    /// Keep every transition stored so far for good (the demonstrations): once full, the ring
+    /// overwrites only the slots after them. Errors: the buffer has wrapped already, or they
+    /// leave no room (`agent.buffer_size` must exceed them).
+    pub fn protect_filled(&mut self) -> Result<()> {
+        self.set_protected(self.len)
+    }
+
+    /// Restore the protected count of a checkpoint (after [`ReplayBuffer::restore`]).
+    pub fn set_protected(&mut self, n: usize) -> Result<()> {
+        if n >= self.capacity {
+            return Err(Error::config(
+                "agent.buffer_size",
+                self.capacity,
+                format!("more transitions than the {n} kept for good (the demonstrations)"),
+            ));
+        }
+        if n > self.len || (self.len == self.capacity && self.pos < n) {
+            return Err(Error::InvalidInput(format!(
+                "replay buffer state: {n} protected transitions do not fit length {}, position {}",
+                self.len, self.pos
+            )));
+        }
+        self.protected = n;
+        Ok(())
     }
 
     /// The stored arrays in `[obs, act, reward, next_obs, terminal]` order, first `len` rows
@@ -227,5 +265,33 @@ mod tests {
             .restore(a.len(), a.position(), [arr[0].1, arr[1].1, arr[2].1, arr[3].1, arr[4].1])
             .is_err());
         assert!(ReplayBuffer::new(0, 2, 1).is_err());
+    }
+
+    #[test]
+    fn protected_transitions_are_never_overwritten_and_sampled_as_demonstrations() {
+        let mut b = filled(5, 2);
+        b.protect_filled().unwrap();
+        for k in 2..9 {
+            let x = k as f32;
+            b.push(&[x, x + 0.5], &[-x], k as f64, &[x + 1.0, x + 1.5], false);
+        }
+        // Slots 0-1 keep transitions 0-1; slots 2-4 take 2-8 in turn (8 in slot 2 last).
+        assert_eq!(b.arrays()[2].1, [0.0, 1.0, 8.0, 6.0, 7.0]);
+        assert_eq!((b.len(), b.position(), b.protected()), (5, 3, 2));
+        let mut batch = Batch::new(64, 2, 1);
+        b.sample_into(&mut Rng::new(3), &mut batch);
+        for (r, d) in batch.reward.iter().zip(&batch.demo) {
+            assert_eq!(*d == 1.0, *r < 2.0, "reward {r} demo {d}");
+        }
+        assert!(batch.demo.contains(&1.0) && batch.demo.contains(&0.0));
+        // A restore takes the count back; counts that do not fit are refused.
+        let mut c = ReplayBuffer::new(5, 2, 1).unwrap();
+        let a = b.arrays();
+        c.restore(5, 3, [a[0].1, a[1].1, a[2].1, a[3].1, a[4].1]).unwrap();
+        c.set_protected(2).unwrap();
+        assert_eq!(c, b);
+        assert!(c.set_protected(4).is_err(), "position 3 is inside 4 protected slots");
+        let e = filled(3, 3).protect_filled().unwrap_err().to_string();
+        assert!(e.contains("`agent.buffer_size`"), "{e}");
     }
 }

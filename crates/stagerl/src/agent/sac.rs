@@ -123,6 +123,12 @@ pub struct SacConfig {
     /// per step).
     #[serde(skip_serializing_if = "is_one")]
     pub policy_delay: u32,
+    /// Behaviour cloning of the demonstrations (`[train.demonstrations]`, which it needs): the
+    /// actor's loss adds `bc_weight * (1/B) sum_i d_i |a~_i - a_i|^2`, `d_i` 1 where row `i` of
+    /// the batch is a demonstration, `a~_i` the reparameterised sample, `a_i` the demonstrated
+    /// action; >= 0, 0 (the default): the demonstrations are only replayed.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub bc_weight: f64,
 }
 
 fn is_tanh(b: &ActorLogStd) -> bool {
@@ -159,6 +165,7 @@ impl Default for SacConfig {
             critic_layer_norm: false,
             actor_log_std: ActorLogStd::Tanh,
             policy_delay: 1,
+            bc_weight: 0.0,
         }
     }
 }
@@ -191,6 +198,13 @@ impl SacConfig {
                 "agent.sac.critic_dropout",
                 self.critic_dropout,
                 "a probability in [0, 1) (0: no dropout; DroQ: 0.01)",
+            ));
+        }
+        if !(self.bc_weight.is_finite() && self.bc_weight >= 0.0 && self.bc_weight <= 1e6) {
+            return Err(Error::config(
+                "agent.sac.bc_weight",
+                self.bc_weight,
+                "a weight in [0, 1e6] (0: the demonstrations are only replayed)",
             ));
         }
         if self.policy_delay == 0 {
@@ -250,6 +264,9 @@ pub struct Sac {
     next_logp: Vec<f32>,
     y: Vec<f32>,
     dlogp: Vec<f32>,
+    /// `bc_weight` and dL/da~ with its term.
+    bc_weight: f32,
+    da_bc: Vec<f32>,
 }
 
 impl Sac {
@@ -285,6 +302,8 @@ impl Sac {
             next_logp: vec![0.0; b],
             y: vec![0.0; b],
             dlogp: vec![0.0; b],
+            bc_weight: own.bc_weight as f32,
+            da_bc: vec![0.0; if own.bc_weight > 0.0 { b * act_dim } else { 0 }],
             cfg: cfg.clone(),
             obs_dim,
             act_dim,
@@ -386,10 +405,22 @@ impl OffPolicy for Sac {
                 self.dlogp[i] = alpha * inv_b;
             }
             actor_loss /= b as f64;
-            let da = match self.actor_q {
+            let mut da = match self.actor_q {
                 ActorQ::Min => self.critics.input_grad_min(-inv_b, od..od + ad),
                 ActorQ::Mean => self.critics.input_grad_mean(-inv_b, od..od + ad),
             };
+            if self.bc_weight > 0.0 {
+                // `bc_weight`: the demonstrations' behaviour cloning term.
+                let (a, c) = (self.head.action(), 2.0 * self.bc_weight * inv_b);
+                let mut bc = 0.0f64;
+                for (k, g) in self.da_bc[..b * ad].iter_mut().enumerate() {
+                    let (d, diff) = (batch.demo[k / ad], a[k] - batch.act[k]);
+                    *g = da[k] + c * d * diff;
+                    bc += f64::from(d * diff * diff);
+                }
+                actor_loss += f64::from(self.bc_weight) * bc / b as f64;
+                da = &self.da_bc[..b * ad];
+            }
             let d_raw = self.head.backward(da, &self.dlogp[..b]);
             self.actor.zero_grad();
             self.actor.backward(d_raw);

@@ -21,10 +21,12 @@ use crate::reward::RewardConfig;
 use crate::robot::RobotConfig;
 
 pub mod curriculum;
+pub mod demonstrations;
 mod resolved;
 pub mod schema;
 mod train;
 pub use curriculum::{CurriculumConfig, CurriculumState};
+pub use demonstrations::DemonstrationsConfig;
 pub use resolved::Resolved;
 pub use train::{TrainConfig, MAX_EVAL_TRIALS};
 
@@ -221,7 +223,33 @@ impl Config {
     pub fn validate(&self) -> Result<()> {
         self.validate_values()?;
         self.agent.validate()?;
-        self.check_curriculum()
+        self.check_curriculum()?;
+        self.check_demonstrations()
+    }
+
+    /// The run-level check of `[train.demonstrations]`: an off-policy agent (the demonstrations
+    /// go into its replay buffer).
+    fn check_demonstrations(&self) -> Result<()> {
+        let bc = self.agent.sac.map_or(0.0, |s| s.bc_weight);
+        if bc > 0.0 && self.train.demonstrations.is_none() {
+            return Err(Error::config(
+                "agent.sac.bc_weight",
+                bc,
+                "0 (left out) without [train.demonstrations]: it clones the demonstrations' actions",
+            ));
+        }
+        if self.train.demonstrations.is_some() && !self.agent.algo.is_off_policy() {
+            return Err(Error::config(
+                "train.demonstrations",
+                "a demonstrations section",
+                format!(
+                    "none with agent.algo = \"{}\": demonstrations are stored in the replay buffer \
+                     of an off-policy agent (use ddpg, td3, sac or crossq)",
+                    self.agent.algo
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// The run-level checks of `[train.curriculum]`: an off-policy agent, and no
@@ -267,6 +295,9 @@ impl Config {
         )?;
         if let Some(c) = &self.train.curriculum {
             c.check_task(self.task.random_obstacles.as_ref().map(|r| r.count))?;
+        }
+        if let Some(d) = &self.train.demonstrations {
+            d.validate(self.task.random_obstacles.is_some())?;
         }
         self.check_memory(ESTIMATE_DOF)
     }

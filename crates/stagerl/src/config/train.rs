@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::curriculum::CurriculumConfig;
+use super::demonstrations::DemonstrationsConfig;
 use crate::{Error, Result};
 
 /// The largest evaluation asked for at once (its per-trial records are kept in memory).
@@ -52,6 +53,10 @@ pub struct TrainConfig {
     /// `train.obstacles_in_path`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub curriculum: Option<CurriculumConfig>,
+    /// Demonstrations from the reference planner in the replay buffer before the first episode
+    /// (unset by default; see [`DemonstrationsConfig`]). Off-policy agents only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub demonstrations: Option<DemonstrationsConfig>,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -71,6 +76,7 @@ impl Default for TrainConfig {
             checkpoint_every_episodes: 250,
             obstacles_in_path: 0.0,
             curriculum: None,
+            demonstrations: None,
         }
     }
 }

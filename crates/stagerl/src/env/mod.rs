@@ -18,7 +18,7 @@ mod task;
 mod vec;
 
 pub use observation::{empty_slot_distance, ObsEntry, ObservationLayout};
-pub use rollout::{rollout, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
+pub use rollout::{rollout, track_waypoints, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
 pub use vec::{VecEnv, MAX_VEC_ENVS};
 
 use nalgebra::Vector3;

@@ -103,3 +103,18 @@ pub fn rollout(env: &mut ReachEnv, scratch: &mut Scratch, driver: &mut impl Driv
         }
     }
 }
+
+/// A policy that follows `waypoints` (one per control step, the first the start): the action
+/// that takes the arm from where it is to the next waypoint, clipped to [-1, 1]; at rest past
+/// the last.
+pub fn track_waypoints(waypoints: &[Vec<f64>]) -> impl FnMut(&ReachEnv, &mut [f32]) -> Result<()> + '_ {
+    move |env, action| {
+        let k = (env.steps() as usize + 1).min(waypoints.len().saturating_sub(1));
+        let (q, v, dt) = (env.joint_positions(), env.chain().velocity_limits(), env.task().dt_s);
+        for (i, a) in action.iter_mut().enumerate() {
+            let next = waypoints.get(k).map_or(q[i], |w| w[i]);
+            *a = ((next - q[i]) / (v[i] * dt)).clamp(-1.0, 1.0) as f32;
+        }
+        Ok(())
+    }
+}

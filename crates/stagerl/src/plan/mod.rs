@@ -16,7 +16,6 @@
 
 pub mod controller;
 pub mod problems;
-pub mod rrt_connect;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -28,12 +27,14 @@ use crate::agent::Agent;
 use crate::base::rng::Rng;
 use crate::config::Config;
 use crate::env::request::{check_obstacle_values, check_scene_for_request};
-use crate::env::{check_joint_positions, rollout, Flow, Observed, Outcome, ReachEnv, ResolvedTask, Scratch};
+use crate::env::{
+    check_joint_positions, rollout, track_waypoints, Flow, Observed, Outcome, ReachEnv, ResolvedTask, Scratch,
+};
 use crate::plan::controller::JacobianController;
-use crate::plan::rrt_connect::{RrtConnect, RrtStats};
 use crate::robot::Chain;
 use crate::run::dir::RunDir;
 use crate::sim::collision::ArmCollider;
+use crate::sim::rrt_connect::{RrtConnect, RrtStats};
 use crate::sim::scene::Obstacle;
 use crate::{Error, Result};
 
@@ -43,7 +44,7 @@ pub enum PlanPolicy {
     Agent(Box<dyn Agent>),
     /// The scripted damped-least-squares controller.
     Jacobian(JacobianController),
-    /// The sampling-based reference planner ([`rrt_connect`]).
+    /// The sampling-based reference planner ([`crate::sim::rrt_connect`]).
     RrtConnect(RrtConnect),
 }
 
@@ -513,19 +514,11 @@ impl Planner {
         if let PlanPolicy::RrtConnect(rrt) = &self.policy {
             let (env, c) = (&self.env, &mut self.collider);
             let start = env.joint_positions().to_vec();
-            // The margin, less where the start pose is closer to an obstacle than twice it.
-            c.set_obstacles(env.obstacles());
-            let near = c.motion_clearance_m(env.chain(), &start, &start).unwrap_or(f64::INFINITY);
-            let margin = rrt_connect::MARGIN_M.min(0.5 * near.max(0.0));
-            let grown: Vec<Obstacle> = env.obstacles().iter().map(|o| o.grown(margin)).collect();
-            c.set_obstacles(&grown);
-            let (stats, path) = rrt.solve(env.chain(), c, &start, &env.target());
+            let (stats, path) =
+                rrt.plan_timed(env.chain(), c, env.obstacles(), &start, &env.target(), env.task().dt_s, 0.0);
             plan.summary.rrt_connect = Some(stats);
             match path {
-                Ok(path) => {
-                    waypoints =
-                        rrt_connect::time_parameterise(&path, env.chain().velocity_limits(), env.task().dt_s)
-                }
+                Ok(path) => waypoints = path,
                 Err(why) => {
                     plan.summary.reason = Some(format!("RRT-Connect found no path: {why}"));
                     return Ok(plan);
@@ -545,9 +538,11 @@ impl Planner {
                 PlanPolicy::Jacobian(ctl) => {
                     rollout(&mut self.env, &mut self.scratch, &mut Observed(ctl.policy(), record))?
                 }
-                PlanPolicy::RrtConnect(_) => {
-                    rollout(&mut self.env, &mut self.scratch, &mut Observed(track(&waypoints), record))?
-                }
+                PlanPolicy::RrtConnect(_) => rollout(
+                    &mut self.env,
+                    &mut self.scratch,
+                    &mut Observed(track_waypoints(&waypoints), record),
+                )?,
             }
         };
         let Outcome::Finished { reward, last } = outcome else {
@@ -619,21 +614,6 @@ impl Planner {
                     .to_string()
             })
         }
-    }
-}
-
-/// A policy that follows `waypoints` (one per control step, the first the start): the action
-/// that takes the arm from where it is to the next waypoint, clipped to [-1, 1]; at rest past
-/// the last.
-fn track(waypoints: &[Vec<f64>]) -> impl FnMut(&ReachEnv, &mut [f32]) -> Result<()> + '_ {
-    move |env, action| {
-        let k = (env.steps() as usize + 1).min(waypoints.len().saturating_sub(1));
-        let (q, v, dt) = (env.joint_positions(), env.chain().velocity_limits(), env.task().dt_s);
-        for (i, a) in action.iter_mut().enumerate() {
-            let next = waypoints.get(k).map_or(q[i], |w| w[i]);
-            *a = ((next - q[i]) / (v[i] * dt)).clamp(-1.0, 1.0) as f32;
-        }
-        Ok(())
     }
 }
 

@@ -298,3 +298,108 @@ fn a_policy_that_observes_obstacles_sees_the_nearest_of_a_larger_scene() {
     let w = plan.warning.unwrap_or_default();
     assert!(!w.contains("observes") && p.env().obstacles().len() == 1, "{w}");
 }
+
+/// RRT-Connect ([`crate::sim::rrt_connect`]) through the planner.
+mod rrt_connect {
+    use crate::config::Config;
+    use crate::plan::{problems, Planner};
+    use crate::sim::rrt_connect::{RrtConnect, RrtStats};
+    use crate::sim::scene::Obstacle;
+
+    fn planner(seed: u64) -> Planner {
+        Planner::rrt_connect(&Config::default(), None, RrtConnect { seed, ..RrtConnect::default() }).unwrap()
+    }
+
+    #[test]
+    fn obstacles_across_the_straight_line_are_gone_round_without_contact() {
+        let cfg = Config::default();
+        let set = problems::obstacle_in_path(&cfg, 30, 11).unwrap();
+        let mut jac = Planner::jacobian(&cfg, None).unwrap();
+        let mut p = planner(3);
+        let (mut solved, mut blocked) = (0, 0);
+        for pr in &set {
+            let straight = jac.plan_among(&pr.target, None, Some(&pr.obstacles)).unwrap();
+            blocked += usize::from(straight.summary.collision);
+            let plan = p.plan_among(&pr.target, None, Some(&pr.obstacles)).unwrap();
+            let stats = plan.summary.rrt_connect.unwrap();
+            assert!(!plan.summary.collision, "{:?}", plan.summary);
+            assert!(plan.summary.min_clearance_m.unwrap() > 0.0);
+            if plan.summary.reached {
+                solved += 1;
+                assert!(stats.solved && stats.ik_attempts >= 1 && stats.goals >= 1);
+                // Within the speed limits: every action in [-1, 1].
+                let v = p.env().chain().velocity_limits();
+                for (k, row) in plan.joint_vel.chunks_exact(plan.dof).enumerate() {
+                    assert!(row.iter().zip(v).all(|(q, v)| q.abs() <= v * (1.0 + 1e-6)), "row {k}");
+                }
+            }
+        }
+        assert!(blocked >= 5, "the straight way is blocked in {blocked} of 30");
+        assert!(solved >= 29, "solved {solved} of 30");
+    }
+
+    #[test]
+    fn a_caged_target_is_reported_unsolved_within_the_budget() {
+        let t = [0.45, 0.15, 0.3];
+        // Six walls 6 cm from the target, 1 cm thick: no arm pose puts the tip inside.
+        let wall = |axis: usize, sign: f64| {
+            let mut h = [0.07; 3];
+            h[axis] = 0.005;
+            let mut c = t;
+            c[axis] += sign * 0.065;
+            Obstacle::cuboid(h, c, None)
+        };
+        let cage: Vec<Obstacle> = (0..3).flat_map(|a| [wall(a, 1.0), wall(a, -1.0)]).collect();
+        // No time budget in play (an hour): the attempts' bound ends the search, on any machine.
+        let rrt = RrtConnect { seed: 1, budget_s: 3600.0, ..RrtConnect::default() };
+        let mut p = Planner::rrt_connect(&Config::default(), None, rrt.clone()).unwrap();
+        let plan = p.plan_among(&t, None, Some(&cage)).unwrap();
+        assert!(!plan.summary.reached && plan.summary.steps == 0 && !plan.summary.collision);
+        let why = plan.summary.reason.clone().unwrap();
+        assert!(why.contains("no collision-free inverse-kinematics solution"), "{why}");
+        let stats = plan.summary.rrt_connect.unwrap();
+        assert!(!stats.solved && stats.goals == 0);
+        assert_eq!(stats.ik_attempts, rrt.ik_attempts, "every attempt made, then given up");
+        // A budget spent before the first attempt: given up at once, whatever the machine.
+        let instant = RrtConnect { budget_s: 1e-9, ..rrt };
+        let mut p = Planner::rrt_connect(&Config::default(), None, instant).unwrap();
+        let stats = p.plan_among(&t, None, Some(&cage)).unwrap().summary.rrt_connect.unwrap();
+        assert_eq!((stats.ik_attempts, stats.solved), (0, false));
+        let line = serde_json::to_value(plan.batch_record()).unwrap();
+        assert_eq!(line["reached"], false);
+        assert!(line["reason"].as_str().unwrap().contains("RRT-Connect found no path"));
+        // A budget of one iteration on a blocked problem: unsolved, the iteration budget named.
+        let set = problems::obstacle_in_path(&Config::default(), 40, 11).unwrap();
+        let mut tight = Planner::rrt_connect(
+            &Config::default(),
+            None,
+            RrtConnect { max_iterations: 1, ..RrtConnect::default() },
+        )
+        .unwrap();
+        let reasons: Vec<String> = set
+            .iter()
+            .filter_map(|pr| tight.plan_among(&pr.target, None, Some(&pr.obstacles)).unwrap().summary.reason)
+            .collect();
+        assert!(reasons.iter().any(|r| r.contains("iteration budget (1)")), "{reasons:?}");
+    }
+
+    #[test]
+    fn a_seed_gives_the_same_paths() {
+        let set = problems::obstacle_in_path(&Config::default(), 8, 5).unwrap();
+        let run = |seed: u64| -> Vec<(Vec<f64>, RrtStats)> {
+            let mut p = planner(seed);
+            set.iter()
+                .map(|pr| {
+                    let plan = p.plan_among(&pr.target, None, Some(&pr.obstacles)).unwrap();
+                    (plan.q, plan.summary.rrt_connect.unwrap())
+                })
+                .collect()
+        };
+        let (a, b) = (run(9), run(9));
+        assert_eq!(a, b);
+        assert!(a.iter().all(|(_, s)| s.seed == 9));
+        // Another seed: the same problems, other searches (some of them).
+        let c = run(10);
+        assert!(a.iter().zip(&c).any(|(x, y)| x.1 != y.1));
+    }
+}

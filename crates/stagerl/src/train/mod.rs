@@ -28,6 +28,7 @@
 //! run from `latest.safetensors` so that its `episodes.csv` (but the wall time) and its networks
 //! are bit-identical to those of an uninterrupted run.
 
+pub mod demonstrations;
 pub mod eval;
 pub mod final_eval;
 pub mod her;
@@ -50,6 +51,7 @@ use crate::io::csv::{parse_line, push_row, CsvRecord, CsvRow};
 use crate::io::csv::{EpisodeCsv, EpisodeRecord, EvalPoint};
 use crate::io::tensorboard::EventWriter;
 use crate::{Error, Result};
+use demonstrations::DemoStats;
 
 use crate::run::dir::RunDir;
 use eval::{deterministic, evaluate, EvalOptions, EvalSummary};
@@ -72,6 +74,8 @@ pub struct Progress<'a> {
     /// With `train.curriculum`: the stage that begins with the next episode, when it changed
     /// after this one (the stage of this episode is in the record).
     pub stage_advance: Option<StageAdvance>,
+    /// With `train.demonstrations`: what they stored, on the episode they were stored before.
+    pub demonstrations: Option<DemoStats>,
 }
 
 /// How a run ended.
@@ -218,6 +222,9 @@ struct EpisodeEnd {
     /// With `train.curriculum`: the stage that begins after this episode, if it changed.
     #[serde(skip)]
     advance: Option<StageAdvance>,
+    /// With `train.demonstrations`: what they stored, when that was done before this episode.
+    #[serde(skip)]
+    demonstrations: Option<DemoStats>,
 }
 
 /// How experience is collected and learnt from: a replay buffer and updates after every step
@@ -427,6 +434,7 @@ impl Trainer {
                 env_steps: train.env_steps,
                 last,
                 stage_advance: end.advance,
+                demonstrations: end.demonstrations,
             });
             if record.episode % 50 == 0 {
                 logs.tb.flush()?;

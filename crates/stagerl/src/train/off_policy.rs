@@ -10,13 +10,14 @@
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+use super::demonstrations::{self, DemoStats};
 use super::her::{HerState, Relabeller};
 use super::{Collector, Counters, EpisodeEnd};
 use crate::agent::replay::{Batch, ReplayBuffer};
 use crate::agent::{Agent, AgentConfig, OffPolicy, UpdateStats};
 use crate::base::rng::Rng;
 use crate::config::curriculum::StageAdvance;
-use crate::config::{Config, CurriculumConfig, CurriculumState};
+use crate::config::{Config, CurriculumConfig, CurriculumState, DemonstrationsConfig};
 use crate::env::{rollout, Driver, EnvState, Flow, Outcome, ReachEnv, Scratch, Step, Transition};
 use crate::io::checkpoint::Checkpoint;
 use crate::{Error, Result};
@@ -34,6 +35,9 @@ struct OffPolicyState {
     warmup_rng: Rng,
     replay_len: usize,
     replay_pos: usize,
+    /// Transitions kept for good at the buffer's start (`train.demonstrations`).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    replay_protected: usize,
     /// A stop came between the updates of this environment step: they go on first.
     #[serde(default)]
     step_under_way: Option<StepUnderWay>,
@@ -43,6 +47,9 @@ struct OffPolicyState {
     /// The obstacle curriculum (`train.curriculum`): the stage and its window of outcomes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     curriculum: Option<CurriculumState>,
+    /// `train.demonstrations`: what was stored, once it was (before the first episode).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    demonstrations: Option<DemoStats>,
 }
 
 /// An environment step taken whose updates are not all done yet; once they are, what the
@@ -82,6 +89,10 @@ pub(super) struct OffPolicyCollector {
     cfg: AgentConfig,
     /// The `[train.curriculum]` section, if any.
     curriculum: Option<CurriculumConfig>,
+    /// The `[train.demonstrations]` section and the environment they are planned in (the
+    /// training one as the task makes it), until they are stored.
+    demonstrations: Option<(DemonstrationsConfig, ReachEnv)>,
+    seed: u64,
     relabeller: Relabeller,
     state: OffPolicyState,
 }
@@ -97,6 +108,7 @@ impl OffPolicyCollector {
     ) -> Result<OffPolicyCollector> {
         let seed = cfg.train.seed;
         let curriculum = cfg.train.curriculum.clone();
+        let demonstrations = cfg.train.demonstrations.clone().map(|d| (d, env.clone()));
         match &curriculum {
             Some(c) => apply_stage(c, 0, &mut env)?,
             None => env.set_obstacles_in_path(cfg.train.obstacles_in_path)?,
@@ -110,6 +122,8 @@ impl OffPolicyCollector {
             cfg: cfg.agent.clone(),
             relabeller: Relabeller::default(),
             curriculum,
+            demonstrations,
+            seed,
             state: OffPolicyState {
                 in_episode: false,
                 episode_reward: 0.0,
@@ -118,9 +132,11 @@ impl OffPolicyCollector {
                 warmup_rng: Rng::derived(seed, 2),
                 replay_len: 0,
                 replay_pos: 0,
+                replay_protected: 0,
                 step_under_way: None,
                 her: cfg.agent.her.map(|_| HerState::new(Rng::derived(seed, 4))),
                 curriculum: cfg.train.curriculum.as_ref().map(|_| CurriculumState::default()),
+                demonstrations: None,
             },
             env,
         })
@@ -201,6 +217,7 @@ impl Collector for OffPolicyCollector {
         last_stats: &mut Option<UpdateStats>,
         stop_requested: &dyn Fn() -> bool,
     ) -> Result<Option<EpisodeEnd>> {
+        let demonstrated = self.demonstrate()?;
         let Some(last) = self.collect_episode(n, last_stats, stop_requested)? else {
             return Ok(None);
         };
@@ -216,6 +233,7 @@ impl Collector for OffPolicyCollector {
             shield: self.env.episode_shield_stats(),
             curriculum_stage,
             advance,
+            demonstrations: demonstrated,
         }))
     }
 
@@ -227,6 +245,7 @@ impl Collector for OffPolicyCollector {
         self.state.env = self.env.state();
         self.state.replay_len = self.buffer.len();
         self.state.replay_pos = self.buffer.position();
+        self.state.replay_protected = self.buffer.protected();
         for (name, data) in self.buffer.arrays() {
             ck.put_tensor(name, &[data.len()], data);
         }
@@ -250,6 +269,7 @@ impl Collector for OffPolicyCollector {
             state.replay_pos,
             [data[0], data[1], data[2], data[3], data[4]],
         )?;
+        self.buffer.set_protected(state.replay_protected)?;
         self.env.restore(&state.env)?;
         self.state = state;
         self.restore_stage(path)
@@ -257,6 +277,22 @@ impl Collector for OffPolicyCollector {
 }
 
 impl OffPolicyCollector {
+    /// With `train.demonstrations`, before the first episode: plan and store them (once; a
+    /// resumed run has them in its buffer already). What they gave, when they were stored now.
+    fn demonstrate(&mut self) -> Result<Option<DemoStats>> {
+        if self.state.demonstrations.is_some() {
+            return Ok(None);
+        }
+        let Some((cfg, env)) = self.demonstrations.take() else {
+            return Ok(None);
+        };
+        let stats = demonstrations::demonstrate(&cfg, self.seed, env, self.agent.as_mut(), &mut self.buffer)?;
+        // Kept for good, as DDPGfD keeps them: the ring overwrites only what comes after.
+        self.buffer.protect_filled()?;
+        self.state.demonstrations = Some(stats);
+        Ok(Some(stats))
+    }
+
     /// With `train.curriculum`: count the episode just ended (`success`) and, when the stage
     /// changes, set the environment to the next one from the next episode on. The stage the
     /// episode was played at, and the change.
@@ -286,6 +322,10 @@ impl OffPolicyCollector {
             ))),
         }
     }
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// Set `env` to stage `stage` of curriculum `cfg` (from its next episode on).

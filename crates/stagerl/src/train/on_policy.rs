@@ -136,6 +136,7 @@ impl OnPolicyCollector {
                     shield: None,
                     curriculum_stage: None,
                     advance: None,
+                    demonstrations: None,
                 });
                 self.episode_reward[i] = 0.0;
                 self.episode_steps[i] = 0;

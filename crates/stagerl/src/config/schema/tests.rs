@@ -58,6 +58,7 @@ critic_dropout = 0.01
 critic_layer_norm = true
 actor_log_std = "clip"
 policy_delay = 3
+bc_weight = 2.0
 [agent.ppo]
 norm_obs = { clip = 10.0 }
 [agent.crossq]
@@ -80,6 +81,12 @@ window = 50
 advance_at = 0.7
 obstacles_in_path = [0.0, 0.5]
 max_obstacles = [1, 2]
+[train.demonstrations]
+episodes = 50
+planner = "rrt-connect"
+obstacles_in_path = 1.0
+max_iterations = 2000
+clearance_m = 0.03
 "#;
 
 /// Every `section.field` path of a JSON value (list items as their section).
@@ -170,6 +177,7 @@ fn the_listing_is_the_default_config_and_shows_the_optional_sections_commented_o
         "# [agent.ppo.norm_obs]",
         "# [agent.sac]",
         "# [train.curriculum]",
+        "# [train.demonstrations]",
     ] {
         assert!(text.lines().any(|l| l == section), "{section} in\n{text}");
     }
