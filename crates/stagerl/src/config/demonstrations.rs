@@ -45,6 +45,10 @@ pub struct DemonstrationsConfig {
     /// obstacles grown by this much (less where the start pose is closer; at least the
     /// planner's own 1.25 mm margin). In [0, 0.5].
     pub clearance_m: f64,
+    /// The planned paths' speed as a fraction of the joints' speed limits, in (0, 1]: every
+    /// demonstrated action is at most this in magnitude (1: the plans of `stagerl plan`, the
+    /// fastest joint at its limit throughout).
+    pub speed_fraction: f64,
 }
 
 impl Default for DemonstrationsConfig {
@@ -55,6 +59,7 @@ impl Default for DemonstrationsConfig {
             obstacles_in_path: 0.0,
             max_iterations: crate::sim::rrt_connect::DEFAULT_ITERATIONS,
             clearance_m: 0.0,
+            speed_fraction: 1.0,
         }
     }
 }
@@ -80,6 +85,9 @@ impl DemonstrationsConfig {
         }
         if !(0.0..=0.5).contains(&self.clearance_m) {
             return Err(Error::config(f("clearance_m"), self.clearance_m, "metres in [0, 0.5]"));
+        }
+        if !(self.speed_fraction > 0.0 && self.speed_fraction <= 1.0) {
+            return Err(Error::config(f("speed_fraction"), self.speed_fraction, "a fraction in (0, 1]"));
         }
         let p = self.obstacles_in_path;
         if !(0.0..=1.0).contains(&p) {

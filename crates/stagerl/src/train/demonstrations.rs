@@ -8,7 +8,7 @@
 //! 2. Demonstration `i`: reset, then RRT-Connect ([`RrtConnect::plan_timed`], seed
 //!    `Rng::derived(seed, 7)`'s `i`-th draw, `max_iterations` and no wall-time budget) from the
 //!    start pose to the target among the episode's obstacles grown by `clearance_m`, timed at
-//!    the joints' speed limits. An unsolved plan stores nothing.
+//!    `speed_fraction` of the joints' speed limits. An unsolved plan stores nothing.
 //! 3. The plan played in the environment ([`track_waypoints`]: one waypoint per control step):
 //!    each transition, with the reward training gives it, goes into the replay buffer; its
 //!    observation joins `agent.norm_obs`'s statistics as an explored one would. A plan longer
@@ -80,7 +80,8 @@ pub(super) fn demonstrate(
             env.obstacles(),
             &start,
             &env.target(),
-            env.task().dt_s,
+            // Waypoints `speed_fraction` of the limits apart: a step of `dt_s` at that speed.
+            env.task().dt_s * cfg.speed_fraction,
             cfg.clearance_m,
         );
         let Ok(waypoints) = path else { continue };
@@ -169,6 +170,13 @@ mod tests {
         assert_eq!((stats, buffer.arrays()), (again, b2.arrays()));
         let (_, b3) = demos(&cfg, 4);
         assert_ne!(buffer.arrays()[0].1[..n], b3.arrays()[0].1[..n]);
+        // At half the speed limits: actions within [-0.5, 0.5], about twice the steps.
+        let slow = config("[train.demonstrations]\nepisodes = 20\nspeed_fraction = 0.5\n");
+        let (s2, b2) = demos(&slow, 3);
+        let m = b2.len();
+        assert!(b2.arrays()[1].1[..m * 6].iter().all(|a| a.abs() <= 0.5 + 1e-6));
+        assert!(b2.arrays()[1].1[..m * 6].iter().any(|a| a.abs() > 0.45), "the fastest joint near 0.5");
+        assert!(s2.transitions as f64 > 1.6 * stats.transitions as f64, "{s2:?} vs {stats:?}");
     }
 
     #[test]

@@ -87,6 +87,7 @@ planner = "rrt-connect"
 obstacles_in_path = 1.0
 max_iterations = 2000
 clearance_m = 0.03
+speed_fraction = 0.5
 "#;
 
 /// Every `section.field` path of a JSON value (list items as their section).
