@@ -81,6 +81,9 @@ pub struct RrtConnect {
     pub goals: u32,
     /// Shortcut attempts.
     pub shortcuts: u32,
+    /// How much [`RrtConnect::plan_timed`] grows the obstacles, metres (at least [`MARGIN_M`],
+    /// the default).
+    pub margin_m: f64,
 }
 
 /// Default `--planner-budget-s`.
@@ -98,6 +101,7 @@ impl Default for RrtConnect {
             ik_attempts: 1000,
             goals: 3,
             shortcuts: 300,
+            margin_m: MARGIN_M,
         }
     }
 }
@@ -378,7 +382,7 @@ impl RrtConnect {
 impl RrtConnect {
     /// The timed path from `start` to `target` among `obstacles`, one row of joint positions per
     /// control step of `dt_s` seconds (the first the start), within the joints' speed limits: the
-    /// search ([`RrtConnect::solve`]) among the obstacles grown by `margin_m` (at least
+    /// search ([`RrtConnect::solve`]) among the obstacles grown by [`RrtConnect::margin_m`] (at least
     /// [`MARGIN_M`]; half the distance from the start pose to the nearest obstacle where that is
     /// less than twice the margin), then [`time_parameterise`]. The collider's obstacles are left
     /// grown.
@@ -390,11 +394,10 @@ impl RrtConnect {
         start: &[f64],
         target: &Vector3<f64>,
         dt_s: f64,
-        margin_m: f64,
     ) -> (RrtStats, Result<Vec<Vec<f64>>, String>) {
         collider.set_obstacles(obstacles);
         let near = collider.motion_clearance_m(chain, start, start).unwrap_or(f64::INFINITY);
-        let margin = margin_m.max(MARGIN_M).min(0.5 * near.max(0.0));
+        let margin = self.margin_m.max(MARGIN_M).min(0.5 * near.max(0.0));
         let grown: Vec<Obstacle> = obstacles.iter().map(|o| o.grown(margin)).collect();
         collider.set_obstacles(&grown);
         let (stats, path) = self.solve(chain, collider, start, target);

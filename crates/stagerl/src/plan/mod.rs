@@ -515,7 +515,7 @@ impl Planner {
             let (env, c) = (&self.env, &mut self.collider);
             let start = env.joint_positions().to_vec();
             let (stats, path) =
-                rrt.plan_timed(env.chain(), c, env.obstacles(), &start, &env.target(), env.task().dt_s, 0.0);
+                rrt.plan_timed(env.chain(), c, env.obstacles(), &start, &env.target(), env.task().dt_s);
             plan.summary.rrt_connect = Some(stats);
             match path {
                 Ok(path) => waypoints = path,

@@ -70,6 +70,7 @@ pub(super) fn demonstrate(
             seed: seeds.next_u64(),
             budget_s: f64::INFINITY,
             max_iterations: cfg.max_iterations,
+            margin_m: cfg.clearance_m,
             ..RrtConnect::default()
         };
         start.clear();
@@ -82,7 +83,6 @@ pub(super) fn demonstrate(
             &env.target(),
             // Waypoints `speed_fraction` of the limits apart: a step of `dt_s` at that speed.
             env.task().dt_s * cfg.speed_fraction,
-            cfg.clearance_m,
         );
         let Ok(waypoints) = path else { continue };
         // 3. The plan played and stored.
