@@ -57,7 +57,7 @@ RESOLUTION = {
 DIFFERENCES = {"episodes": {"env_steps"}}
 DIFF_SUFFIX = ":diff"
 
-SKIP_DIRS = {"tensorboard", "checkpoints"}
+SKIP_DIRS = {"tb", "tensorboard", "checkpoints"}  # `tb`: a run's TensorBoard events
 
 
 def kind_of(name):
