@@ -103,10 +103,12 @@ impl<'a> Reporter<'a> {
     pub fn episode(&mut self, p: &Progress<'_>) {
         let r = p.record;
         if let Some(d) = &p.demonstrations {
+            let contacts =
+                d.collided.map_or("contacts not checked".to_string(), |c| format!("{c} with a contact"));
             let line = format!(
                 "demonstrations: {} episode(s) planned by RRT-Connect, {} solved and stored ({} reached the \
-                 target, {} with a contact): {} transitions in the replay buffer",
-                d.episodes, d.solved, d.reached, d.collided, d.transitions
+                 target, {contacts}): {} transitions in the replay buffer",
+                d.episodes, d.solved, d.reached, d.transitions
             );
             match &self.bar {
                 Some(b) => b.println(line),

@@ -247,7 +247,7 @@ fn robot_prints_the_arm_and_writes_a_config_that_trains() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// A run on an arm without any collision shape says so before it starts.
+/// A run on an arm without any collision shape says so before it starts (its demonstrations too).
 #[test]
 fn train_warns_when_the_arm_has_no_collision_shape() {
     let dir = std::env::temp_dir().join(format!("stagerl-cli-bare-{}", std::process::id()));
@@ -264,7 +264,8 @@ fn train_warns_when_the_arm_has_no_collision_shape() {
     let cfg = dir.join("bare.toml");
     let urdf = dir.join("bare.urdf").display().to_string();
     let toml = format!(
-        "[robot]\nurdf = {urdf:?}\n[task]\nhome_pose_rad = [0.0, 0.0]\ntarget_joint_range_rad = [1.0, 0.5]\n"
+        "[robot]\nurdf = {urdf:?}\n[task]\nhome_pose_rad = [0.0, 0.0]\ntarget_joint_range_rad = [1.0, 0.5]\n\
+         [train.demonstrations]\nepisodes = 3\n"
     );
     std::fs::write(&cfg, toml).unwrap();
     let run = dir.join("run");
@@ -293,6 +294,12 @@ fn train_warns_when_the_arm_has_no_collision_shape() {
     let row: Vec<&str> = episodes.lines().nth(1).unwrap().split(',').collect();
     assert_eq!(row[6], "", "{episodes}");
     assert!(String::from_utf8_lossy(&out.stdout).contains("collisions not checked"), "{out:?}");
+    // Nor do the planner's demonstrations claim 0 contacts.
+    let demos = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .find(|l| l.starts_with("demonstrations:"))
+        .map(str::to_owned);
+    assert!(demos.as_deref().is_some_and(|l| l.contains("contacts not checked")), "{out:?}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -14,7 +14,9 @@
 //!    minimises `mean (Q_i(s, a) - y)^2`;
 //! 2. actor minimises `mean (alpha log pi(a~|s) - Q(s, a~))`, `a~ ~ pi(.|s)`, reparameterised,
 //!    so the gradient flows through dQ/da and the squashed Gaussian; `Q` is `min_i Q_i` (SAC) or
-//!    `(1/N) sum_i Q_i` (`actor_q = "mean"`, REDQ's and DroQ's);
+//!    `(1/N) sum_i Q_i` (`actor_q = "mean"`, REDQ's and DroQ's); with `bc_weight` (our addition,
+//!    for `[train.demonstrations]`) plus `bc_weight * (1/B) sum_i d_i |a~_i - a_i|^2` over the
+//!    batch's demonstration rows (`d_i = 1`);
 //! 3. `log alpha` minimises `-log alpha * mean(log pi(a~|s) + H_target)`, `H_target = -act_dim`
 //!    (times `target_entropy_per_dim`);
 //!

@@ -89,18 +89,11 @@ impl DemonstrationsConfig {
         if !(self.speed_fraction > 0.0 && self.speed_fraction <= 1.0) {
             return Err(Error::config(f("speed_fraction"), self.speed_fraction, "a fraction in (0, 1]"));
         }
-        let p = self.obstacles_in_path;
-        if !(0.0..=1.0).contains(&p) {
-            return Err(Error::config(f("obstacles_in_path"), p, "a probability in [0, 1]"));
-        }
-        if p > 0.0 && !random_obstacles {
-            return Err(Error::config(
-                f("obstacles_in_path"),
-                p,
-                "0 for a task without [task.random_obstacles] (there is no random obstacle to place)",
-            ));
-        }
-        Ok(())
+        crate::env::check_in_path_probability(
+            &f("obstacles_in_path"),
+            self.obstacles_in_path,
+            random_obstacles,
+        )
     }
 }
 

@@ -129,7 +129,11 @@ pub fn check_collision_settings(on_collision: OnCollision, reward: &RewardConfig
 /// Check `train.obstacles_in_path`: a probability, and positive only when the task has random
 /// obstacles to place.
 pub fn check_obstacles_in_path(fraction: f64, random_obstacles: bool) -> Result<()> {
-    let field = "train.obstacles_in_path";
+    check_in_path_probability("train.obstacles_in_path", fraction, random_obstacles)
+}
+
+/// [`check_obstacles_in_path`] of a setting named `field` (`train.demonstrations.obstacles_in_path`).
+pub fn check_in_path_probability(field: &str, fraction: f64, random_obstacles: bool) -> Result<()> {
     if !(0.0..=1.0).contains(&fraction) {
         return Err(Error::config(field, fraction, "a probability in [0, 1]"));
     }

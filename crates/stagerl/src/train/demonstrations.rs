@@ -38,8 +38,9 @@ pub struct DemoStats {
     pub solved: u32,
     /// Stored episodes that reached the target.
     pub reached: u32,
-    /// Stored episodes with a contact (the environment's check at the control steps).
-    pub collided: u32,
+    /// Stored episodes with a contact (the environment's check at the control steps); `None`:
+    /// no contact was looked for (an arm without collision shapes).
+    pub collided: Option<u32>,
     /// Transitions stored in the replay buffer.
     pub transitions: u64,
 }
@@ -55,13 +56,13 @@ pub(super) fn demonstrate(
 ) -> Result<DemoStats> {
     // 1. The environment.
     env.reseed(Rng::derived(seed, 6).next_u64());
-    if env.task().random_obstacles.is_some() {
-        env.set_obstacles_in_path(cfg.obstacles_in_path)?;
-    }
+    env.set_obstacles_in_path(cfg.obstacles_in_path)?;
     let mut collider = ArmCollider::new(env.chain(), env.task().collision);
     let mut scratch = Scratch::new(&env);
     let mut seeds = Rng::derived(seed, 7);
-    let mut stats = DemoStats { episodes: cfg.episodes, ..DemoStats::default() };
+    let checked = env.collisions_checked();
+    let mut stats =
+        DemoStats { episodes: cfg.episodes, collided: checked.then_some(0), ..DemoStats::default() };
     let mut start = Vec::with_capacity(env.chain().dof());
     for _ in 0..cfg.episodes {
         // 2. The plan.
@@ -98,7 +99,9 @@ pub(super) fn demonstrate(
         stats.transitions += d.n;
         stats.solved += 1;
         stats.reached += u32::from(last.reached());
-        stats.collided += u32::from(env.collision_steps() > 0);
+        if let Some(c) = &mut stats.collided {
+            *c += u32::from(env.collision_steps() > 0);
+        }
     }
     Ok(stats)
 }
@@ -153,7 +156,7 @@ mod tests {
         let (stats, buffer) = demos(&cfg, 3);
         assert_eq!(
             (stats.episodes, stats.solved, stats.reached, stats.collided),
-            (20, 20, 20, 0),
+            (20, 20, 20, Some(0)),
             "{stats:?}"
         );
         assert_eq!(buffer.len() as u64, stats.transitions);
@@ -188,7 +191,7 @@ mod tests {
         );
         let (stats, buffer) = demos(&cfg, 5);
         assert!(stats.solved >= 27 && stats.reached == stats.solved, "{stats:?}");
-        assert_eq!(stats.collided, 0, "{stats:?}");
+        assert_eq!(stats.collided, Some(0), "{stats:?}");
         // No contact penalty among the stored rewards (a contact ends an episode at -10 or below).
         let n = buffer.len();
         assert!(buffer.arrays()[2].1[..n].iter().all(|&r| r > -10.0));
