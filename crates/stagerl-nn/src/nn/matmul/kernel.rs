@@ -29,6 +29,23 @@ fn forward_nb(k: usize) -> usize {
     }
 }
 
+/// Columns of a block of a copied right-hand side with AVX2: one panel of the 6 x 16 tiles, so
+/// that a panel's rows are contiguous in the buffer. Wider blocks (the AVX-512 kernels' 64
+/// columns) leave a 16-column panel's rows 256 bytes apart, in a quarter of the L1 cache's sets,
+/// where the left-hand side's lines evict them (a 32 KiB L1 on AMD's Zen 3).
+const AVX2_NB: usize = 16;
+
+/// Depth of a block of a copied right-hand side with AVX2 (with [`AVX2_NB`] columns, 16 KiB of a
+/// 32 KiB L1): 256, or 128 where the left-hand side is read down its columns (`dW += dy^T x`,
+/// one cache line of `dy` a depth step, so that those lines fit beside the block).
+fn avx2_kb(r: Raw) -> usize {
+    if r.a_cs == 1 {
+        256
+    } else {
+        128
+    }
+}
+
 /// What a tile does to its sums `v` before storing them (after the last depth block), each
 /// the same instructions as the separate loop in `Activation`, so the same bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -94,13 +111,14 @@ impl Raw {
 }
 
 /// One register tile: rows `0..MR` of `r`, columns `0..NV * W` of which the last vector's lanes
-/// outside `last` are neither read nor written. Accumulators: `MR x NV` registers.
+/// outside `last` are neither read nor written (`FULL`: `last` is all lanes, so that vector is
+/// read and written with plain moves). Accumulators: `MR x NV` registers.
 ///
 /// # Safety
 /// The tile's elements (rows `0..MR`, the columns of the full vectors and of `last`, depth
 /// `0..r.k`) must lie inside the operands; the CPU must have `S`'s instructions.
 #[inline(always)]
-unsafe fn tile<S: Lanes, const MR: usize, const NV: usize>(s: S, r: Raw, last: S::M) {
+unsafe fn tile<S: Lanes, const MR: usize, const NV: usize, const FULL: bool>(s: S, r: Raw, last: S::M) {
     let w = S::W;
     let mut acc = [[s.zero(); NV]; MR];
     // SAFETY: every pointer below addresses an element of the tile (the caller's guarantee).
@@ -109,8 +127,7 @@ unsafe fn tile<S: Lanes, const MR: usize, const NV: usize>(s: S, r: Raw, last: S
             for (i, row) in acc.iter_mut().enumerate() {
                 let c = r.c.add(i * r.c_rs);
                 for v in 0..NV {
-                    row[v] =
-                        if v + 1 < NV { s.load(c.add(v * w)) } else { s.load_masked(c.add(v * w), last) };
+                    row[v] = s.load_part(c.add(v * w), v + 1 < NV || FULL, last);
                 }
             }
         }
@@ -118,15 +135,15 @@ unsafe fn tile<S: Lanes, const MR: usize, const NV: usize>(s: S, r: Raw, last: S
             // Rows of the left-hand side contiguous: one pointer a row, indexed by `p`.
             let rows: [*const f32; MR] = std::array::from_fn(|i| r.a.add(i * r.a_rs));
             for p in 0..r.k {
-                step(s, &mut acc, (r.b.add(p * r.b_rs), last), |i| *rows[i].add(p));
+                step::<S, MR, NV, FULL>(s, &mut acc, (r.b.add(p * r.b_rs), last), |i| *rows[i].add(p));
             }
         } else {
             for p in 0..r.k {
                 let a = r.a.add(p * r.a_cs);
-                step(s, &mut acc, (r.b.add(p * r.b_rs), last), |i| *a.add(i * r.a_rs));
+                step::<S, MR, NV, FULL>(s, &mut acc, (r.b.add(p * r.b_rs), last), |i| *a.add(i * r.a_rs));
             }
         }
-        store(s, r, &acc, last);
+        store::<S, MR, NV, FULL>(s, r, &acc, last);
     }
 }
 
@@ -137,7 +154,7 @@ unsafe fn tile<S: Lanes, const MR: usize, const NV: usize>(s: S, r: Raw, last: S
 /// # Safety
 /// As [`tile`], for `c` and, as `r.fuse` needs them, `bias`, `ys` and `bias_grad`.
 #[inline(always)]
-unsafe fn store<S: Lanes, const MR: usize, const NV: usize>(
+unsafe fn store<S: Lanes, const MR: usize, const NV: usize, const FULL: bool>(
     s: S,
     r: Raw,
     acc: &[[S::V; NV]; MR],
@@ -146,23 +163,27 @@ unsafe fn store<S: Lanes, const MR: usize, const NV: usize>(
     // SAFETY: the caller's guarantee.
     unsafe {
         match r.fuse {
-            Fuse::None => each(s, r, acc, last, |_, _, x| x),
+            Fuse::None => each::<S, MR, NV, FULL>(s, r, acc, last, |_, _, x| x),
             Fuse::Bias | Fuse::BiasRelu => {
                 let mut bias = [s.zero(); NV];
                 for (v, b) in bias.iter_mut().enumerate() {
-                    *b = s.load_masked(r.bias.add(v * S::W), if v + 1 < NV { s.mask(S::W) } else { last });
+                    *b = s.load_part(r.bias.add(v * S::W), v + 1 < NV || FULL, last);
                 }
                 if r.fuse == Fuse::Bias {
-                    each(s, r, acc, last, |_, v, x| s.add(x, bias[v]));
+                    each::<S, MR, NV, FULL>(s, r, acc, last, |_, v, x| s.add(x, bias[v]));
                 } else {
-                    each(s, r, acc, last, |_, v, x| s.max(s.add(x, bias[v]), s.zero()));
+                    each::<S, MR, NV, FULL>(s, r, acc, last, |_, v, x| s.max(s.add(x, bias[v]), s.zero()));
                 }
             }
-            Fuse::Deriv(Activation::Identity, sum) => deriv(s, r, acc, last, sum, |g, _| g),
-            Fuse::Deriv(Activation::Relu, sum) => deriv(s, r, acc, last, sum, |g, y| s.where_positive(y, g)),
-            Fuse::Deriv(Activation::Tanh, sum) => {
-                deriv(s, r, acc, last, sum, |g, y| s.mul(g, s.sub(s.splat(1.0), s.mul(y, y))))
+            Fuse::Deriv(Activation::Identity, sum) => {
+                deriv::<S, MR, NV, FULL>(s, r, acc, last, sum, |g, _| g)
             }
+            Fuse::Deriv(Activation::Relu, sum) => {
+                deriv::<S, MR, NV, FULL>(s, r, acc, last, sum, |g, y| s.where_positive(y, g))
+            }
+            Fuse::Deriv(Activation::Tanh, sum) => deriv::<S, MR, NV, FULL>(s, r, acc, last, sum, |g, y| {
+                s.mul(g, s.sub(s.splat(1.0), s.mul(y, y)))
+            }),
         }
     }
 }
@@ -172,7 +193,7 @@ unsafe fn store<S: Lanes, const MR: usize, const NV: usize>(
 /// # Safety
 /// As [`store`].
 #[inline(always)]
-unsafe fn each<S: Lanes, const MR: usize, const NV: usize>(
+unsafe fn each<S: Lanes, const MR: usize, const NV: usize, const FULL: bool>(
     s: S,
     r: Raw,
     acc: &[[S::V; NV]; MR],
@@ -183,13 +204,7 @@ unsafe fn each<S: Lanes, const MR: usize, const NV: usize>(
         for v in 0..NV {
             let x = out(i, v, row[v]);
             // SAFETY: row `i`, vector `v` of the tile's `c` (the caller's guarantee).
-            unsafe {
-                s.store_masked(
-                    r.c.add(i * r.c_rs + v * S::W),
-                    if v + 1 < NV { s.mask(S::W) } else { last },
-                    x,
-                )
-            };
+            unsafe { s.store_part(r.c.add(i * r.c_rs + v * S::W), v + 1 < NV || FULL, last, x) };
         }
     }
 }
@@ -200,7 +215,7 @@ unsafe fn each<S: Lanes, const MR: usize, const NV: usize>(
 /// # Safety
 /// As [`store`].
 #[inline(always)]
-unsafe fn deriv<S: Lanes, const MR: usize, const NV: usize>(
+unsafe fn deriv<S: Lanes, const MR: usize, const NV: usize, const FULL: bool>(
     s: S,
     r: Raw,
     acc: &[[S::V; NV]; MR],
@@ -208,23 +223,23 @@ unsafe fn deriv<S: Lanes, const MR: usize, const NV: usize>(
     sum: bool,
     d: impl Fn(S::V, S::V) -> S::V,
 ) {
-    let mask = |v: usize| if v + 1 < NV { s.mask(S::W) } else { last };
+    let full = |v: usize| v + 1 < NV || FULL;
     let mut sums = [s.zero(); NV];
     // SAFETY: the tile's elements of `ys` and columns of `bias_grad` (the caller's guarantee).
     unsafe {
         if sum {
             for (v, t) in sums.iter_mut().enumerate() {
-                *t = s.load_masked(r.bias_grad.add(v * S::W), mask(v));
+                *t = s.load_part(r.bias_grad.add(v * S::W), full(v), last);
             }
         }
-        each(s, r, acc, last, |i, v, x| {
-            let g = d(x, s.load_masked(r.ys.add(i * r.c_rs + v * S::W), mask(v)));
+        each::<S, MR, NV, FULL>(s, r, acc, last, |i, v, x| {
+            let g = d(x, s.load_part(r.ys.add(i * r.c_rs + v * S::W), full(v), last));
             sums[v] = s.add(sums[v], g);
             g
         });
         if sum {
             for (v, t) in sums.iter().enumerate() {
-                s.store_masked(r.bias_grad.add(v * S::W), mask(v), *t);
+                s.store_part(r.bias_grad.add(v * S::W), full(v), last, *t);
             }
         }
     }
@@ -236,7 +251,7 @@ unsafe fn deriv<S: Lanes, const MR: usize, const NV: usize>(
 /// # Safety
 /// As [`tile`]: `b`'s lanes and the values `a` reads must lie inside the operands.
 #[inline(always)]
-unsafe fn step<S: Lanes, const MR: usize, const NV: usize>(
+unsafe fn step<S: Lanes, const MR: usize, const NV: usize, const FULL: bool>(
     s: S,
     acc: &mut [[S::V; NV]; MR],
     (b, last): (*const f32, S::M),
@@ -247,7 +262,7 @@ unsafe fn step<S: Lanes, const MR: usize, const NV: usize>(
     // SAFETY: the caller's guarantee.
     unsafe {
         for v in 0..NV {
-            bv[v] = if v + 1 < NV { s.load(b.add(v * w)) } else { s.load_masked(b.add(v * w), last) };
+            bv[v] = s.load_part(b.add(v * w), v + 1 < NV || FULL, last);
         }
     }
     for (i, row) in acc.iter_mut().enumerate() {
@@ -258,57 +273,58 @@ unsafe fn step<S: Lanes, const MR: usize, const NV: usize>(
     }
 }
 
-/// All rows of one column panel of `r` (`NV` vectors wide, the last one masked by `last`):
-/// tiles of `MR < 24` rows, then one tile of the remaining rows.
-///
-/// # Safety
-/// As [`tile`], for all `r.m` rows.
-#[inline(always)]
-unsafe fn panel<S: Lanes, const MR: usize, const NV: usize>(s: S, r: Raw, last: S::M) {
-    let mut i = 0;
-    // SAFETY (every call): rows `i..i + rows` lie inside `0..r.m`, so inside the operands.
-    unsafe {
-        while i + MR <= r.m {
-            tile::<S, MR, NV>(s, r.rows_from(i), last);
-            i += MR;
-        }
-        let t = r.rows_from(i);
-        macro_rules! remainder {
-            ($($rows:literal)*) => {
+/// `$name::<FULL>(s, r, last)`: all rows of one column panel of `r` (`$nv` vectors of `$s`
+/// wide, the last one masked by `last`): tiles of `$mr` rows, then one tile of the remaining
+/// rows (one of `$rem`, the sizes below `$mr`). One function per panel width and level, so that
+/// only the tiles a level uses are compiled.
+macro_rules! panel_fn {
+    ($name:ident, $s:ty, $nv:literal, $mr:literal, [$($rem:literal)*]) => {
+        /// See `panel_fn`.
+        ///
+        /// # Safety
+        /// As [`tile`], for all `r.m` rows.
+        #[inline(always)]
+        unsafe fn $name<const FULL: bool>(s: $s, r: Raw, last: <$s as Lanes>::M) {
+            let mut i = 0;
+            // SAFETY (every call): rows `i..i + rows` lie inside `0..r.m`, so inside the operands.
+            unsafe {
+                while i + $mr <= r.m {
+                    tile::<$s, $mr, $nv, FULL>(s, r.rows_from(i), last);
+                    i += $mr;
+                }
+                let t = r.rows_from(i);
                 match r.m - i {
-                    $($rows if $rows < MR => tile::<S, $rows, NV>(s, t, last),)*
+                    $($rem => tile::<$s, $rem, $nv, FULL>(s, t, last),)*
                     _ => {}
                 }
-            };
+            }
         }
-        remainder!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23);
-    }
+    };
 }
 
+panel_fn!(avx512_panel1, Avx512, 1, 24, [1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23]);
+panel_fn!(avx512_panel2, Avx512, 2, 12, [1 2 3 4 5 6 7 8 9 10 11]);
+panel_fn!(avx512_panel3, Avx512, 3, 8, [1 2 3 4 5 6 7]);
+panel_fn!(avx512_panel4, Avx512, 4, 6, [1 2 3 4 5]);
+panel_fn!(avx2_panel1, Avx2, 1, 12, [1 2 3 4 5 6 7 8 9 10 11]);
+panel_fn!(avx2_panel2, Avx2, 2, 6, [1 2 3 4 5]);
+
 /// The whole product `r` in column panels of up to `NV_MAX` vectors (the last panel as narrow
-/// as its columns allow), with tiles of `MR[nv - 1]` rows for a panel of `nv` vectors.
+/// as its columns allow), each run by `panel(nv, full, sub, last)`: `nv` vectors, the last
+/// masked by `last`, `full` if that mask is all lanes.
 ///
 /// # Safety
-/// `r` must lie inside its operands; the CPU must have `S`'s instructions.
+/// `r` must lie inside its operands; the CPU must have `S`'s instructions; `panel` must run
+/// the panel it is given as [`tile`] would (within its operands).
 #[inline(always)]
-unsafe fn product<S: Lanes, const NV_MAX: usize>(s: S, r: Raw, mr: [usize; 4]) {
+unsafe fn product<S: Lanes, const NV_MAX: usize>(s: S, r: Raw, panel: impl Fn(usize, bool, Raw, S::M)) {
     let mut j = 0;
     while j < r.n {
         let cols = (r.n - j).min(NV_MAX * S::W);
         let nv = cols.div_ceil(S::W);
         let (sub, last) = (r.cols_from(j), s.mask(cols - (nv - 1) * S::W));
-        // SAFETY: columns `j..j + cols` lie inside `0..r.n`; the masks cover exactly them.
-        unsafe {
-            macro_rules! panels {
-                ($($nv:literal: $mr:literal),*) => {
-                    match (nv, mr[nv - 1]) {
-                        $(($nv, $mr) => panel::<S, $mr, $nv>(s, sub, last),)*
-                        _ => unreachable!("no tile of {nv} vectors"),
-                    }
-                };
-            }
-            panels!(1: 24, 1: 12, 2: 12, 2: 6, 3: 8, 4: 6);
-        }
+        // Columns `j..j + cols` lie inside `0..r.n`; the masks cover exactly them.
+        panel(nv, cols == nv * S::W, sub, last);
         j += cols;
     }
 }
@@ -403,7 +419,8 @@ unsafe fn transpose8(r: [__m256; 8]) -> [__m256; 8] {
 }
 
 /// The product `r` with its right-hand side read from `rhs` (not `r.b`), copied block by block
-/// (at most `nb_max` columns and [`BUF`] values) into a stack buffer with [`pack`]: contiguous,
+/// (at most `nb_max` columns and `kb_max` rows, `nb_max * kb_max <= BUF` values) into a stack
+/// buffer with [`pack`]: contiguous,
 /// so that its rows do not compete for the same cache sets whatever the stride. Each depth
 /// block's product accumulates onto the previous one's stored result (lossless: the same
 /// unbroken chains); the epilogue (`r.fuse`) runs after the last.
@@ -412,10 +429,14 @@ unsafe fn transpose8(r: [__m256; 8]) -> [__m256; 8] {
 /// `r` (with `rhs`) must lie inside its operands; the CPU must have `S`'s instructions and AVX,
 /// and `product` must compute a [`Raw`] inside its operands.
 #[inline(always)]
-unsafe fn blocked<S: Lanes>((s, product): (S, unsafe fn(S, Raw)), r: Raw, (rhs, nb_max): (Rhs, usize)) {
+unsafe fn blocked<S: Lanes>(
+    (s, product): (S, unsafe fn(S, Raw)),
+    r: Raw,
+    (rhs, nb_max, kb_max): (Rhs, usize, usize),
+) {
+    debug_assert!(nb_max * kb_max <= BUF);
     let mut buf = MaybeUninit::<[f32; BUF]>::uninit();
     let bp = buf.as_mut_ptr().cast::<f32>();
-    let kb_max = BUF / nb_max;
     for j0 in (0..r.n).step_by(nb_max) {
         let nb = (r.n - j0).min(nb_max);
         for p0 in (0..r.k).step_by(kb_max) {
@@ -439,6 +460,61 @@ unsafe fn blocked<S: Lanes>((s, product): (S, unsafe fn(S, Raw)), r: Raw, (rhs, 
     }
 }
 
+/// Values in the stack buffer of [`panels`] (256 KiB: half of Zen 3's L2 cache, the rest for
+/// a block of the left-hand side's rows and their outputs).
+const BIG: usize = 65536;
+/// Rows of a block of the left-hand side in [`panels`] (eight 6-row tiles: at depth 256,
+/// 48 KiB, which stays in L2 while every panel of the packed right-hand side passes over it).
+const AVX2_MC: usize = 48;
+
+/// The product `r` with its right-hand side read from `rhs`, for AVX2's 16-column panels, in
+/// the order of BLIS: a block of depth `kb` ([`avx2_kb`]) and up to [`BIG`]` / kb` columns is
+/// copied once into a stack buffer, panel after panel (each `kb x 16` panel contiguous, 16 KiB
+/// at most, so that it stays in L1 while the tiles of a row block pass over it); then for each
+/// block of [`AVX2_MC`] rows, every panel. The rows of the left-hand side are read once from
+/// memory and then from L2, rather than once a panel. Each element is still one chain in
+/// increasing depth (a depth block accumulates onto the previous one's stored result), and the
+/// rows of a column are visited in increasing order (the bias gradient's sums), so the bits are
+/// those of [`blocked`].
+///
+/// # Safety
+/// As [`blocked`], with AVX2.
+#[inline(always)]
+unsafe fn panels<S: Lanes>((s, product): (S, unsafe fn(S, Raw)), r: Raw, rhs: Rhs) {
+    let mut buf = MaybeUninit::<[f32; BIG]>::uninit();
+    let bp = buf.as_mut_ptr().cast::<f32>();
+    let kb_max = avx2_kb(r);
+    let nb_max = BIG / kb_max;
+    for j0 in (0..r.n).step_by(nb_max) {
+        let nb = (r.n - j0).min(nb_max);
+        for p0 in (0..r.k).step_by(kb_max) {
+            let kb = (r.k - p0).min(kb_max);
+            // SAFETY: each panel lies inside `rhs` (columns `j0 + q..`, depth `p0..p0 + kb`) and
+            // inside the buffer (`kb * nb <= BIG`); the products read the packed panels, depth
+            // `p0..p0 + kb` of rows `i0..i0 + mc` of `r.a` and write those rows' columns
+            // `j0 + q..j0 + q + w` of `r.c`.
+            unsafe {
+                for q in (0..nb).step_by(AVX2_NB) {
+                    let w = (nb - q).min(AVX2_NB);
+                    pack(rhs, (j0 + q, w), (p0, kb), bp.add(q * kb));
+                }
+                let accumulate = r.accumulate || p0 > 0;
+                let fuse = if p0 + kb == r.k { r.fuse } else { Fuse::None };
+                for i0 in (0..r.m).step_by(AVX2_MC) {
+                    let mc = (r.m - i0).min(AVX2_MC);
+                    let rows = r.rows_from(i0);
+                    for q in (0..nb).step_by(AVX2_NB) {
+                        let w = (nb - q).min(AVX2_NB);
+                        let sub = rows.cols_from(j0 + q);
+                        let (a, b) = (sub.a.add(p0 * r.a_cs), bp.add(q * kb));
+                        product(s, Raw { m: mc, n: w, k: kb, a, b, b_rs: w, accumulate, fuse, ..sub });
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// [`Raw`] with AVX-512F: tiles of 6 rows x 64 columns (24 accumulators), 8 x 48, 12 x 32 and
 /// 24 x 16 for narrower panels.
 ///
@@ -446,8 +522,16 @@ unsafe fn blocked<S: Lanes>((s, product): (S, unsafe fn(S, Raw)), r: Raw, (rhs, 
 /// `r` must lie inside its operands (the token proves the CPU has AVX-512F).
 #[target_feature(enable = "avx512f")]
 pub(super) unsafe fn product_avx512(s: Avx512, r: Raw) {
-    // SAFETY: the caller's guarantee.
-    unsafe { product::<Avx512, 4>(s, r, [24, 12, 8, 6]) }
+    // Masked moves are cheap with AVX-512, so the last vector is always masked (`FULL` false).
+    // SAFETY: the caller's guarantee; each panel lies inside `r`.
+    unsafe {
+        product::<Avx512, 4>(s, r, |nv, _, sub, last| match nv {
+            1 => avx512_panel1::<false>(s, sub, last),
+            2 => avx512_panel2::<false>(s, sub, last),
+            3 => avx512_panel3::<false>(s, sub, last),
+            _ => avx512_panel4::<false>(s, sub, last),
+        })
+    }
 }
 
 /// [`Raw`] with AVX2 and FMA: tiles of 6 rows x 16 columns (12 accumulators), 12 x 8 for one
@@ -457,8 +541,15 @@ pub(super) unsafe fn product_avx512(s: Avx512, r: Raw) {
 /// As [`product_avx512`].
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn product_avx2(s: Avx2, r: Raw) {
-    // SAFETY: the caller's guarantee.
-    unsafe { product::<Avx2, 2>(s, r, [12, 6, 0, 0]) }
+    // SAFETY: the caller's guarantee; each panel lies inside `r`.
+    unsafe {
+        product::<Avx2, 2>(s, r, |nv, full, sub, last| match (nv, full) {
+            (1, true) => avx2_panel1::<true>(s, sub, last),
+            (1, false) => avx2_panel1::<false>(s, sub, last),
+            (2, true) => avx2_panel2::<true>(s, sub, last),
+            _ => avx2_panel2::<false>(s, sub, last),
+        })
+    }
 }
 
 impl Raw {
@@ -495,7 +586,7 @@ impl Raw {
 #[target_feature(enable = "avx512f")]
 pub(super) unsafe fn packed_avx512(s: Avx512, r: Raw, rhs: Rhs) {
     // SAFETY: the caller's guarantee.
-    unsafe { blocked((s, product_avx512), r, (rhs, COPY_NB)) }
+    unsafe { blocked((s, product_avx512), r, (rhs, COPY_NB, BUF / COPY_NB)) }
 }
 
 /// As [`packed_avx512`] with AVX2 and FMA.
@@ -505,7 +596,7 @@ pub(super) unsafe fn packed_avx512(s: Avx512, r: Raw, rhs: Rhs) {
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn packed_avx2(s: Avx2, r: Raw, rhs: Rhs) {
     // SAFETY: the caller's guarantee.
-    unsafe { blocked((s, product_avx2), r, (rhs, COPY_NB)) }
+    unsafe { panels((s, product_avx2), r, rhs) }
 }
 
 /// The forward product `r` (see [`Raw::forward`]) with the row-major `n x k` weight `w`, with
@@ -520,7 +611,8 @@ pub(super) unsafe fn forward_avx512(s: Avx512, r: Raw, w: *const f32) {
         if r.n == 1 {
             dot_avx512(r, w);
         } else {
-            blocked((s, product_avx512), r, (Rhs { b: w, rs: 1, cs: r.k }, forward_nb(r.k)));
+            let nb = forward_nb(r.k);
+            blocked((s, product_avx512), r, (Rhs { b: w, rs: 1, cs: r.k }, nb, BUF / nb));
         }
     }
 }
@@ -536,7 +628,7 @@ pub(super) unsafe fn forward_avx2(s: Avx2, r: Raw, w: *const f32) {
         if r.n == 1 {
             dot_avx2(s, r, w);
         } else {
-            blocked((s, product_avx2), r, (Rhs { b: w, rs: 1, cs: r.k }, forward_nb(r.k)));
+            panels((s, product_avx2), r, Rhs { b: w, rs: 1, cs: r.k });
         }
     }
 }

@@ -50,6 +50,43 @@ pub(super) trait Lanes: Copy {
     /// # Safety
     /// The lanes of `m` must be writable.
     unsafe fn store_masked(self, p: *mut f32, m: Self::M, v: Self::V);
+    /// Stores `W` values.
+    ///
+    /// # Safety
+    /// `p .. p + W` must be writable.
+    unsafe fn store(self, p: *mut f32, v: Self::V);
+
+    /// [`Lanes::load`] if `full`, otherwise [`Lanes::load_masked`] under `m` (AVX2's masked
+    /// moves are slow on AMD's cores, the stores especially, so full vectors avoid them).
+    ///
+    /// # Safety
+    /// As the load it makes.
+    #[inline(always)]
+    unsafe fn load_part(self, p: *const f32, full: bool, m: Self::M) -> Self::V {
+        // SAFETY: the caller's guarantee.
+        unsafe {
+            if full {
+                self.load(p)
+            } else {
+                self.load_masked(p, m)
+            }
+        }
+    }
+    /// [`Lanes::store`] if `full`, otherwise [`Lanes::store_masked`] under `m`.
+    ///
+    /// # Safety
+    /// As the store it makes.
+    #[inline(always)]
+    unsafe fn store_part(self, p: *mut f32, full: bool, m: Self::M, v: Self::V) {
+        // SAFETY: the caller's guarantee.
+        unsafe {
+            if full {
+                self.store(p, v)
+            } else {
+                self.store_masked(p, m, v)
+            }
+        }
+    }
 }
 
 /// AVX-512F: 16 lanes (`__m512`, `__mmask16`).
@@ -129,6 +166,11 @@ impl Lanes for Avx512 {
     unsafe fn store_masked(self, p: *mut f32, m: __mmask16, v: __m512) {
         // SAFETY: as `load_masked`, for writing.
         unsafe { _mm512_mask_storeu_ps(p, m, v) }
+    }
+    #[inline(always)]
+    unsafe fn store(self, p: *mut f32, v: __m512) {
+        // SAFETY: the CPU has AVX-512F; the caller guarantees the 16 values are writable.
+        unsafe { _mm512_storeu_ps(p, v) }
     }
 }
 
@@ -211,6 +253,11 @@ impl Lanes for Avx2 {
     unsafe fn store_masked(self, p: *mut f32, m: __m256i, v: __m256) {
         // SAFETY: as `load_masked`, for writing.
         unsafe { _mm256_maskstore_ps(p, m, v) }
+    }
+    #[inline(always)]
+    unsafe fn store(self, p: *mut f32, v: __m256) {
+        // SAFETY: the CPU has AVX; the caller guarantees the 8 values are writable.
+        unsafe { _mm256_storeu_ps(p, v) }
     }
 }
 
