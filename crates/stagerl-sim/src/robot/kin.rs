@@ -320,6 +320,23 @@ impl Kinematics {
     /// ones leave the remaining joints out (callers check the length).
     #[inline]
     pub fn fk_tf(&self, q: &[f64]) -> Tf {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { self.fk_tf_avx2(q) };
+        }
+        self.fk_tf_body(q)
+    }
+
+    /// [`Kinematics::fk_tf`] compiled for AVX2 (the same operations, so the same bits).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn fk_tf_avx2(&self, q: &[f64]) -> Tf {
+        self.fk_tf_body(q)
+    }
+
+    #[inline(always)]
+    fn fk_tf_body(&self, q: &[f64]) -> Tf {
         let mut m = self.base;
         for (steps, q) in self.steps.chunks(CHUNK).zip(q.chunks(CHUNK)) {
             let sc = sin_cos_chunk(q);
@@ -351,6 +368,24 @@ impl Kinematics {
     /// when it is shorter than `n`): [`Kinematics::fk_tf`]'s pass with each frame kept between
     /// the joint's motion and the constant after it (the same products in the same order).
     pub fn segment_frames(&self, q: &[f64], out: &mut [Tf]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { self.segment_frames_avx2(q, out) };
+        }
+        self.segment_frames_body(q, out)
+    }
+
+    /// [`Kinematics::segment_frames`] compiled for AVX2 (the same operations, so the same bits:
+    /// no fused multiply-adds).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn segment_frames_avx2(&self, q: &[f64], out: &mut [Tf]) {
+        self.segment_frames_body(q, out)
+    }
+
+    #[inline(always)]
+    fn segment_frames_body(&self, q: &[f64], out: &mut [Tf]) {
         let mut m = self.base;
         let mut sc = [(0.0, 1.0); CHUNK];
         for (i, ((s, &qi), o)) in self.steps.iter().zip(q).zip(out.iter_mut()).enumerate() {
@@ -447,5 +482,38 @@ pub(crate) fn pose_of(m: &Tf) -> Pose {
     Pose {
         position: Vector3::new(m[3], m[7], m[11]),
         orientation: UnitQuaternion::new_unchecked(Quaternion::new(w, x, y, z)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::base::rng::Rng;
+
+    /// The AVX2 builds of the forward kinematics give the bits of the baseline build (the
+    /// same operations: no fused multiply-adds), on the bundled arms at random joint values,
+    /// some beyond the fast sine's range.
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn the_avx2_builds_give_the_baseline_bits() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("skipped: this CPU has no AVX2, so no AVX2 build runs here");
+            return;
+        }
+        let mut rng = Rng::new(5);
+        for chain in ["ur5", "panda"].map(|r| crate::robot::Chain::load(r, None).unwrap()) {
+            let (kin, n) = (&chain.kin, chain.dof());
+            let (mut a, mut b) = (vec![[0.0; 12]; n], vec![[0.0; 12]; n]);
+            for i in 0..2000 {
+                let scale = if i % 100 == 0 { 3e5 } else { 7.0 };
+                let q: Vec<f64> = (0..n).map(|_| rng.uniform_range(-scale, scale)).collect();
+                // SAFETY: the CPU has AVX2 (checked above).
+                let (fa, fb) = (unsafe { kin.fk_tf_avx2(&q) }, kin.fk_tf_body(&q));
+                assert_eq!(fa.map(f64::to_bits), fb.map(f64::to_bits), "q = {q:?}");
+                // SAFETY: as above.
+                unsafe { kin.segment_frames_avx2(&q, &mut a) };
+                kin.segment_frames_body(&q, &mut b);
+                assert_eq!(a, b, "q = {q:?}");
+            }
+        }
     }
 }

@@ -230,9 +230,14 @@ pub struct ArmCollider {
     reach: Vec<f64>,
     /// Scratch joint values of [`ArmCollider::check_motion`].
     motion_q: Vec<f64>,
-    /// The joint values of the last placement, when `placed` (a placement at the same values,
+    /// The joint values of the last placement, when `framed` (a placement at the same values,
     /// bit for bit, is skipped: the shield places the arm where the last check left it).
     placed_q: Vec<f64>,
+    /// The segment frames and every shape's [`Geo`] are those of `placed_q` (and `world` is,
+    /// but for the capsules' and spheres' first two columns after a check:
+    /// [`ArmCollider::place_for_check`]).
+    framed: bool,
+    /// `framed`, and every entry of `world` too.
     placed: bool,
     /// Where the support searches of mesh parts start ([`climb`]): each self pair's two sides
     /// (`2 p`, `2 p + 1`), then each shape's against the obstacles (`2 pairs + k`).
@@ -272,6 +277,7 @@ impl ArmCollider {
             reach,
             motion_q: vec![0.0; chain.dof()],
             placed_q: vec![0.0; chain.dof()],
+            framed: false,
             placed: false,
             shapes,
             obstacles: Vec::new(),
@@ -317,17 +323,89 @@ impl ArmCollider {
 
     /// Put the arm's shapes where joint values `q` take them.
     fn place(&mut self, chain: &Chain, q: &[f64]) {
-        let same = |p: &[f64]| p.len() == q.len() && p.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits());
-        if self.placed && same(&self.placed_q) {
+        if self.placed && self.same_q(q) {
             return;
         }
-        self.placed = self.placed_q.len() == q.len();
-        if self.placed {
+        if self.framed && self.same_q(q) {
+            // After a check: only the capsules' and spheres' poses are partial.
+            for k in 0..self.shapes.len() {
+                if self.partial(k) {
+                    self.place_shape(k);
+                }
+            }
+        } else {
+            self.set_frames(chain, q);
+            for k in 0..self.shapes.len() {
+                self.place_shape(k);
+            }
+        }
+        self.placed = self.framed;
+    }
+
+    /// Whether arm shape `k`'s `world` pose is partial: a moving capsule or sphere after
+    /// [`ArmCollider::place_for_check`].
+    #[inline(always)]
+    fn partial(&self, k: usize) -> bool {
+        let s = &self.shapes[k];
+        self.framed
+            && !self.placed
+            && s.segment >= 0
+            && matches!(s.shape, Shape::Capsule { .. } | Shape::Sphere { .. })
+    }
+
+    /// Placed arm shape `k`'s pose for parry (a partial one completed: the same bits as
+    /// [`ArmCollider::place_shape`]'s).
+    fn parry_pose(&self, k: usize) -> Pose3 {
+        if self.partial(k) {
+            let s = &self.shapes[k];
+            pose3(&crate::robot::mul_tf(&self.frames[s.segment as usize], &s.local))
+        } else {
+            pose3(&self.world[k])
+        }
+    }
+
+    /// Whether `q` is, bit for bit, the joint values of the last placement.
+    #[inline(always)]
+    fn same_q(&self, q: &[f64]) -> bool {
+        self.placed_q.len() == q.len() && self.placed_q.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+
+    /// The segment frames at `q` (the shapes not placed yet).
+    #[inline(always)]
+    fn set_frames(&mut self, chain: &Chain, q: &[f64]) {
+        self.placed = false;
+        self.framed = self.placed_q.len() == q.len();
+        if self.framed {
             self.placed_q.copy_from_slice(q);
         }
         chain.segment_frames(q, &mut self.frames);
+    }
+
+    /// [`ArmCollider::place`] as [`ArmCollider::check`] needs it: a capsule's or a sphere's
+    /// tests read only the third and fourth columns of its pose (its axis and centre), so only
+    /// those are computed for them (the same products as [`crate::robot::mul_tf`]'s, so the
+    /// same bits); the next [`ArmCollider::place`] at the same `q` completes the poses.
+    #[inline(always)]
+    fn place_for_check(&mut self, chain: &Chain, q: &[f64]) {
+        if self.framed && self.same_q(q) {
+            return;
+        }
+        self.set_frames(chain, q);
+        let partial = self.framed;
         for k in 0..self.shapes.len() {
-            self.place_shape(k);
+            let s = &self.shapes[k];
+            match (&s.shape, s.segment) {
+                (Shape::Capsule { .. } | Shape::Sphere { .. }, i) if i >= 0 && partial => {
+                    let (f, l, m) = (&self.frames[i as usize], &s.local, &mut self.world[k]);
+                    for r in 0..3 {
+                        let (a0, a1, a2, a3) = (f[4 * r], f[4 * r + 1], f[4 * r + 2], f[4 * r + 3]);
+                        m[4 * r + 2] = a0 * l[2] + a1 * l[6] + a2 * l[10];
+                        m[4 * r + 3] = a0 * l[3] + a1 * l[7] + a2 * l[11] + a3;
+                    }
+                    self.geo[k] = Geo::of(&s.shape, m);
+                }
+                _ => self.place_shape(k),
+            }
         }
     }
 
@@ -349,7 +427,7 @@ impl ArmCollider {
     pub fn place_some_at(&mut self, chain: &Chain, q: &[f64], needed: &[bool]) {
         let segments = self.shapes.iter().zip(needed).filter(|(_, &n)| n).map(|(s, _)| s.segment);
         let Some(last) = segments.max() else { return };
-        self.placed = false;
+        (self.placed, self.framed) = (false, false);
         let upto = usize::try_from(last + 1).unwrap_or(0).min(self.frames.len());
         chain.segment_frames(q, &mut self.frames[..upto]);
         for k in 0..self.shapes.len().min(needed.len()) {
@@ -402,12 +480,30 @@ impl ArmCollider {
     /// The first contact of the arm at joint values `q` (one per joint) with the floor, itself
     /// or the obstacles, in that order of tests; `None` when it is clear.
     pub fn check(&mut self, chain: &Chain, q: &[f64]) -> Option<Contact> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { self.check_avx2(chain, q) };
+        }
+        self.check_body(chain, q)
+    }
+
+    /// [`ArmCollider::check`] compiled for AVX2 (the same operations, so the same bits: no
+    /// fused multiply-adds).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn check_avx2(&mut self, chain: &Chain, q: &[f64]) -> Option<Contact> {
+        self.check_body(chain, q)
+    }
+
+    #[inline(always)]
+    fn check_body(&mut self, chain: &Chain, q: &[f64]) -> Option<Contact> {
         if self.shapes.is_empty()
             || !(self.checks.floor || self.checks.self_collision || !self.obstacles.is_empty())
         {
             return None;
         }
-        self.place(chain, q);
+        self.place_for_check(chain, q);
         if self.checks.floor {
             for (k, s) in self.shapes.iter().enumerate() {
                 if s.segment >= 0 && self.below_floor(k) {
@@ -517,10 +613,13 @@ impl ArmCollider {
     // Inlined into `check` as it was when `check` was its only caller (a step's hot loop).
     #[inline(always)]
     fn overlap_arm(&self, p: usize, a: usize, b: usize) -> bool {
+        self.geo[a].bounds_overlap(&self.geo[b]) && self.overlap_arm_near(p, a, b)
+    }
+
+    /// [`ArmCollider::overlap_arm`] after its bounding spheres' test.
+    #[inline(always)]
+    fn overlap_arm_near(&self, p: usize, a: usize, b: usize) -> bool {
         let (ga, gb) = (&self.geo[a], &self.geo[b]);
-        if !ga.bounds_overlap(gb) {
-            return false;
-        }
         if ga.round && gb.round {
             return segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) < (ga.radius + gb.radius).powi(2);
         }
@@ -538,7 +637,7 @@ impl ArmCollider {
     /// line: the capsules' path stays as small as it was).
     #[inline(never)]
     fn exact_overlap_arm(&self, p: usize, a: usize, b: usize) -> bool {
-        let (sb, pb) = (&self.shapes[b], pose3(&self.world[b]));
+        let (sb, pb) = (&self.shapes[b], self.parry_pose(b));
         // Each pair's walks start where that pair's last ended (GJK's directions are the pair's).
         let (wa, wb) = (&self.warm.0[2 * p], &self.warm.0[2 * p + 1]);
         self.exact_overlap(a, wa, &pb, &sb.parry, sb.climber.as_deref().map(|c| (c, wb)))
@@ -558,7 +657,7 @@ impl ArmCollider {
         climbing: Option<(&Climber, &AtomicU32)>,
     ) -> bool {
         let sa = &self.shapes[a];
-        let pa = pose3(&self.world[a]);
+        let pa = self.parry_pose(a);
         let ball = matches!(sa.parry, Prim::Ball(_)) || matches!(other, Prim::Ball(_));
         if ball || (sa.climber.is_none() && climbing.is_none()) {
             return overlap(&pa, sa.parry.shape(), pose, other.shape());

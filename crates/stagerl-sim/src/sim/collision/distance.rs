@@ -99,9 +99,7 @@ impl ArmCollider {
     /// (bit for bit), else `None`: what [`Chain::tip_pose_from_frames`] needs for the tip's
     /// pose at `q` without another pass.
     pub fn frames_placed_at(&self, q: &[f64]) -> Option<&[[f64; 12]]> {
-        let same = self.placed_q.len() == q.len()
-            && self.placed_q.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits());
-        (self.placed && same).then_some(&self.frames[..])
+        (self.framed && self.same_q(q)).then_some(&self.frames[..])
     }
 
     /// The bounding sphere of arm shape `k` at the last placement: its centre (world frame)
@@ -572,7 +570,7 @@ pub(crate) fn segment_box(a: [f64; 3], b: [f64; 3], h: [f64; 3]) -> ([f64; 3], [
 /// The closest points of segments `p1`-`q1` and `p2`-`q2` (Ericson, Real-Time Collision
 /// Detection, 5.1.9: the closest points' parameters, clamped); [`super::segment_segment_distance2`]
 /// is their squared distance.
-#[inline]
+#[inline(always)]
 pub(crate) fn segment_closest_points(
     p1: [f64; 3],
     q1: [f64; 3],

@@ -381,3 +381,112 @@ fn the_capsules_around_mesh_parts_never_change_a_verdict() {
     // (the exact test decides those).
     assert!(contacts > 400 && near_misses > 200, "{contacts} {near_misses}");
 }
+
+/// `check` places capsules and spheres only as far as its tests need (their axis and centre);
+/// whatever the order of the calls, every answer (first contact, contacts, clearance, closest
+/// points, the frames the tip is taken from) and every placed pose is the one of a collider
+/// that placed the whole arm first, bit for bit. An arm of capsules, spheres, boxes and a mesh
+/// part, with obstacles, over random poses visited in random orders.
+#[test]
+fn checks_that_place_part_of_the_arm_answer_as_a_whole_placement_does() {
+    let d = std::env::temp_dir().join(format!("stagerl-collision-{}-mixed", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let mut rng = Rng::new(23);
+    let mut obj = String::new();
+    for _ in 0..120 {
+        obj.push_str(&format!(
+            "v {} {} {}\n",
+            0.2 * rng.uniform_range(-0.5, 0.5),
+            0.04 * rng.normal(),
+            0.04 * rng.normal()
+        ));
+    }
+    std::fs::write(d.join("part.obj"), obj).unwrap();
+    let geometry = [
+        "<cylinder radius=\"0.05\" length=\"0.3\"/>",
+        "<sphere radius=\"0.07\"/>",
+        "<box size=\"0.3 0.06 0.05\"/>",
+        "<mesh filename=\"part.obj\"/>",
+        "<cylinder radius=\"0.03\" length=\"0.2\"/>",
+    ];
+    let mut urdf = String::from("<robot name=\"mixed\">");
+    for (i, g) in geometry.iter().enumerate() {
+        urdf.push_str(&format!(
+            r#"<link name="l{i}"><collision><origin xyz="0.1 0 0.05" rpy="0.3 1.2 0"/><geometry>{g}</geometry></collision><collision><origin xyz="0 0 0.12"/><geometry><sphere radius="0.03"/></geometry></collision></link>"#
+        ));
+        if i > 0 {
+            urdf.push_str(&format!(
+                r#"<joint name="j{i}" type="revolute"><parent link="l{}"/><child link="l{i}"/><origin xyz="0.2 0 0.15" rpy="0 0.4 0"/><axis xyz="{}"/><limit lower="-3.1" upper="3.1" velocity="1"/></joint>"#,
+                i - 1,
+                if i % 2 == 0 { "0 1 0" } else { "0 0 1" }
+            ));
+        }
+    }
+    urdf.push_str("</robot>");
+    std::fs::write(d.join("mixed.urdf"), urdf).unwrap();
+    let chain = Chain::from_urdf_file(&d.join("mixed.urdf"), None).unwrap();
+    let kinds = |f: fn(&Shape) -> bool| chain.collision_shapes().iter().filter(|s| f(&s.shape)).count();
+    assert!(
+        kinds(|s| matches!(s, Shape::Capsule { .. })) >= 2
+            && kinds(|s| matches!(s, Shape::Sphere { .. })) >= 5
+    );
+    assert!(
+        kinds(|s| matches!(s, Shape::Cuboid { .. })) == 1 && kinds(|s| matches!(s, Shape::Convex(_))) >= 1
+    );
+    let obstacles = [
+        Obstacle::sphere(0.1, [0.4, 0.1, 0.4]),
+        Obstacle::cuboid([0.1, 0.05, 0.2], [0.2, -0.2, 0.5], Some([0.0, 0.0, 0.38268343, 0.92387953])),
+    ];
+    // With the floor test first, most contacts are floor contacts; without it, self and
+    // obstacle contacts come first (the exact tests of capsules against boxes and meshes).
+    for floor in [true, false] {
+        let checks = Checks { floor, self_collision: true };
+        let (mut c, mut whole) = (ArmCollider::new(&chain, checks), ArmCollider::new(&chain, checks));
+        c.set_obstacles(&obstacles);
+        whole.set_obstacles(&obstacles);
+        let (mut out, mut want) = (Vec::new(), Vec::new());
+        let (mut contacts, mut partial_exact) = (0, 0);
+        let mut pairs = Vec::new();
+        whole.checked_pairs(&mut pairs);
+        for _ in 0..1500 {
+            let q: Vec<f64> = (0..chain.dof()).map(|_| rng.uniform_range(-2.5, 2.5)).collect();
+            // The reference: everything placed first.
+            whole.place_at(&chain, &q);
+            let first = whole.check(&chain, &q);
+            let clearance = whole.contacts(&chain, &q, &mut want);
+            contacts += usize::from(first.is_some());
+            // A check first (partial placement), then the rest in a random order.
+            let got = c.check(&chain, &q);
+            assert_eq!(got, first, "q = {q:?}");
+            partial_exact += usize::from(matches!(got, Some(Contact::SelfCollision { .. })));
+            assert_eq!(
+                c.frames_placed_at(&q).map(<[_]>::to_vec),
+                whole.frames_placed_at(&q).map(<[_]>::to_vec)
+            );
+            for step in if rng.uniform() < 0.5 { [0, 1] } else { [1, 0] } {
+                if step == 0 {
+                    let cl = c.contacts(&chain, &q, &mut out);
+                    assert_eq!(
+                        (&out, cl.map(f64::to_bits)),
+                        (&want, clearance.map(f64::to_bits)),
+                        "q = {q:?}"
+                    );
+                } else {
+                    c.place_at(&chain, &q);
+                    for &p in &pairs {
+                        let (a, b) = (c.closest(p), whole.closest(p));
+                        assert_eq!(format!("{a:?}"), format!("{b:?}"), "{p:?} at q = {q:?}");
+                    }
+                }
+            }
+            for k in 0..c.len() {
+                assert_eq!(c.world[k].map(f64::to_bits), whole.world[k].map(f64::to_bits), "shape {k}");
+            }
+        }
+        assert!(
+            contacts > 300 && (floor || partial_exact > 100),
+            "{contacts} contacts, {partial_exact} self contacts"
+        );
+    }
+}
