@@ -456,28 +456,57 @@ struct Spec {
 /// The id of the basic reward's claim.
 const BASIC_CLAIM: &str = "basic-does-not-converge";
 
-const ALGOS: [Method; 2] = [Method::Sac, Method::Ddpg];
+/// The paper's learners.
+const PAPER_ALGOS: [Method; 2] = [Method::Sac, Method::Ddpg];
 
-fn per_algo(metric: Metric, better: RewardFunction, worse: &[RewardFunction]) -> Vec<Check> {
-    ALGOS.iter().flat_map(|&a| worse.iter().map(move |&w| (metric, (a, better), (a, w)))).collect()
+/// The learners the claims about rewards ("with each algorithm") are checked with: the paper's
+/// SAC and DDPG when the report holds either; otherwise every learner it holds (in Table 1's
+/// order), so that a study of other learners (CrossQ's rewards, say) gets the reward claims
+/// checked with them. The claims that compare SAC with DDPG stay theirs.
+pub fn claim_learners(groups: &[GroupSummary]) -> Vec<Method> {
+    let held = |a: Method| groups.iter().any(|g| g.primary && g.algo == a && g.seeds > 0);
+    if PAPER_ALGOS.iter().any(|&a| held(a)) {
+        return PAPER_ALGOS.to_vec();
+    }
+    let others: Vec<Method> = Method::ORDER.into_iter().filter(|&a| held(a)).collect();
+    if others.is_empty() {
+        PAPER_ALGOS.to_vec()
+    } else {
+        others
+    }
 }
 
-/// The paper's claims, section by section.
-fn specs() -> Vec<Spec> {
-    [specs_vi_a(), specs_vi_b(), specs_vi_c()].into_iter().flatten().collect()
+fn per_algo(
+    algos: &[Method],
+    metric: Metric,
+    better: RewardFunction,
+    worse: &[RewardFunction],
+) -> Vec<Check> {
+    algos.iter().flat_map(|&a| worse.iter().map(move |&w| (metric, (a, better), (a, w)))).collect()
+}
+
+/// The paper's claims, section by section, the reward claims checked with `algos`.
+fn specs(algos: &[Method]) -> Vec<Spec> {
+    [specs_vi_a(algos), specs_vi_b(algos), specs_vi_c(algos)].into_iter().flatten().collect()
 }
 
 /// Section VI.A: posture against stride, SAC against DDPG.
-fn specs_vi_a() -> Vec<Spec> {
+fn specs_vi_a(algos: &[Method]) -> Vec<Spec> {
     use Metric::*;
     let dense = [Posture, Stride, Har, Sar];
+    let with = if algos == PAPER_ALGOS {
+        "with SAC and DDPG".to_string()
+    } else {
+        let names: Vec<&str> = algos.iter().map(|&a| algo_title(a)).collect();
+        format!("with {}", names.join(" and "))
+    };
     vec![
         Spec {
             id: BASIC_CLAIM,
             section: "VI.A",
-            statement: "The sparse basic reward (eq. 18) converges in fewer seeds than every dense reward, with SAC and DDPG (the paper: it does not converge at all)".into(),
+            statement: format!("The sparse basic reward (eq. 18) converges in fewer seeds than every dense reward, {with} (the paper: it does not converge at all)"),
             paper_text: "\"DDPG and SAC could not converge even after a long training period based on a sparse reward function\"",
-            checks: ALGOS
+            checks: algos
                 .iter()
                 .flat_map(|&a| dense.iter().map(move |&r| (Converged, (a, r), (a, Basic))))
                 .collect(),
@@ -494,14 +523,14 @@ fn specs_vi_a() -> Vec<Spec> {
             section: "VI.A",
             statement: "Posture converges faster than stride (smaller E_start), with each algorithm".into(),
             paper_text: "\"the convergence rate of the posture reward function increased by 22.6-26.4 %\"",
-            checks: per_algo(EStart, Posture, &[Stride]),
+            checks: per_algo(algos, EStart, Posture, &[Stride]),
         },
         Spec {
             id: "stride-lower-std-than-posture",
             section: "VI.A",
             statement: "Stride has a lower V_STDEV than posture, with each algorithm".into(),
             paper_text: "\"the standard deviation of the stride reward function was 23.7-46.4 % lower\"",
-            checks: per_algo(VStdev, Stride, &[Posture]),
+            checks: per_algo(algos, VStdev, Stride, &[Posture]),
         },
         Spec {
             id: "stride-higher-reward-ddpg",
@@ -515,20 +544,20 @@ fn specs_vi_a() -> Vec<Spec> {
             section: "VI.A",
             statement: "Posture completes the task in fewer evaluation steps than stride, with each algorithm".into(),
             paper_text: "\"the posture reward function completes trajectory planning with fewer average steps\"",
-            checks: per_algo(EvalSteps, Posture, &[Stride]),
+            checks: per_algo(algos, EvalSteps, Posture, &[Stride]),
         },
         Spec {
             id: "stride-more-reward",
             section: "VI.A",
             statement: "Stride obtains a higher evaluation reward than posture, with each algorithm".into(),
             paper_text: "\"the stride reward function obtains more rewards\"",
-            checks: per_algo(EvalReward, Stride, &[Posture]),
+            checks: per_algo(algos, EvalReward, Stride, &[Posture]),
         },
     ]
 }
 
 /// Section VI.B: HAR.
-fn specs_vi_b() -> Vec<Spec> {
+fn specs_vi_b(algos: &[Method]) -> Vec<Spec> {
     use Metric::*;
     vec![
         Spec {
@@ -536,21 +565,21 @@ fn specs_vi_b() -> Vec<Spec> {
             section: "VI.B",
             statement: "HAR has a lower V_STDEV than posture, with each algorithm".into(),
             paper_text: "\"the standard deviation decreased by about 42.6 % with HAR compared to the posture reward function\"",
-            checks: per_algo(VStdev, Har, &[Posture]),
+            checks: per_algo(algos, VStdev, Har, &[Posture]),
         },
         Spec {
             id: "har-faster-than-stride",
             section: "VI.B",
             statement: "HAR converges faster than stride, with each algorithm".into(),
             paper_text: "\"The convergence rate of the HAR reward function was about 20.4 % faster than that of the stride reward function\"",
-            checks: per_algo(EStart, Har, &[Stride]),
+            checks: per_algo(algos, EStart, Har, &[Stride]),
         },
         Spec {
             id: "har-slower-than-posture",
             section: "VI.B",
             statement: "HAR converges more slowly than posture, with each algorithm".into(),
             paper_text: "\"but it was slower than the posture reward function\"",
-            checks: ALGOS.iter().map(|&a| (EStart, (a, Posture), (a, Har))).collect(),
+            checks: algos.iter().map(|&a| (EStart, (a, Posture), (a, Har))).collect(),
         },
         Spec {
             id: "har-better-evaluation",
@@ -559,14 +588,14 @@ fn specs_vi_b() -> Vec<Spec> {
             paper_text: "\"The reward increased to 24.7 %, the average steps decreased by 16.7-27.2 %, and the success rate for trajectory planning increased by 2.4-5.2 %\"",
             checks: [EvalReward, EvalSteps, SuccessRate]
                 .iter()
-                .flat_map(|&m| per_algo(m, Har, &[Posture, Stride]))
+                .flat_map(|&m| per_algo(algos, m, Har, &[Posture, Stride]))
                 .collect(),
         },
     ]
 }
 
 /// Section VI.C: SAR.
-fn specs_vi_c() -> Vec<Spec> {
+fn specs_vi_c(algos: &[Method]) -> Vec<Spec> {
     use Metric::*;
     let mut v = Vec::new();
     for (id, metric, what, text) in [
@@ -583,7 +612,7 @@ fn specs_vi_c() -> Vec<Spec> {
             section: "VI.C",
             statement: format!("SAR {what} among posture, stride, HAR and SAR, with each algorithm"),
             paper_text: text,
-            checks: per_algo(metric, Sar, &[Posture, Stride, Har]),
+            checks: per_algo(algos, metric, Sar, &[Posture, Stride, Har]),
         });
     }
     v.push(Spec {
@@ -674,9 +703,9 @@ fn headline(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Claim {
 }
 
 /// Which seeds of the basic reward converged, and why the others did not.
-fn basic_detail(groups: &[GroupSummary]) -> String {
+fn basic_detail(groups: &[GroupSummary], algos: &[Method]) -> String {
     let mut parts = Vec::new();
-    for a in ALGOS {
+    for &a in algos {
         if let Some(g) = primary(groups, a, Basic).filter(|g| g.seeds > 0) {
             let why: Vec<String> = g
                 .runs
@@ -715,7 +744,8 @@ fn seeds_needed(st: &Stats, family: usize) -> Option<u64> {
 /// the comparisons' p-values are Holm-corrected together, as one family.
 pub fn evaluate(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Vec<Claim> {
     let mut i = 0;
-    let mut claims: Vec<Claim> = specs()
+    let algos = claim_learners(groups);
+    let mut claims: Vec<Claim> = specs(&algos)
         .into_iter()
         .map(|s| {
             let comparisons: Vec<Comparison> = s
@@ -762,7 +792,7 @@ pub fn evaluate(groups: &[GroupSummary], paper_rows: &[PaperRow]) -> Vec<Claim> 
     for c in &mut claims {
         c.verdict = Verdict::all(c.comparisons.iter().map(|k| k.verdict));
         if c.id == BASIC_CLAIM {
-            c.detail = basic_detail(groups);
+            c.detail = basic_detail(groups, &algos);
         }
     }
     claims.push(headline(groups, paper_rows));
@@ -829,6 +859,23 @@ pub fn render_markdown(claims: &[Claim]) -> String {
         count(Verdict::Inconclusive),
         count(Verdict::NotMeasurable)
     );
+    // The learners of the reward claims, when they are not the paper's (`claim_learners`).
+    let mut learners: Vec<Method> = Vec::new();
+    for k in claims.iter().filter(|c| c.id == BASIC_CLAIM).flat_map(|c| &c.comparisons) {
+        if !learners.contains(&k.better.0) {
+            learners.push(k.better.0);
+        }
+    }
+    if !learners.is_empty() && learners != PAPER_ALGOS {
+        let names: Vec<&str> = learners.iter().map(|&a| algo_title(a)).collect();
+        let _ = writeln!(
+            s,
+            "This report holds neither of the paper's learners (SAC, DDPG), so the claims about rewards \
+             (\"with each algorithm\") are checked with {}; the claims that compare SAC with DDPG are not \
+             measurable here.\n",
+            names.join(" and ")
+        );
+    }
     s.push_str("| # | Section | Claim | Ours | Paper's table |\n|---|---|---|---|---|\n");
     for (i, c) in claims.iter().enumerate() {
         let _ = writeln!(

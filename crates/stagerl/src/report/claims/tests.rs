@@ -153,7 +153,7 @@ fn a_group_that_never_converges_loses_on_e_start_and_convergence_counts() {
     let dense = normal(20, 1500.0, 200.0, &mut rng);
     let never = vec![None; 20];
     let mut groups = vec![group(Method::Ddpg, Basic, &never, &[0.0; 20])];
-    for a in ALGOS {
+    for a in PAPER_ALGOS {
         for r in [Posture, Stride, Har, Sar] {
             groups.push(group(a, r, &dense, &ok));
         }
@@ -173,4 +173,45 @@ fn markdown_names_the_method_and_every_verdict() {
     assert!(md.contains("permutation test") && md.contains("Holm-Bonferroni"), "{md}");
     assert!(md.contains("1 claims: 1 supported, 0 contradicted, 0 inconclusive"), "{md}");
     assert!(md.contains("| E_start | SAC+SAR"), "{md}");
+}
+
+/// A study of a learner other than the paper's (CrossQ's rewards) gets the reward claims checked
+/// with that learner, and says so; the claims that compare SAC with DDPG stay unmeasurable; a
+/// study that holds SAC (or DDPG) beside other learners keeps the paper's two.
+#[test]
+fn reward_claims_are_checked_with_the_learners_a_study_of_others_holds() {
+    let mut rng = Rng::new(9);
+    let ok = vec![0.99; 20];
+    let never = vec![None; 20];
+    let mut groups = vec![group(Method::Crossq, Basic, &never, &[0.0; 20])];
+    for r in [Posture, Stride, Har, Sar] {
+        groups.push(group(Method::Crossq, r, &normal(20, 1500.0, 200.0, &mut rng), &ok));
+    }
+    assert_eq!(claim_learners(&groups), vec![Method::Crossq]);
+    let claims = evaluate(&groups, &paper::table1());
+    let by_id = |id: &str| claims.iter().find(|c| c.id == id).unwrap();
+    let basic = by_id(BASIC_CLAIM);
+    assert_eq!(basic.verdict, Verdict::Supported, "{:#?}", basic.comparisons);
+    assert!(
+        basic.statement.contains("with CrossQ") && basic.detail.contains("CrossQ+Basic: 0 of 20"),
+        "{basic:?}"
+    );
+    assert!(basic.comparisons.iter().all(|k| k.better.0 == Method::Crossq && k.worse.0 == Method::Crossq));
+    let sar = by_id("sar-fastest");
+    assert_eq!(sar.comparisons.len(), 3);
+    assert_ne!(sar.verdict, Verdict::NotMeasurable);
+    for id in ["sac-converges-faster", "sar-sac-faster-than-ddpg", "ddpg-sar-headline"] {
+        assert_eq!(by_id(id).verdict, Verdict::NotMeasurable, "{id}");
+    }
+    let md = render_markdown(&claims);
+    assert!(md.contains("are checked with CrossQ;"), "{md}");
+    // Beside SAC, CrossQ's groups do not change the paper's claims (nor add comparisons).
+    let mut with_sac = groups.clone();
+    with_sac.push(group(Method::Sac, Sar, &normal(20, 1500.0, 200.0, &mut rng), &ok));
+    assert_eq!(claim_learners(&with_sac), PAPER_ALGOS.to_vec());
+    let claims = evaluate(&with_sac, &paper::table1());
+    assert!(claims.iter().flat_map(|c| &c.comparisons).all(|k| k.better.0 != Method::Crossq));
+    assert!(!render_markdown(&claims).contains("are checked with"));
+    // No runs at all: the paper's learners (every claim unmeasurable, as before).
+    assert_eq!(claim_learners(&[]), PAPER_ALGOS.to_vec());
 }
