@@ -139,3 +139,24 @@ fn the_docs_stay_under_40_mb() {
     assert!(total < 40_000_000, "docs/ holds {:.1} MB (at most 40): largest {top:?}", total as f64 / 1e6);
     assert!(total > 1_000_000, "docs/ read as {total} bytes: not the docs");
 }
+
+/// A committed report keeps its figures as SVG only (docs/results/README.md, "How results are
+/// kept"): no PNG beside an SVG of the same name under `docs/results/`.
+#[test]
+fn committed_reports_keep_svg_figures_only() {
+    fn walk(dir: &Path, twins: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(&p, twins);
+            } else if p.extension().is_some_and(|x| x == "png") && p.with_extension("svg").exists() {
+                twins.push(p);
+            }
+        }
+    }
+    let mut twins = Vec::new();
+    let results = repo().join("docs/results");
+    walk(&results, &mut twins);
+    assert!(results.join("paper/figure8.svg").exists(), "the paper report's figures are where they were");
+    assert!(twins.is_empty(), "PNG twins of SVG figures (delete them): {twins:?}");
+}
