@@ -382,17 +382,11 @@ fn the_capsules_around_mesh_parts_never_change_a_verdict() {
     assert!(contacts > 400 && near_misses > 200, "{contacts} {near_misses}");
 }
 
-/// `check` places capsules and spheres only as far as its tests need (their axis and centre);
-/// whatever the order of the calls, every answer (first contact, contacts, clearance, closest
-/// points, the frames the tip is taken from) and every placed pose is the one of a collider
-/// that placed the whole arm first, bit for bit. An arm of capsules, spheres, boxes and a mesh
-/// part, with obstacles, over random poses visited in random orders.
-#[test]
-fn checks_that_place_part_of_the_arm_answer_as_a_whole_placement_does() {
+/// An arm of capsules, spheres, a box and a mesh part (written under a scratch folder).
+fn mixed_arm(rng: &mut Rng) -> Chain {
     let d = std::env::temp_dir().join(format!("stagerl-collision-{}-mixed", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    let mut rng = Rng::new(23);
     let mut obj = String::new();
     for _ in 0..120 {
         obj.push_str(&format!(
@@ -425,7 +419,18 @@ fn checks_that_place_part_of_the_arm_answer_as_a_whole_placement_does() {
     }
     urdf.push_str("</robot>");
     std::fs::write(d.join("mixed.urdf"), urdf).unwrap();
-    let chain = Chain::from_urdf_file(&d.join("mixed.urdf"), None).unwrap();
+    Chain::from_urdf_file(&d.join("mixed.urdf"), None).unwrap()
+}
+
+/// `check` places capsules and spheres only as far as its tests need (their axis and centre);
+/// whatever the order of the calls, every answer (first contact, contacts, clearance, closest
+/// points, the frames the tip is taken from) and every placed pose is the one of a collider
+/// that placed the whole arm first, bit for bit. An arm of capsules, spheres, boxes and a mesh
+/// part, with obstacles, over random poses visited in random orders.
+#[test]
+fn checks_that_place_part_of_the_arm_answer_as_a_whole_placement_does() {
+    let mut rng = Rng::new(23);
+    let chain = mixed_arm(&mut rng);
     let kinds = |f: fn(&Shape) -> bool| chain.collision_shapes().iter().filter(|s| f(&s.shape)).count();
     assert!(
         kinds(|s| matches!(s, Shape::Capsule { .. })) >= 2
