@@ -27,14 +27,22 @@ pub(crate) const IDENTITY: Tf = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.
 #[inline(always)]
 pub(crate) fn mul(a: &Tf, b: &Tf) -> Tf {
     let mut o = [0.0; 12];
+    mul_columns(a, b, 0, &mut o);
+    o
+}
+
+/// Columns `from..4` of [`mul`]`(a, b)` into `o` (the others left as they are), with the same
+/// products in the same order, so the same bits: `from = 2` gives the product's z axis and
+/// translation, all a capsule's or a sphere's placement reads.
+#[inline(always)]
+pub(crate) fn mul_columns(a: &Tf, b: &Tf, from: usize, o: &mut Tf) {
     for r in 0..3 {
         let (a0, a1, a2, a3) = (a[4 * r], a[4 * r + 1], a[4 * r + 2], a[4 * r + 3]);
-        for c in 0..4 {
+        for c in from..4 {
             o[4 * r + c] = a0 * b[c] + a1 * b[4 + c] + a2 * b[8 + c];
         }
         o[4 * r + 3] += a3;
     }
-    o
 }
 
 /// `Trans(xyz) * Rz(yaw) * Ry(pitch) * Rx(roll)`: a URDF `<origin>` with `rpy = (roll, pitch, yaw)`.

@@ -82,6 +82,12 @@ pub fn mul_tf(a: &[f64; 12], b: &[f64; 12]) -> [f64; 12] {
     kin::mul(a, b)
 }
 
+/// The z axis and translation of [`mul_tf`]`(a, b)` into columns 2 and 3 of `o` (the others
+/// left as they are), to the bit.
+pub(crate) fn mul_tf_z_and_origin(a: &[f64; 12], b: &[f64; 12], o: &mut [f64; 12]) {
+    kin::mul_columns(a, b, 2, o)
+}
+
 /// An end-effector pose in the chain's base frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pose {

@@ -383,8 +383,8 @@ impl ArmCollider {
 
     /// [`ArmCollider::place`] as [`ArmCollider::check`] needs it: a capsule's or a sphere's
     /// tests read only the third and fourth columns of its pose (its axis and centre), so only
-    /// those are computed for them (the same products as [`crate::robot::mul_tf`]'s, so the
-    /// same bits); the next [`ArmCollider::place`] at the same `q` completes the poses.
+    /// those are computed for them ([`crate::robot::mul_tf_z_and_origin`]: the same bits as the
+    /// whole product); the next [`ArmCollider::place`] at the same `q` completes the poses.
     #[inline(always)]
     fn place_for_check(&mut self, chain: &Chain, q: &[f64]) {
         if self.framed && self.same_q(q) {
@@ -396,13 +396,8 @@ impl ArmCollider {
             let s = &self.shapes[k];
             match (&s.shape, s.segment) {
                 (Shape::Capsule { .. } | Shape::Sphere { .. }, i) if i >= 0 && partial => {
-                    let (f, l, m) = (&self.frames[i as usize], &s.local, &mut self.world[k]);
-                    for r in 0..3 {
-                        let (a0, a1, a2, a3) = (f[4 * r], f[4 * r + 1], f[4 * r + 2], f[4 * r + 3]);
-                        m[4 * r + 2] = a0 * l[2] + a1 * l[6] + a2 * l[10];
-                        m[4 * r + 3] = a0 * l[3] + a1 * l[7] + a2 * l[11] + a3;
-                    }
-                    self.geo[k] = Geo::of(&s.shape, m);
+                    crate::robot::mul_tf_z_and_origin(&self.frames[i as usize], &s.local, &mut self.world[k]);
+                    self.geo[k] = Geo::of(&s.shape, &self.world[k]);
                 }
                 _ => self.place_shape(k),
             }
