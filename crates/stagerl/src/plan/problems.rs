@@ -120,6 +120,8 @@ pub fn draw_problems(
     // Nor on the reward (whose clearance term needs obstacles, which a free-space set lacks).
     cfg.reward.clearance = None;
     cfg.train.obstacles_in_path = 0.0;
+    // Nor on the training schedule (a curriculum needs random obstacles: a free set has none).
+    cfg.train.curriculum = None;
     let index = ProblemSet::ALL.iter().position(|&s| s == set).unwrap_or(0) as u64;
     let mut env = ReachEnv::from_config(&cfg, 0)?;
     if set == ProblemSet::InTheWay {

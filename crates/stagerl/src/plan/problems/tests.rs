@@ -73,18 +73,24 @@ fn refused_candidates_are_counted_and_an_impossible_set_is_an_error() {
     assert!(e.contains("`random-3`") && e.contains("only 0 of 2") && e.contains("not solvable"), "{e}");
 }
 
-/// A run's config with the per-link observation and the clearance term draws the free-space
-/// problems of the default config: neither what a policy observes nor its reward changes them.
+/// A run's config with the per-link observation and the clearance term, or the bundled
+/// obstacle preset (its curriculum too), draws the problems of the default config: neither what
+/// a policy observes, nor its reward, nor its training schedule changes them.
 #[test]
-fn the_problems_do_not_depend_on_the_observation_or_the_clearance_term() {
+fn the_problems_do_not_depend_on_the_observation_the_clearance_term_or_the_curriculum() {
     let mut cfg = Config::default();
     cfg.task.random_obstacles = Some(crate::sim::scene::RandomObstacles::default());
     cfg.task.observe_obstacles = true;
     cfg.task.obstacle_observation = crate::env::ObstacleObservation::PerLink;
     cfg.reward.clearance = Some(crate::reward::ClearanceConfig::default());
-    for set in [ProblemSet::Free, ProblemSet::InTheWay] {
-        let mine = draw_problems(&cfg, set, 4, 3, &mut |_| true).unwrap().0;
-        let plain = draw_problems(&Config::default(), set, 4, 3, &mut |_| true).unwrap().0;
-        assert_eq!(format!("{mine:?}"), format!("{plain:?}"), "{set:?}");
+    let preset = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/obstacles.toml");
+    let preset = Config::load(&preset).unwrap();
+    assert!(preset.train.curriculum.is_some(), "the preset trains with a curriculum");
+    for cfg in [cfg, preset] {
+        for set in [ProblemSet::Free, ProblemSet::InTheWay] {
+            let mine = draw_problems(&cfg, set, 4, 3, &mut |_| true).unwrap().0;
+            let plain = draw_problems(&Config::default(), set, 4, 3, &mut |_| true).unwrap().0;
+            assert_eq!(format!("{mine:?}"), format!("{plain:?}"), "{set:?}");
+        }
     }
 }
