@@ -46,3 +46,30 @@ def test_pack_runs_leaves_out_tensorboard_events_and_checkpoints_but_those_kept(
     pack_runs.unpack(str(dest), str(out))
     rows = (out / "runs" / "sac-sar-seed1" / "episodes.csv").read_text().splitlines()
     assert rows[0].split(",")[0] == "episode" and rows[2].split(",")[rows[0].split(",").index("env_steps")] == "25"
+
+
+def test_obstacle_summary_counts_successes_and_contacts_and_refuses_a_missing_evaluation(tmp_path, capsys):
+    summary = load("obstacle_summary")
+    run = tmp_path / "her-s2"
+    run.mkdir()
+    (run / "episodes.csv").write_text(
+        "episode,reward,steps,success,final_distance_m,env_steps,collision_steps,curriculum_stage,wall_s\n"
+        "1,0,5,0,0.3,5,0,0,0.0\n2,21,4,1,0.005,9,0,1,0.1\n3,21,4,1,0.005,13,0,1,0.2\n4,-10,2,0,0.2,15,1,2,12.6\n"
+    )
+    header = "trial,reward,steps,success,collision_steps\n"
+    # 500 trials each: successes and trials with a contact step (a count, not a flag) differ per file.
+    for i, (_, file) in enumerate(summary.EVALS):
+        rows = [f"{t},0,5,{int(t <= 100 * (i + 1))},{3 if t > 490 - i else 0}\n" for t in range(1, 501)]
+        (run / file).write_text(header + "".join(rows))
+    summary.main(str(tmp_path))
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("config,seed,episodes,env_steps,train_wall_s,stages_began_at_episode,success_alone")
+    assert out[1] == "her,2,4,15,13,2;4,20.0,2.0,40.0,2.2,60.0,2.4,80.0,2.6"
+    # A run whose shielded evaluation did not run is an error naming the file, not a row of zeros.
+    (run / summary.EVALS[1][1]).unlink()
+    try:
+        summary.main(str(tmp_path))
+    except SystemExit as e:
+        assert summary.EVALS[1][1] in str(e) and "missing" in str(e)
+    else:
+        raise AssertionError("a missing evaluation was not refused")

@@ -73,8 +73,9 @@ fn misplaced_settings_and_other_algorithms_sections_are_refused() {
 }
 
 /// The bundled obstacle preset (`configs/obstacles.toml`, issue 34) trains as it is, with its
-/// settings in the run's config: SAC with layer-normalised critics, the per-link obstacle
-/// observation and the curriculum (whose stage `episodes.csv` records).
+/// settings in the run's config: SAC (256 x 256) with layer-normalised critics and its entropy
+/// coefficient starting at 0.01, the sparse reward with hindsight relabelling, the per-link
+/// obstacle observation and the curriculum (whose stage `episodes.csv` records).
 #[test]
 fn the_obstacle_preset_trains_as_it_is() {
     let preset = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/obstacles.toml");
@@ -89,7 +90,11 @@ fn the_obstacle_preset_trains_as_it_is() {
     let cfg = Config::load(&out.join("config.toml")).unwrap();
     let preset_cfg = Config::load(&preset).unwrap();
     assert_eq!(preset_cfg.train.episodes, 6000, "the preset's own budget");
-    assert!(cfg.agent.sac.as_ref().is_some_and(|s| s.critic_layer_norm));
+    assert_eq!(cfg.agent.hidden, [256, 256]);
+    assert!(cfg.agent.sac.as_ref().is_some_and(|s| s.critic_layer_norm && s.init_alpha == 0.01));
+    let her = cfg.agent.her.as_ref().expect("the preset relabels with HER");
+    assert_eq!((her.strategy, her.k), (stagerl::agent::HerStrategy::Future, 4));
+    assert_eq!(cfg.reward.function, stagerl::reward::RewardFunction::Basic);
     assert!(cfg.task.observe_obstacles && cfg.task.random_obstacles.is_some());
     assert!(cfg.train.curriculum.is_some());
     let log = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
