@@ -23,12 +23,14 @@ def steps_per_s(env, n=200_000):
     return n / (time.perf_counter() - t)
 
 
-def vector_env(num_envs=256, batches=100, rounds=100):
+def vector_env(num_envs=256, batches=100, rounds=100, threads=1):
     """Steps/s of the native vector env through ``step`` and of the Rust ``VecEnv`` it wraps
     (timed in Rust, no Python in the loop, on a copy of the same batch with the same actions),
     in ``rounds`` interleaved rounds of ``batches`` steps, so that both see the same machine
-    load: the best round of each, and the median of the rounds' ratios."""
-    envs = gym.make_vec("stagerl/Reach-v0", num_envs=num_envs, vectorization_mode="vector_entry_point")
+    load: the best round of each, and the median of the rounds' ratios. ``threads``: the
+    vector env's threads (both are split over them)."""
+    envs = gym.make_vec("stagerl/Reach-v0", num_envs=num_envs, vectorization_mode="vector_entry_point",
+                        threads=threads)
     actions = np.random.default_rng(0).uniform(-1, 1, (64, num_envs, 6)).astype(np.float32)
     envs.reset(seed=0)
     py, native = [], []
@@ -45,9 +47,10 @@ def vector_env(num_envs=256, batches=100, rounds=100):
 def main():
     print(f"ReachEnv.step directly: {steps_per_s(ReachEnv()):,.0f} steps/s")
     print(f"through gymnasium.make's wrappers: {steps_per_s(gym.make('stagerl/Reach-v0')):,.0f} steps/s")
-    py, native, median = vector_env()
-    print(f"vector env, 256 sub-environments: {py:,.0f} steps/s through step, Rust VecEnv {native:,.0f} steps/s"
-          f" ({py / native:.0%} of it; median ratio of the rounds {median:.0%})")
+    for threads in (1, 2):
+        py, native, median = vector_env(threads=threads)
+        print(f"vector env, 256 sub-environments, {threads} thread(s): {py:,.0f} steps/s through step, "
+              f"Rust VecEnv {native:,.0f} steps/s ({py / native:.0%} of it; median ratio of the rounds {median:.0%})")
     rng = np.random.default_rng(1)
     n = 1_000_000
     q = rng.normal(size=(n, 4))

@@ -67,13 +67,17 @@ class ReachVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, reward: Optional[str] = None,
                  config: Union[None, str, os.PathLike, dict] = None, robot: Union[None, str, os.PathLike] = None,
                  render_mode: Optional[str] = None, render_width: Optional[int] = None,
-                 render_height: Optional[int] = None):
-        """``num_envs`` (an integer >= 1) environments; the other arguments as for
+                 render_height: Optional[int] = None, threads: int = 1):
+        """``num_envs`` (an integer >= 1) environments; ``threads`` (1 to 64): threads that
+        ``step`` splits the environments over (the results do not depend on it; 16 or more
+        environments are needed for a split); the other arguments as for
         :class:`stagerl.envs.ReachEnv`. Raises ValueError naming a bad argument."""
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"`num_envs` = {num_envs!r} is invalid: an integer >= 1")
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= 64:
+            raise ValueError(f"`threads` = {threads!r} is invalid: an integer from 1 to 64 (threads stepping the environments)")
         check_render_args(render_mode, render_width, render_height)
-        self._core = _core.VecCore(int(num_envs), **core_args(reward, config, robot))
+        self._core = _core.VecCore(int(num_envs), **core_args(reward, config, robot), threads=int(threads))
         self.num_envs = int(num_envs)
         self.single_observation_space, self.single_action_space = describe(self, self._core)
         enable_render(self, self._core, render_mode, render_width, render_height)

@@ -55,6 +55,25 @@ def test_equals_sync_vector_env_of_single_envs_value_for_value():
     assert ends["terminated"] > 50 and ends["truncated"] > 3 * SEED_BLOCK, ends
 
 
+def test_threads_give_the_same_values():
+    """40 sub-environments among random obstacles stepped on 2 threads (``make_vec(...,
+    threads=2)``) and on one: every array equal, over enough steps for many autoresets."""
+    n = 40
+    cfg = {**SHORT, "task": {**SHORT["task"], "random_obstacles": {"count": [1, 2]}, "observe_obstacles": True}}
+    one = make_vec(n, config=cfg)
+    two = make_vec(n, config=cfg, threads=2)
+    assert two.unwrapped._core is not None and two.num_envs == n
+    rng = np.random.default_rng(3)
+    assert data_equivalence(one.reset(seed=11), two.reset(seed=11), exact=True)
+    ends = 0
+    for _ in range(60):
+        actions = rng.uniform(-1, 1, (n, 6)).astype(np.float32)
+        a, b = one.step(actions), two.step(actions)
+        assert data_equivalence(a, b, exact=True)
+        ends += int(a[2].sum() + a[3].sum())
+    assert ends > n, ends
+
+
 def test_next_step_autoreset():
     n = 3
     envs = make_vec(n, config=SHORT)
@@ -162,6 +181,9 @@ def test_native_speed_measurement_steps_a_copy():
         ({"num_envs": 2, "reward": "fast"}, r"`reward` = \"fast\" is invalid: one of"),
         ({"num_envs": 2, "render_mode": "human"}, r"`render_mode` = 'human' is invalid"),
         ({"num_envs": 2, "config": {"task": {"max_steps": 0}}}, r"max_steps"),
+        ({"num_envs": 2, "threads": 0}, r"`threads` = 0 is invalid: an integer from 1 to 64"),
+        ({"num_envs": 2, "threads": 65}, r"`threads` = 65 is invalid"),
+        ({"num_envs": 2, "threads": 1.5}, r"`threads` = 1.5 is invalid"),
     ],
 )
 def test_bad_constructor_arguments(kwargs, match):

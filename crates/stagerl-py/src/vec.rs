@@ -45,6 +45,8 @@ pub struct VecCore {
     /// Environments whose episode is among the scene given to `reset` (`obstacles`): their
     /// next autoreset goes back to the task's scene, as a `SyncVectorEnv`'s does.
     scene: Vec<bool>,
+    /// The threads `step` splits the environments over (none: the calling thread alone).
+    pool: Option<stagerl::base::par::Pool>,
 }
 
 impl VecCore {
@@ -144,7 +146,7 @@ pub(crate) fn array2<'py, T: numpy::Element>(
 #[pymethods]
 impl VecCore {
     #[new]
-    #[pyo3(signature = (num_envs, config_path=None, config_json=None, reward=None, robot=None))]
+    #[pyo3(signature = (num_envs, config_path=None, config_json=None, reward=None, robot=None, threads=1))]
     fn new(
         py: Python<'_>,
         num_envs: usize,
@@ -152,7 +154,16 @@ impl VecCore {
         config_json: Option<&str>,
         reward: Option<&str>,
         robot: Option<&str>,
+        threads: i64,
     ) -> PyResult<Self> {
+        let max = stagerl::base::par::MAX_THREADS;
+        let threads = usize::try_from(threads).ok().filter(|t| (1..=max).contains(t)).ok_or_else(|| {
+            bad_arg(
+                "threads",
+                threads,
+                &format!("an integer from 1 to {max} (threads stepping the environments)"),
+            )
+        })?;
         if num_envs == 0 || num_envs > stagerl::env::MAX_VEC_ENVS {
             // Checked before anything is allocated for them.
             return Err(bad_arg(
@@ -176,7 +187,11 @@ impl VecCore {
         let (pools, used, next_seeds) = (vec![Vec::new(); num_envs], vec![0; num_envs], vec![0; num_envs]);
         let (renderer, paths) = (None, Vec::new());
         let scene = vec![false; num_envs];
-        Ok(VecCore { env, pools, used, next_seeds, keys, all: all.unbind(), renderer, paths, scene })
+        let pool = match threads {
+            1 => None,
+            t => Some(stagerl::base::par::Pool::new(t).map_err(to_py)?),
+        };
+        Ok(VecCore { env, pools, used, next_seeds, keys, all: all.unbind(), renderer, paths, scene, pool })
     }
 
     #[getter]
@@ -289,8 +304,12 @@ impl VecCore {
                 }
             }
         }
-        let (env, seeds) = (&mut self.env, &self.next_seeds);
-        py.detach(|| guard("step", || env.step_next_step_reset(actions, seeds).map_err(to_py)))?;
+        let (env, seeds, pool) = (&mut self.env, &self.next_seeds, self.pool.as_ref());
+        py.detach(|| {
+            guard("step", || {
+                stagerl::base::par::install(pool, || env.step_next_step_reset(actions, seeds)).map_err(to_py)
+            })
+        })?;
         let env = &self.env;
         for ((p, e), &reset) in self.paths.iter_mut().zip(env.envs()).zip(env.autoreset()) {
             if reset {
@@ -343,7 +362,7 @@ impl VecCore {
             ));
         }
         let flat = contiguous("actions", &actions)?;
-        let mut env = self.env.clone();
+        let (mut env, pool) = (self.env.clone(), self.pool.as_ref());
         for i in 0..n {
             if env.envs()[i].is_done() {
                 env.reset_env_with_seed(i, i as u64).map_err(to_py)?;
@@ -351,12 +370,14 @@ impl VecCore {
         }
         py.detach(|| {
             guard("time_native_steps", || {
-                let t = std::time::Instant::now();
-                for (k, batch) in flat.chunks_exact(n * a).cycle().take(steps).enumerate() {
-                    env.step(batch)
-                        .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("step {k}: {e}")))?;
-                }
-                Ok(t.elapsed().as_secs_f64())
+                stagerl::base::par::install(pool, || {
+                    let t = std::time::Instant::now();
+                    for (k, batch) in flat.chunks_exact(n * a).cycle().take(steps).enumerate() {
+                        env.step(batch)
+                            .map_err(|e| pyo3::exceptions::PyValueError::new_err(format!("step {k}: {e}")))?;
+                    }
+                    Ok(t.elapsed().as_secs_f64())
+                })
             })
         })
     }

@@ -19,7 +19,7 @@ mod vec;
 
 pub use observation::{empty_slot_distance, ObsEntry, ObservationLayout};
 pub use rollout::{rollout, track_waypoints, Driver, Flow, Observed, Outcome, Policy, Scratch, Transition};
-pub use vec::{VecEnv, MAX_VEC_ENVS};
+pub use vec::{VecEnv, MAX_VEC_ENVS, PAR_MIN_ENVS};
 
 use nalgebra::Vector3;
 use std::f64::consts::PI;

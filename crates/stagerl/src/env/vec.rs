@@ -119,36 +119,43 @@ impl VecEnv {
     }
 
     /// [`VecEnv::step`] (`reset_seeds` None: same-step autoreset from each environment's own
-    /// stream) or [`VecEnv::step_next_step_reset`].
+    /// stream) or [`VecEnv::step_next_step_reset`]. The environments are split into contiguous
+    /// ranges over the pool installed on this thread ([`crate::base::par::split`]; serially
+    /// without one or below [`PAR_MIN_ENVS`]): each environment's step is the same sequence of
+    /// operations on any thread, so the results do not depend on the thread count. On an error
+    /// of a simulator, the error of the lowest environment index is returned (the others were
+    /// stepped).
     fn step_with(&mut self, actions: &[f32], reset_seeds: Option<&[u64]>) -> Result<()> {
         self.check_actions(actions)?;
-        let (a, d) = (self.act_dim(), self.obs_dim());
-        for (i, env) in self.envs.iter_mut().enumerate() {
-            let row = i * d..(i + 1) * d;
-            let reset_seed = reset_seeds.filter(|_| env.is_done()).map(|s| s[i]);
-            self.autoreset[i] = reset_seed.is_some();
-            if let Some(seed) = reset_seed {
-                env.reset_with_seed(seed);
-                self.rewards[i] = 0.0;
-                self.terminated[i] = false;
-                self.truncated[i] = false;
-                self.steps[i] = Step::default();
-                self.final_obs[row.clone()].copy_from_slice(env.observation());
-                self.obs[row].copy_from_slice(env.observation());
-                continue;
+        let n = self.envs.len();
+        let out = Lanes {
+            envs: self.envs.as_mut_ptr(),
+            obs: self.obs.as_mut_ptr(),
+            final_obs: self.final_obs.as_mut_ptr(),
+            rewards: self.rewards.as_mut_ptr(),
+            terminated: self.terminated.as_mut_ptr(),
+            truncated: self.truncated.as_mut_ptr(),
+            steps: self.steps.as_mut_ptr(),
+            autoreset: self.autoreset.as_mut_ptr(),
+            d: self.obs_dim(),
+        };
+        let (out, a) = (&out, self.act_dim());
+        let first_error: std::sync::Mutex<Option<(usize, Error)>> = std::sync::Mutex::new(None);
+        crate::base::par::split(n, 1, 1, PAR_MIN_ENVS, &|r: std::ops::Range<usize>| {
+            // SAFETY: `split` hands out disjoint ranges of 0..n, so each range's lanes are
+            // borrowed by this call alone, while `self` stays borrowed mutably until it returns.
+            let mut lanes = unsafe { out.range(r.clone()) };
+            if let Err((i, e)) = lanes.step(r.start, &actions[r.start * a..r.end * a], a, reset_seeds) {
+                let mut first = first_error.lock().unwrap_or_else(|p| p.into_inner());
+                if first.as_ref().is_none_or(|(j, _)| i < *j) {
+                    *first = Some((i, e));
+                }
             }
-            let s = env.step(&actions[i * a..(i + 1) * a])?;
-            self.rewards[i] = s.total();
-            self.terminated[i] = s.terminated;
-            self.truncated[i] = s.truncated;
-            self.steps[i] = s;
-            self.final_obs[row.clone()].copy_from_slice(env.observation());
-            if s.done() && reset_seeds.is_none() {
-                env.reset();
-            }
-            self.obs[row].copy_from_slice(env.observation());
+        });
+        match first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            Some((_, e)) => Err(e),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// `len() * act_dim()` finite values, or an error naming the first bad one.
@@ -265,6 +272,110 @@ impl VecEnv {
     }
 }
 
+/// Fewer environments than this are stepped on the calling thread alone (a step of the UR5
+/// with its checks takes about a microsecond; waking a worker, a few).
+pub const PAR_MIN_ENVS: usize = 16;
+
+/// The start of each of a [`VecEnv`]'s buffers, for the ranges [`VecEnv::step_with`] splits
+/// them into.
+struct Lanes {
+    envs: *mut ReachEnv,
+    obs: *mut f32,
+    final_obs: *mut f32,
+    rewards: *mut f64,
+    terminated: *mut bool,
+    truncated: *mut bool,
+    steps: *mut Step,
+    autoreset: *mut bool,
+    /// Observation values per environment.
+    d: usize,
+}
+
+/// `ReachEnv` moves between threads in [`VecEnv::step_with`] (checked here, at compile time).
+const _: fn() = || {
+    fn send<T: Send>() {}
+    send::<ReachEnv>();
+};
+
+// SAFETY: the pointers are only turned into slices of disjoint ranges (`Lanes::range`), one per
+// task, while the `VecEnv` they point into is borrowed mutably by `step_with`; `ReachEnv` is `Send`.
+unsafe impl Sync for Lanes {}
+
+/// Environments `start..start + envs.len()` of a [`VecEnv`] with their rows of every buffer.
+struct LaneRange<'a> {
+    envs: &'a mut [ReachEnv],
+    obs: &'a mut [f32],
+    final_obs: &'a mut [f32],
+    rewards: &'a mut [f64],
+    terminated: &'a mut [bool],
+    truncated: &'a mut [bool],
+    steps: &'a mut [Step],
+    autoreset: &'a mut [bool],
+}
+
+impl Lanes {
+    /// The lanes of environments `r`.
+    ///
+    /// # Safety
+    /// `r` lies inside the vector env, and no other slice of these lanes overlapping `r` is
+    /// alive while the result is.
+    unsafe fn range(&self, r: std::ops::Range<usize>) -> LaneRange<'_> {
+        use std::slice::from_raw_parts_mut as part;
+        let (k, len, d) = (r.start, r.len(), self.d);
+        LaneRange {
+            envs: part(self.envs.add(k), len),
+            obs: part(self.obs.add(k * d), len * d),
+            final_obs: part(self.final_obs.add(k * d), len * d),
+            rewards: part(self.rewards.add(k), len),
+            terminated: part(self.terminated.add(k), len),
+            truncated: part(self.truncated.add(k), len),
+            steps: part(self.steps.add(k), len),
+            autoreset: part(self.autoreset.add(k), len),
+        }
+    }
+}
+
+impl LaneRange<'_> {
+    /// Step (or, with `reset_seeds`, reset the ended) environments of this range, the first
+    /// being environment `start`; `actions` holds this range's rows (`a` values each). Stops at
+    /// the first error, returned with its environment's index.
+    fn step(
+        &mut self,
+        start: usize,
+        actions: &[f32],
+        a: usize,
+        reset_seeds: Option<&[u64]>,
+    ) -> std::result::Result<(), (usize, Error)> {
+        let d = self.obs.len() / self.envs.len().max(1);
+        for (j, env) in self.envs.iter_mut().enumerate() {
+            let row = j * d..(j + 1) * d;
+            let reset_seed = reset_seeds.filter(|_| env.is_done()).map(|s| s[start + j]);
+            self.autoreset[j] = reset_seed.is_some();
+            if let Some(seed) = reset_seed {
+                env.reset_with_seed(seed);
+                self.rewards[j] = 0.0;
+                self.terminated[j] = false;
+                self.truncated[j] = false;
+                self.steps[j] = Step::default();
+                self.final_obs[row.clone()].copy_from_slice(env.observation());
+                self.obs[row].copy_from_slice(env.observation());
+                continue;
+            }
+            let s = env.step(&actions[j * a..(j + 1) * a]).map_err(|e| (start + j, e))?;
+            self.rewards[j] = s.total();
+            self.terminated[j] = s.terminated;
+            self.truncated[j] = s.truncated;
+            self.steps[j] = s;
+            self.final_obs[row.clone()].copy_from_slice(env.observation());
+            if s.done() && reset_seeds.is_none() {
+                env.reset();
+            }
+            self.obs[row].copy_from_slice(env.observation());
+        }
+        Ok(())
+    }
+}
+
 /// Environment `i` of `envs`, or an error naming the indices that exist.
 fn env_at(envs: &mut [ReachEnv], i: usize) -> Result<&mut ReachEnv> {
     let n = envs.len();
@@ -368,5 +479,61 @@ mod tests {
         assert!(e.contains("environment 1, joint 2"), "{e}");
         assert!(v.envs().iter().all(|e| e.steps() == 0));
         assert!(ur5_vec(0, 1).is_err());
+    }
+
+    /// Split over pools of 2 and 3 threads (with random obstacles, their observation and
+    /// contacts ending episodes), both autoreset modes give the serial run's bits, step by step.
+    #[test]
+    fn threads_do_not_change_a_step() {
+        let chain = Arc::new(Chain::ur5());
+        let mut task = super::super::TaskConfig::default();
+        task.random_obstacles = Some(crate::sim::scene::RandomObstacles::default());
+        task.observe_obstacles = true;
+        task.on_collision = crate::env::OnCollision::Terminate;
+        let task = task.resolve(&chain).unwrap();
+        let n = 3 * PAR_MIN_ENVS + 5;
+        let run = |threads: usize, next_step: bool| {
+            let pool = crate::base::par::Pool::new(threads).unwrap();
+            let mut v = VecEnv::new(n, chain.clone(), task.clone(), RewardConfig::default(), 7).unwrap();
+            let mut rng = Rng::new(3);
+            let mut trace: Vec<u64> = Vec::new();
+            crate::base::par::install(Some(&pool), || {
+                for k in 0..150u64 {
+                    let actions: Vec<f32> = (0..n * 6).map(|_| rng.uniform_range(-1.0, 1.0) as f32).collect();
+                    if next_step {
+                        let seeds: Vec<u64> = (0..n as u64).map(|i| 1000 * k + i).collect();
+                        v.step_next_step_reset(&actions, &seeds).unwrap();
+                    } else {
+                        v.step(&actions).unwrap();
+                    }
+                    trace.extend(v.observations().iter().map(|x| u64::from(x.to_bits())));
+                    trace.extend(v.final_observations().iter().map(|x| u64::from(x.to_bits())));
+                    trace.extend(v.rewards().iter().map(|x| x.to_bits()));
+                    trace.extend(
+                        v.terminated()
+                            .iter()
+                            .zip(v.truncated())
+                            .map(|(&a, &b)| u64::from(a) + 2 * u64::from(b)),
+                    );
+                    trace.extend(v.autoreset().iter().map(|&a| u64::from(a)));
+                    trace.extend(
+                        v.last_steps().iter().map(|s| s.total().to_bits() ^ u64::from(s.collision.is_some())),
+                    );
+                }
+            });
+            trace
+        };
+        for next_step in [false, true] {
+            let split = crate::base::par::split_jobs();
+            let serial = run(1, next_step);
+            let two = run(2, next_step);
+            assert!(crate::base::par::split_jobs() > split, "the steps were split over the pool");
+            let three = run(3, next_step);
+            assert_eq!(serial.len(), two.len());
+            assert!(
+                serial == two && serial == three,
+                "a thread count changed a step (next_step {next_step})"
+            );
+        }
     }
 }

@@ -36,6 +36,30 @@ fn the_shielded_step_allocates_nothing() {
     no_allocation_in(cfg);
 }
 
+/// A vector env split over a pool of two threads: nothing allocates on the caller or the worker.
+#[test]
+fn a_vector_env_on_two_threads_allocates_nothing() {
+    let _alone = common::POOL_TESTS.lock().unwrap_or_else(|p| p.into_inner());
+    let mut cfg = stagerl::config::Config::default();
+    cfg.task.random_obstacles = Some(stagerl::sim::scene::RandomObstacles::default());
+    cfg.task.observe_obstacles = true;
+    let n = 4 * stagerl::env::PAR_MIN_ENVS;
+    let mut venv = stagerl::env::VecEnv::from_config(n, &cfg, 1).unwrap();
+    let actions: Vec<f32> = (0..n * 6).map(|i| ((i * 7919) % 200) as f32 / 100.0 - 1.0).collect();
+    let pool = stagerl::base::par::Pool::new(2).unwrap();
+    let split = stagerl::base::par::split_jobs();
+    stagerl::base::par::install(Some(&pool), || {
+        venv.step(&actions).unwrap();
+        let (before, workers) = (allocs(), common::worker_allocs());
+        for _ in 0..2000 {
+            venv.step(&actions).unwrap();
+        }
+        assert_eq!(allocs() - before, 0, "allocations on the calling thread during 2000 steps");
+        assert_eq!(common::worker_allocs() - workers, 0, "allocations on the worker during 2000 steps");
+    });
+    assert!(stagerl::base::par::split_jobs() > split, "work went to the worker");
+}
+
 fn no_allocation_in(cfg: stagerl::config::Config) {
     let mut env = stagerl::env::ReachEnv::from_config(&cfg, 1).unwrap();
     let mut venv = stagerl::env::VecEnv::from_config(4, &cfg, 1).unwrap();

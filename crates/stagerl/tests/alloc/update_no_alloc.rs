@@ -113,6 +113,7 @@ fn ddpg_updates_allocate_nothing() {
 /// may grow on either thread) nothing allocates on the caller or on the pool's worker.
 #[test]
 fn updates_on_two_threads_allocate_nothing() {
+    let _alone = common::POOL_TESTS.lock().unwrap_or_else(|p| p.into_inner());
     let pool = stagerl::base::par::Pool::new(2).unwrap();
     let split = stagerl::base::par::split_jobs();
     stagerl::base::par::install(Some(&pool), || {

@@ -24,6 +24,11 @@ fn count() {
     }
 }
 
+/// Held by each test that makes a pool, so that no other pool's workers allocate (in their
+/// warm-up) while one counts its workers' allocations.
+#[allow(dead_code)] // not every test makes a pool
+pub static POOL_TESTS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Allocations made by the calling thread so far.
 pub fn allocs() -> usize {
     COUNT.with(Cell::get)
