@@ -486,10 +486,12 @@ mod tests {
     #[test]
     fn threads_do_not_change_a_step() {
         let chain = Arc::new(Chain::ur5());
-        let mut task = super::super::TaskConfig::default();
-        task.random_obstacles = Some(crate::sim::scene::RandomObstacles::default());
-        task.observe_obstacles = true;
-        task.on_collision = crate::env::OnCollision::Terminate;
+        let task = super::super::TaskConfig {
+            random_obstacles: Some(crate::sim::scene::RandomObstacles::default()),
+            observe_obstacles: true,
+            on_collision: crate::env::OnCollision::Terminate,
+            ..Default::default()
+        };
         let task = task.resolve(&chain).unwrap();
         let n = 3 * PAR_MIN_ENVS + 5;
         let run = |threads: usize, next_step: bool| {
