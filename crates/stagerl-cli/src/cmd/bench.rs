@@ -138,6 +138,13 @@ pub struct EnvArgs {
     /// The simulator (overrides `task.sim`): `kinematic` or `dynamic` (rapier3d).
     #[arg(long, value_parser = ["kinematic", "dynamic"])]
     sim: Option<String>,
+    /// Time a vector env of this many environments (`VecEnv`, same-step autoreset; `--steps`
+    /// counts every environment's steps) instead of one environment.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=65_536))]
+    num_envs: u32,
+    /// Threads the vector env's steps are split over (with `--num-envs` 16 or more).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    threads: u32,
 }
 
 pub fn run(b: Bench) -> Result<()> {
@@ -220,6 +227,17 @@ fn env(a: EnvArgs) -> Result<()> {
     if let Some(sim) = &a.sim {
         cfg.task.sim = sim.parse()?;
     }
+    if a.num_envs > 1 {
+        return vec_env(&a, &cfg);
+    }
+    if a.threads > 1 {
+        return Err(stagerl::Error::config(
+            "--threads",
+            a.threads,
+            "1 for one environment: threads split a vector env (--num-envs 16 or more)",
+        )
+        .into());
+    }
     let mut env = ReachEnv::from_config(&cfg, a.seed).context("building the environment")?;
     let dim = env.act_dim();
     // A fixed table of random actions, so the timed loop only steps the environment.
@@ -258,6 +276,52 @@ fn env(a: EnvArgs) -> Result<()> {
         a.reward,
         env.chain().collision_shapes().len(),
         env.task().obstacles.len(),
+        checksum
+    )?;
+    outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
+    Ok(())
+}
+
+/// `bench env --num-envs N`: steps/s of a [`stagerl::env::VecEnv`] of N environments on
+/// `--threads` threads, over a table of random actions.
+fn vec_env(a: &EnvArgs, cfg: &Config) -> Result<()> {
+    let n = a.num_envs as usize;
+    let mut venv = stagerl::env::VecEnv::from_config(n, cfg, a.seed).context("building the vector env")?;
+    let dim = venv.act_dim();
+    let mut rng = Rng::new(a.seed ^ 0xBE7C);
+    let batches = 61;
+    let table: Vec<f32> = (0..batches * n * dim).map(|_| rng.uniform_range(-1.0, 1.0) as f32).collect();
+    let pool = stagerl::base::par::Pool::new(a.threads as usize)?;
+    let steps = a.steps.div_ceil(n as u64);
+    let mut run = |calls: u64| -> Result<f64> {
+        let mut checksum = 0.0;
+        stagerl::base::par::install(Some(&pool), || -> Result<()> {
+            for k in 0..calls as usize {
+                let b = k % batches;
+                venv.step(&table[b * n * dim..(b + 1) * n * dim])?;
+                checksum += venv.rewards().iter().sum::<f64>();
+            }
+            Ok(())
+        })?;
+        Ok(checksum)
+    };
+    run((steps / 10).max(10))?; // warm-up
+    let start = Instant::now();
+    let checksum = run(steps)?;
+    let secs = start.elapsed().as_secs_f64();
+    let sps = (steps * n as u64) as f64 / secs;
+    outln!(
+        "env: a vector env of {n} environments, {} calls ({} environment steps) in {:.3} s, {:.0} steps/s \
+         ({} thread(s), {}, {} simulation, reward {}, {} collision shapes, checksum {:.3})",
+        steps,
+        steps * n as u64,
+        secs,
+        sps,
+        a.threads,
+        cfg.robot.urdf,
+        cfg.task.sim.name(),
+        a.reward,
+        venv.envs()[0].chain().collision_shapes().len(),
         checksum
     )?;
     outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;

@@ -76,6 +76,8 @@ const ARGS: &[Case] = &[
     Case { args: &["fk", "--robot", "ur5", "--tip", "flange"], stdin: "", expect: &["unknown tip link `flange`"] },
     // Benchmarks take their values through the same validation.
     Case { args: &["bench", "env", "--steps=-1"], stdin: "", expect: &["--steps", "-1"] },
+    Case { args: &["bench", "env", "--threads", "2"], stdin: "", expect: &["--threads", "1 for one environment"] },
+    Case { args: &["bench", "env", "--num-envs", "0"], stdin: "", expect: &["--num-envs", "0"] },
     Case { args: &["bench", "update", "--hidden", "0"], stdin: "", expect: &["agent.hidden"] },
     Case { args: &["bench", "update", "--batch", "0"], stdin: "", expect: &["agent.batch_size"] },
     Case { args: &["bench", "update", "--algo", "ppo"], stdin: "", expect: &["ppo", "off-policy"] },

@@ -452,6 +452,25 @@ fn bench_env_prints_a_json_line() {
     assert!(f(&v["steps_per_sec"]) > 0.0);
 }
 
+/// `bench env --num-envs`: a vector env's rewards (their checksum) are those of one thread on two.
+#[test]
+fn bench_env_times_a_vector_env_on_any_thread_count() {
+    let checksum = |threads: &str| {
+        let out =
+            stagerl(&["bench", "env", "--steps", "40000", "--num-envs", "40", "--threads", threads], "");
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(
+            text.contains("a vector env of 40 environments, 1000 calls (40000 environment steps)"),
+            "{text}"
+        );
+        let v: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+        assert!(f(&v["steps_per_sec"]) > 0.0);
+        text.split("checksum ").nth(1).unwrap().split(')').next().unwrap().to_string()
+    };
+    assert_eq!(checksum("1"), checksum("2"));
+}
+
 #[test]
 fn unwritable_output_directory_is_refused_before_training() {
     // Paths no process can create, root included: under a regular file, and inside /proc.
