@@ -89,7 +89,7 @@ fn the_obstacle_preset_trains_as_it_is() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let cfg = Config::load(&out.join("config.toml")).unwrap();
     let preset_cfg = Config::load(&preset).unwrap();
-    assert_eq!(preset_cfg.train.episodes, 6000, "the preset's own budget");
+    assert_eq!(preset_cfg.train.episodes, 15000, "the preset's own budget");
     assert_eq!(cfg.agent.hidden, [256, 256]);
     assert!(cfg.agent.sac.as_ref().is_some_and(|s| s.critic_layer_norm && s.init_alpha == 0.01));
     let her = cfg.agent.her.as_ref().expect("the preset relabels with HER");
