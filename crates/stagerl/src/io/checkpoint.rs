@@ -4,6 +4,9 @@
 //! Everything that is not a float array (counters, random-generator states, the config, the
 //! algorithm's name) goes in the metadata as text, usually JSON.
 //!
+//! The header's JSON is written with its keys sorted (the metadata's and each tensor's), so the
+//! same contents give the same file, byte for byte, in any process.
+//!
 //! Every file carries a SHA-256 checksum of its contents in the metadata entry `sha256` (lowercase
 //! hex), checked on every load: a file without it or with a wrong one is refused, naming the file.
 //! It is the SHA-256 of a sequence of parts, each written as its length in bytes (8 bytes, little
@@ -40,6 +43,25 @@ pub const MAX_CHECKPOINT_BYTES: u64 = 17 << 30;
 
 /// The metadata key of the checksum.
 pub const CHECKSUM_KEY: &str = "sha256";
+
+/// A safetensors file with its header's JSON keys sorted (safetensors writes its maps in hash
+/// order, which differs from process to process): the same JSON values, re-serialised (serde_json
+/// maps are sorted) and padded with spaces to the header's length, so every data offset stays.
+/// A header that does not parse or would not fit is left as it is (it cannot happen for a file
+/// safetensors just wrote).
+fn sorted_header(mut bytes: Vec<u8>) -> Vec<u8> {
+    let Some(n) = bytes.get(..8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")) as usize) else {
+        return bytes;
+    };
+    let Some(header) = bytes.get(8..8usize.saturating_add(n)) else { return bytes };
+    let Ok(value) = serde_json::from_slice::<serde_json::Value>(header) else { return bytes };
+    let Ok(sorted) = serde_json::to_vec(&value) else { return bytes };
+    if sorted.len() <= n {
+        bytes[8..8 + sorted.len()].copy_from_slice(&sorted);
+        bytes[8 + sorted.len()..8 + n].fill(b' ');
+    }
+    bytes
+}
 
 /// The checksum described in the module docs, over tensors given as (name, shape, f32 LE bytes).
 fn checksum<'a>(
@@ -150,8 +172,8 @@ impl Checkpoint {
         &self.metadata
     }
 
-    /// Same tensors (names, shapes, bit-identical values) and same metadata. (The files' bytes
-    /// may differ: safetensors writes the metadata map in hash order.)
+    /// Same tensors (names, shapes, bit-identical values) and same metadata (then the files are
+    /// the same too: [`sorted_header`]).
     pub fn same_contents(&self, other: &Checkpoint) -> bool {
         self.metadata == other.metadata
             && self.tensors.len() == other.tensors.len()
@@ -186,6 +208,7 @@ impl Checkpoint {
         let mut meta: HashMap<String, String> = self.metadata.clone().into_iter().collect();
         meta.insert(CHECKSUM_KEY.to_string(), sum);
         safetensors::tensor::serialize(views, Some(meta))
+            .map(sorted_header)
             .map_err(|e| Error::InvalidInput(format!("checkpoint: {e}")))
     }
 
@@ -248,6 +271,31 @@ impl Checkpoint {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The same contents give the same bytes, whatever order the hash maps of safetensors take
+    /// (each `to_bytes` makes new ones, with new random keys), and the sorted file reads back.
+    #[test]
+    fn the_same_contents_give_the_same_file() {
+        let mut ck = Checkpoint::new();
+        for k in 0..12 {
+            ck.put_tensor(&format!("layer{k}.weight"), &[2, 2], &[k as f32, 1.0, -2.0, 0.5]);
+            ck.put_meta(&format!("key{k}"), format!("value {k}"));
+        }
+        let first = ck.to_bytes().unwrap();
+        let header = |b: &[u8]| {
+            let n = u64::from_le_bytes(b[..8].try_into().unwrap()) as usize;
+            String::from_utf8(b[8..8 + n].to_vec()).unwrap()
+        };
+        let h = header(&first);
+        let (k0, k11) = (h.find("\"key0\"").unwrap(), h.find("\"key11\"").unwrap());
+        let (l0, l11) = (h.find("\"layer0.weight\"").unwrap(), h.find("\"layer11.weight\"").unwrap());
+        assert!(k0 < k11 && l0 < l11 && h.starts_with("{\"__metadata__\""), "{h}");
+        for _ in 0..20 {
+            assert_eq!(ck.to_bytes().unwrap(), first);
+        }
+        let back = Checkpoint::from_bytes(&first, Path::new("mem")).unwrap();
+        assert!(back.same_contents(&ck));
+    }
 
     #[test]
     fn round_trip_and_errors() {
