@@ -303,6 +303,8 @@ unsafe impl Sync for Lanes {}
 
 /// Environments `start..start + envs.len()` of a [`VecEnv`] with their rows of every buffer.
 struct LaneRange<'a> {
+    /// Observation values per environment.
+    d: usize,
     envs: &'a mut [ReachEnv],
     obs: &'a mut [f32],
     final_obs: &'a mut [f32],
@@ -323,6 +325,7 @@ impl Lanes {
         use std::slice::from_raw_parts_mut as part;
         let (k, len, d) = (r.start, r.len(), self.d);
         LaneRange {
+            d,
             envs: part(self.envs.add(k), len),
             obs: part(self.obs.add(k * d), len * d),
             final_obs: part(self.final_obs.add(k * d), len * d),
@@ -346,7 +349,7 @@ impl LaneRange<'_> {
         a: usize,
         reset_seeds: Option<&[u64]>,
     ) -> std::result::Result<(), (usize, Error)> {
-        let d = self.obs.len() / self.envs.len().max(1);
+        let d = self.d;
         for (j, env) in self.envs.iter_mut().enumerate() {
             let row = j * d..(j + 1) * d;
             let reset_seed = reset_seeds.filter(|_| env.is_done()).map(|s| s[start + j]);
