@@ -242,6 +242,13 @@ pub struct ArmCollider {
     /// Where the support searches of mesh parts start ([`climb`]): each self pair's two sides
     /// (`2 p`, `2 p + 1`), then each shape's against the obstacles (`2 pairs + k`).
     warm: WarmStarts,
+    /// The axis that separated the last exact test found apart (`f32` bits, three a slot, in
+    /// the first shape's frame): each self pair's (slot `p`), then each shape's against the
+    /// obstacles (`pairs + k`); 0: none ([`ArmCollider::exact_overlap`]).
+    axes: WarmStarts,
+    /// The exact tests the separating axes answered (for the tests).
+    #[cfg(test)]
+    axis_skips: WarmStarts,
 }
 
 impl ArmCollider {
@@ -274,6 +281,9 @@ impl ArmCollider {
         let reach = motion::joint_reach(chain, &shapes);
         ArmCollider {
             warm: WarmStarts((0..2 * pairs.len() + n).map(|_| AtomicU32::new(0)).collect()),
+            axes: WarmStarts((0..3 * (pairs.len() + n)).map(|_| AtomicU32::new(0)).collect()),
+            #[cfg(test)]
+            axis_skips: WarmStarts(vec![AtomicU32::new(0)]),
             reach,
             motion_q: vec![0.0; chain.dof()],
             placed_q: vec![0.0; chain.dof()],
@@ -458,7 +468,12 @@ impl ArmCollider {
                 false
             }
             (false, false, Some(b)) if g.enclosed && !distance::round_box_overlap(g, b) => false,
-            _ => self.exact_overlap(k, &self.warm.0[2 * self.pairs.len() + k], &o.pose, &o.prim, None),
+            _ => {
+                let slot = self.pairs.len() + k;
+                let axis = &self.axes.0[3 * slot..3 * slot + 3];
+                let warm = &self.warm.0[2 * self.pairs.len() + k];
+                self.exact_overlap(k, warm, axis, Body { pose: &o.pose, prim: &o.prim, geo: &o.geo }, None)
+            }
         }
     }
 
@@ -635,22 +650,34 @@ impl ArmCollider {
         let (sb, pb) = (&self.shapes[b], self.parry_pose(b));
         // Each pair's walks start where that pair's last ended (GJK's directions are the pair's).
         let (wa, wb) = (&self.warm.0[2 * p], &self.warm.0[2 * p + 1]);
-        self.exact_overlap(a, wa, &pb, &sb.parry, sb.climber.as_deref().map(|c| (c, wb)))
+        let axis = &self.axes.0[3 * p..3 * p + 3];
+        let other = Body { pose: &pb, prim: &sb.parry, geo: &self.geo[b] };
+        self.exact_overlap(a, wa, axis, other, sb.climber.as_deref().map(|c| (c, wb)))
     }
 
     /// parry's exact test of placed arm shape `a` against shape `other` at `pose` (with its
     /// hull's climber and warm start when it is a mesh part): a mesh part against a mesh part,
     /// a capsule or a box by GJK with the parts' supports by hill climbing ([`climb`]), the
     /// rest by parry's dispatcher.
+    ///
+    /// Before GJK, two axes that may separate the pair: the one that separated it at its last
+    /// test apart (steps move the arm little, so it often still does), then the direction
+    /// from `a`'s capsule (or bounding sphere) to the other's, between their
+    /// closest points. With `d` such a unit axis in `a`'s frame, the pair is apart when
+    /// `max_{x in A} d.x + m < min_{y in B} d.y`: two support points (the same hulls and pose
+    /// as GJK's); `m` = [`crate::robot::mesh::CAPSULE_MARGIN_M`], the room the hulls' capsules
+    /// already leave GJK (f32) before they skip it. The axis that separated, or GJK's own, is
+    /// kept for the next test; GJK's verdict is never changed (it starts as it would).
     #[inline]
     fn exact_overlap(
         &self,
         a: usize,
         warm_a: &AtomicU32,
-        pose: &Pose3,
-        other: &Prim,
+        axis: &[AtomicU32],
+        other: Body,
         climbing: Option<(&Climber, &AtomicU32)>,
     ) -> bool {
+        let Body { pose, prim: other, geo: other_geo } = other;
         let sa = &self.shapes[a];
         let pa = self.parry_pose(a);
         let ball = matches!(sa.parry, Prim::Ball(_)) || matches!(other, Prim::Ball(_));
@@ -668,15 +695,58 @@ impl ArmCollider {
             None => other.support_map(),
         };
         let pos12 = pa.inv_mul(pose);
-        intersection_test_support_map_support_map_with_params(
+        use std::sync::atomic::Ordering::Relaxed;
+        let d = Vec3::new(
+            f32::from_bits(axis[0].load(Relaxed)),
+            f32::from_bits(axis[1].load(Relaxed)),
+            f32::from_bits(axis[2].load(Relaxed)),
+        );
+        const MARGIN_M: f32 = crate::robot::mesh::CAPSULE_MARGIN_M as f32;
+        let separates =
+            |d: Vec3| d.dot(ga.local_support_point(d)) + MARGIN_M < d.dot(gb.support_point(&pos12, -d));
+        let keep = |d: Vec3| {
+            axis[0].store(d.x.to_bits(), Relaxed);
+            axis[1].store(d.y.to_bits(), Relaxed);
+            axis[2].store(d.z.to_bits(), Relaxed);
+        };
+        if d != Vec3::ZERO && separates(d) {
+            #[cfg(test)]
+            self.axis_skips.0[0].fetch_add(1, Relaxed);
+            return false;
+        }
+        let (g1, g2) = (&self.geo[a], other_geo);
+        let (c1, c2) = if (g1.round || g1.enclosed) && (g2.round || g2.enclosed) {
+            distance::segment_closest_points(g1.a, g1.b, g2.a, g2.b)
+        } else {
+            (g1.centre, g2.centre)
+        };
+        let w = sub(c2, c1);
+        let d =
+            (pa.rotation.inverse() * Vec3::new(w[0] as f32, w[1] as f32, w[2] as f32)).normalize_or_zero();
+        if d != Vec3::ZERO && d.is_finite() && separates(d) {
+            #[cfg(test)]
+            self.axis_skips.0[0].fetch_add(1, Relaxed);
+            keep(d);
+            return false;
+        }
+        let (hit, dir) = intersection_test_support_map_support_map_with_params(
             &pos12,
             ga,
             gb,
             &mut VoronoiSimplex::new(),
             None,
-        )
-        .0
+        );
+        keep(if hit || !dir.is_finite() { Vec3::ZERO } else { dir.normalize_or_zero() });
+        hit
     }
+}
+
+/// The other side of an exact test: its pose, shape and placed [`Geo`].
+#[derive(Clone, Copy)]
+struct Body<'a> {
+    pose: &'a Pose3,
+    prim: &'a Prim,
+    geo: &'a Geo,
 }
 
 /// A shape placed in the world, as the fast tests need it: capsules and spheres (`round`) as a
@@ -724,8 +794,13 @@ impl Geo {
     /// [`Geo::of`] a mesh part: its bounding sphere placed (out of line, as [`convex_lowest_z`]).
     #[inline(never)]
     fn of_convex(part: &ConvexPart, m: &[f64; 12]) -> Geo {
+        // Written out: `[0, 1, 2].map(..)` was not inlined (a call per point).
         let place = |l: [f64; 3]| {
-            [0, 1, 2].map(|r| m[4 * r] * l[0] + m[4 * r + 1] * l[1] + m[4 * r + 2] * l[2] + m[4 * r + 3])
+            [
+                m[0] * l[0] + m[1] * l[1] + m[2] * l[2] + m[3],
+                m[4] * l[0] + m[5] * l[1] + m[6] * l[2] + m[7],
+                m[8] * l[0] + m[9] * l[1] + m[10] * l[2] + m[11],
+            ]
         };
         let (a, b, radius) = part.capsule_m;
         Geo {

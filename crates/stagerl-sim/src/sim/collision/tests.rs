@@ -298,7 +298,9 @@ fn mesh_links_collide_with_each_other_as_the_gap_between_them_says() {
 /// A three-joint arm whose four links are random elongated blobs (OBJ files of vertices, each
 /// loaded as its hull), with obstacles: the capsules around the hulls (the broad phase) never
 /// change a verdict. Over 4000 random poses every contact `contacts` reports, and `check`'s
-/// first, are those of parry's exact test on every pair without the capsules.
+/// first, are those of parry's exact test on every pair without the capsules; and over 6000
+/// steps of a random walk too, where most exact tests are answered by the axis that separated
+/// the pair at the step before (a sign error there fails this).
 #[test]
 fn the_capsules_around_mesh_parts_never_change_a_verdict() {
     let d = std::env::temp_dir().join(format!("stagerl-collision-{}-blobs", std::process::id()));
@@ -337,27 +339,27 @@ fn the_capsules_around_mesh_parts_never_change_a_verdict() {
     let chain = Chain::from_urdf_file(&d.join("blobs.urdf"), None).unwrap();
     assert_eq!(chain.collision_shapes().len(), 4);
     let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
-    c.set_obstacles(&[
+    let obstacles = [
         Obstacle::sphere(0.08, [0.3, 0.1, 0.3]),
         Obstacle::cuboid([0.1, 0.05, 0.2], [-0.25, 0.0, 0.35], Some([0.0, 0.0, 0.38268343, 0.92387953])),
-    ]);
-    let (mut out, mut want) = (Vec::new(), Vec::new());
-    let (mut contacts, mut near_misses) = (0, 0);
-    for _ in 0..4000 {
-        let q: Vec<f64> = (0..3).map(|_| rng.uniform_range(-3.1, 3.1)).collect();
-        c.contacts(&chain, &q, &mut out);
+    ];
+    c.set_obstacles(&obstacles);
+    // Every contact parry's exact test finds on every pair at `c`'s last placement, in the
+    // order of the checks; and how many pairs have capsules that meet where the hulls do not.
+    let parry_contacts = |c: &ArmCollider, want: &mut Vec<Contact>| {
         want.clear();
         for (k, s) in c.shapes.iter().enumerate().filter(|(_, s)| s.segment >= 0) {
             if lowest_z(&s.shape, &c.world[k]) < 0.0 {
                 want.push(Contact::Floor { shape: s.index });
             }
         }
-        let exact = |c: &ArmCollider, a: usize, pose: &Pose3, s: &dyn ParryShape| {
+        let exact = |a: usize, pose: &Pose3, s: &dyn ParryShape| {
             overlap(&pose3(&c.world[a]), c.shapes[a].parry.shape(), pose, s)
         };
+        let mut near_misses = 0;
         for &(a, b) in &c.pairs {
             let (pb, sb) = (pose3(&c.world[b]), c.shapes[b].parry.shape());
-            let hit = exact(&c, a, &pb, sb);
+            let hit = exact(a, &pb, sb);
             let (ga, gb) = (&c.geo[a], &c.geo[b]);
             let capsules_meet =
                 segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) < (ga.radius + gb.radius).powi(2);
@@ -368,15 +370,48 @@ fn the_capsules_around_mesh_parts_never_change_a_verdict() {
         }
         for (i, o) in c.obstacles.iter().enumerate() {
             for k in 0..c.shapes.len() {
-                if exact(&c, k, &o.pose, o.prim.shape()) {
+                if exact(k, &o.pose, o.prim.shape()) {
                     want.push(Contact::Obstacle { shape: c.shapes[k].index, obstacle: i });
                 }
             }
         }
+        near_misses
+    };
+    let (mut out, mut want) = (Vec::new(), Vec::new());
+    let (mut contacts, mut near_misses) = (0, 0);
+    for _ in 0..4000 {
+        let q: Vec<f64> = (0..3).map(|_| rng.uniform_range(-3.1, 3.1)).collect();
+        c.contacts(&chain, &q, &mut out);
+        near_misses += parry_contacts(&c, &mut want);
         assert_eq!(out, want, "q = {q:?}");
         assert_eq!(c.check(&chain, &q), want.first().copied(), "q = {q:?}");
         contacts += usize::from(!want.is_empty());
     }
+    // Steps of a random walk (0.03 rad a joint at most), as an episode takes them: the axis
+    // that separated a pair at the last step answers most exact tests, and never wrongly.
+    // (No floor test: its contacts would come first.)
+    let mut walk = ArmCollider::new(&chain, Checks { floor: false, self_collision: true });
+    walk.set_obstacles(&obstacles);
+    let mut q = vec![0.0; 3];
+    let (mut walk_contacts, mut walk_near) = (0, 0);
+    for _ in 0..6000 {
+        for x in q.iter_mut() {
+            *x = (*x + rng.uniform_range(-0.03, 0.03)).clamp(-3.1, 3.1);
+        }
+        let got = walk.check(&chain, &q);
+        walk.contacts(&chain, &q, &mut out);
+        walk_near += parry_contacts(&walk, &mut want);
+        want.retain(|c| !matches!(c, Contact::Floor { .. }));
+        assert_eq!(out, want, "walk at q = {q:?}");
+        assert_eq!(got, want.first().copied(), "walk at q = {q:?}");
+        walk_contacts += usize::from(got.is_some());
+    }
+    let skips = walk.axis_skips.0[0].load(std::sync::atomic::Ordering::Relaxed) as usize;
+    assert!(walk_contacts > 100 && walk_near > 1000, "{walk_contacts} contacts, {walk_near} near misses");
+    assert!(
+        skips > walk_near / 2,
+        "{skips} exact tests answered by the last axis of {walk_near} near misses"
+    );
     // Both kinds of pose are common: contacts, and capsules that meet where the hulls do not
     // (the exact test decides those).
     assert!(contacts > 400 && near_misses > 200, "{contacts} {near_misses}");
