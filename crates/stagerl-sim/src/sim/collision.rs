@@ -133,6 +133,9 @@ struct ArmShape {
     parry: Prim,
     /// A mesh part's hull for the support by hill climbing.
     climber: Option<Arc<Climber>>,
+    /// A mesh part's capsule ends and sphere centre in its segment's frame (`local` applied),
+    /// for [`ArmCollider::check`]'s placement without the whole pose.
+    segment_points: [[f64; 3]; 3],
 }
 
 /// The lowest z of a primitive at the row-major 3 x 4 pose `m`, metres.
@@ -242,9 +245,10 @@ pub struct ArmCollider {
     /// Where the support searches of mesh parts start ([`climb`]): each self pair's two sides
     /// (`2 p`, `2 p + 1`), then each shape's against the obstacles (`2 pairs + k`).
     warm: WarmStarts,
-    /// The axis that separated the last exact test found apart (`f32` bits, three a slot, in
-    /// the first shape's frame): each self pair's (slot `p`), then each shape's against the
-    /// obstacles (`pairs + k`); 0: none ([`ArmCollider::exact_overlap`]).
+    /// The axis that separated the last exact test found apart (`f32` bits, four a slot: the
+    /// unit axis in the first shape's frame, then that shape's support along it, which stays
+    /// the same while the axis does): each self pair's (slot `p`), then each shape's against
+    /// the obstacles (`pairs + k`); a zero axis: none ([`ArmCollider::exact_overlap`]).
     axes: WarmStarts,
     /// The exact tests the separating axes answered (for the tests).
     #[cfg(test)]
@@ -267,6 +271,13 @@ impl ArmCollider {
                     Shape::Convex(part) => Some(Arc::new(Climber::of(part.hull()))),
                     _ => None,
                 },
+                segment_points: match &s.shape {
+                    Shape::Convex(part) => {
+                        let (a, b, _) = part.capsule_m;
+                        [a, b, part.centre_m].map(|p| apply(&s.pose, p))
+                    }
+                    _ => [[0.0; 3]; 3],
+                },
             })
             .collect();
         let mut pairs = Vec::new();
@@ -281,7 +292,7 @@ impl ArmCollider {
         let reach = motion::joint_reach(chain, &shapes);
         ArmCollider {
             warm: WarmStarts((0..2 * pairs.len() + n).map(|_| AtomicU32::new(0)).collect()),
-            axes: WarmStarts((0..3 * (pairs.len() + n)).map(|_| AtomicU32::new(0)).collect()),
+            axes: WarmStarts((0..4 * (pairs.len() + n)).map(|_| AtomicU32::new(0)).collect()),
             #[cfg(test)]
             axis_skips: WarmStarts(vec![AtomicU32::new(0)]),
             reach,
@@ -360,7 +371,7 @@ impl ArmCollider {
         self.framed
             && !self.placed
             && s.segment >= 0
-            && matches!(s.shape, Shape::Capsule { .. } | Shape::Sphere { .. })
+            && matches!(s.shape, Shape::Capsule { .. } | Shape::Sphere { .. } | Shape::Convex(_))
     }
 
     /// Placed arm shape `k`'s pose for parry (a partial one completed: the same bits as
@@ -408,6 +419,21 @@ impl ArmCollider {
                 (Shape::Capsule { .. } | Shape::Sphere { .. }, i) if i >= 0 && partial => {
                     crate::robot::mul_tf_z_and_origin(&self.frames[i as usize], &s.local, &mut self.world[k]);
                     self.geo[k] = Geo::of(&s.shape, &self.world[k]);
+                }
+                // A mesh part: its capsule and sphere only (the pose when a test needs it).
+                (Shape::Convex(part), i) if i >= 0 && partial => {
+                    let f = &self.frames[i as usize];
+                    let [a, b, centre] = s.segment_points.map(|p| apply(f, p));
+                    let g = Geo {
+                        round: false,
+                        enclosed: true,
+                        a,
+                        b,
+                        radius: part.capsule_m.2,
+                        centre,
+                        bound: part.radius_m,
+                    };
+                    self.geo[k] = g;
                 }
                 _ => self.place_shape(k),
             }
@@ -470,7 +496,7 @@ impl ArmCollider {
             (false, false, Some(b)) if g.enclosed && !distance::round_box_overlap(g, b) => false,
             _ => {
                 let slot = self.pairs.len() + k;
-                let axis = &self.axes.0[3 * slot..3 * slot + 3];
+                let axis = &self.axes.0[4 * slot..4 * slot + 4];
                 let warm = &self.warm.0[2 * self.pairs.len() + k];
                 self.exact_overlap(k, warm, axis, Body { pose: &o.pose, prim: &o.prim, geo: &o.geo }, None)
             }
@@ -544,9 +570,19 @@ impl ArmCollider {
         match &self.shapes[k].shape {
             Shape::Convex(_) => {
                 let g = &self.geo[k];
-                g.centre[2] - g.bound < 0.0
-                    && g.a[2].min(g.b[2]) - g.radius < 0.0
-                    && lowest_z(&self.shapes[k].shape, &self.world[k]) < 0.0
+                // (The filters' rounding differs from the whole pose's by far less than the
+                // room the sphere and the capsule leave.)
+                g.centre[2] - g.bound < 0.0 && g.a[2].min(g.b[2]) - g.radius < 0.0 && {
+                    let s = &self.shapes[k];
+                    let placed;
+                    let m = if self.partial(k) {
+                        placed = crate::robot::mul_tf(&self.frames[s.segment as usize], &s.local);
+                        &placed
+                    } else {
+                        &self.world[k]
+                    };
+                    lowest_z(&s.shape, m) < 0.0
+                }
             }
             s => lowest_z(s, &self.world[k]) < 0.0,
         }
@@ -650,7 +686,7 @@ impl ArmCollider {
         let (sb, pb) = (&self.shapes[b], self.parry_pose(b));
         // Each pair's walks start where that pair's last ended (GJK's directions are the pair's).
         let (wa, wb) = (&self.warm.0[2 * p], &self.warm.0[2 * p + 1]);
-        let axis = &self.axes.0[3 * p..3 * p + 3];
+        let axis = &self.axes.0[4 * p..4 * p + 4];
         let other = Body { pose: &pb, prim: &sb.parry, geo: &self.geo[b] };
         self.exact_overlap(a, wa, axis, other, sb.climber.as_deref().map(|c| (c, wb)))
     }
@@ -702,14 +738,15 @@ impl ArmCollider {
             f32::from_bits(axis[2].load(Relaxed)),
         );
         const MARGIN_M: f32 = crate::robot::mesh::CAPSULE_MARGIN_M as f32;
-        let separates =
-            |d: Vec3| d.dot(ga.local_support_point(d)) + MARGIN_M < d.dot(gb.support_point(&pos12, -d));
-        let keep = |d: Vec3| {
+        // `h_a`: A's support along `d` (A's frame, so it does not move with the pose).
+        let separates = |d: Vec3, h_a: f32| h_a + MARGIN_M < d.dot(gb.support_point(&pos12, -d));
+        let keep = |d: Vec3, h_a: f32| {
             axis[0].store(d.x.to_bits(), Relaxed);
             axis[1].store(d.y.to_bits(), Relaxed);
             axis[2].store(d.z.to_bits(), Relaxed);
+            axis[3].store(h_a.to_bits(), Relaxed);
         };
-        if d != Vec3::ZERO && separates(d) {
+        if d != Vec3::ZERO && separates(d, f32::from_bits(axis[3].load(Relaxed))) {
             #[cfg(test)]
             self.axis_skips.0[0].fetch_add(1, Relaxed);
             return false;
@@ -723,11 +760,14 @@ impl ArmCollider {
         let w = sub(c2, c1);
         let d =
             (pa.rotation.inverse() * Vec3::new(w[0] as f32, w[1] as f32, w[2] as f32)).normalize_or_zero();
-        if d != Vec3::ZERO && d.is_finite() && separates(d) {
-            #[cfg(test)]
-            self.axis_skips.0[0].fetch_add(1, Relaxed);
-            keep(d);
-            return false;
+        if d != Vec3::ZERO && d.is_finite() {
+            let h_a = d.dot(ga.local_support_point(d));
+            if separates(d, h_a) {
+                #[cfg(test)]
+                self.axis_skips.0[0].fetch_add(1, Relaxed);
+                keep(d, h_a);
+                return false;
+            }
         }
         let (hit, dir) = intersection_test_support_map_support_map_with_params(
             &pos12,
@@ -736,7 +776,8 @@ impl ArmCollider {
             &mut VoronoiSimplex::new(),
             None,
         );
-        keep(if hit || !dir.is_finite() { Vec3::ZERO } else { dir.normalize_or_zero() });
+        let d = if hit || !dir.is_finite() { Vec3::ZERO } else { dir.normalize_or_zero() };
+        keep(d, if d == Vec3::ZERO { 0.0 } else { d.dot(ga.local_support_point(d)) });
         hit
     }
 }
@@ -794,14 +835,7 @@ impl Geo {
     /// [`Geo::of`] a mesh part: its bounding sphere placed (out of line, as [`convex_lowest_z`]).
     #[inline(never)]
     fn of_convex(part: &ConvexPart, m: &[f64; 12]) -> Geo {
-        // Written out: `[0, 1, 2].map(..)` was not inlined (a call per point).
-        let place = |l: [f64; 3]| {
-            [
-                m[0] * l[0] + m[1] * l[1] + m[2] * l[2] + m[3],
-                m[4] * l[0] + m[5] * l[1] + m[6] * l[2] + m[7],
-                m[8] * l[0] + m[9] * l[1] + m[10] * l[2] + m[11],
-            ]
-        };
+        let place = |l: [f64; 3]| apply(m, l);
         let (a, b, radius) = part.capsule_m;
         Geo {
             round: false,
@@ -817,6 +851,17 @@ impl Geo {
         let d = [self.centre[0] - o.centre[0], self.centre[1] - o.centre[1], self.centre[2] - o.centre[2]];
         d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= (self.bound + o.bound).powi(2)
     }
+}
+
+/// The row-major 3 x 4 transform `m` applied to point `p` (written out: `[0, 1, 2].map(..)` was
+/// not inlined, a call per point).
+#[inline(always)]
+fn apply(m: &[f64; 12], p: [f64; 3]) -> [f64; 3] {
+    [
+        m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3],
+        m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
+        m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11],
+    ]
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
