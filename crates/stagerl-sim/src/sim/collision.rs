@@ -149,6 +149,10 @@ fn lowest_z(s: &Shape, m: &[f64; 12]) -> f64 {
     }
 }
 
+/// How far above the floor the lowest vertex the f32 search finds must be for the verdict to
+/// skip the scan of every vertex, metres (the search's rounding is about 1e-7 m).
+const FLOOR_ROOM_M: f64 = 1e-5;
+
 /// [`lowest_z`] of a mesh part: its lowest hull vertex (out of line: the primitives' path stays
 /// as small as it was).
 #[inline(never)]
@@ -243,7 +247,8 @@ pub struct ArmCollider {
     /// `framed`, and every entry of `world` too.
     placed: bool,
     /// Where the support searches of mesh parts start ([`climb`]): each self pair's two sides
-    /// (`2 p`, `2 p + 1`), then each shape's against the obstacles (`2 pairs + k`).
+    /// (`2 p`, `2 p + 1`), then each shape's against the obstacles (`2 pairs + k`), then each
+    /// shape's lowest vertex (`2 pairs + n + k`).
     warm: WarmStarts,
     /// The axis that separated the last exact test found apart (`f32` bits, four a slot: the
     /// unit axis in the first shape's frame, then that shape's support along it, which stays
@@ -291,7 +296,7 @@ impl ArmCollider {
         let n = shapes.len();
         let reach = motion::joint_reach(chain, &shapes);
         ArmCollider {
-            warm: WarmStarts((0..2 * pairs.len() + n).map(|_| AtomicU32::new(0)).collect()),
+            warm: WarmStarts((0..2 * pairs.len() + 2 * n).map(|_| AtomicU32::new(0)).collect()),
             axes: WarmStarts((0..4 * (pairs.len() + n)).map(|_| AtomicU32::new(0)).collect()),
             #[cfg(test)]
             axis_skips: WarmStarts(vec![AtomicU32::new(0)]),
@@ -581,10 +586,38 @@ impl ArmCollider {
                     } else {
                         &self.world[k]
                     };
-                    lowest_z(&s.shape, m) < 0.0
+                    match self.lowest_vertex_verdict(k, m) {
+                        Some(below) => below,
+                        None => lowest_z(&s.shape, m) < 0.0,
+                    }
                 }
             }
             s => lowest_z(s, &self.world[k]) < 0.0,
+        }
+    }
+
+    /// The floor's verdict for mesh part `k` at pose `m` from its lowest vertex by hill climbing
+    /// (f32, from where the last search ended), when that settles it: `z`, that vertex's height
+    /// computed as [`convex_lowest_z`] computes each vertex's, below 0 (the lowest is no higher:
+    /// `Some(true)`), or more than [`FLOOR_ROOM_M`] above (the f32 search's choice is within
+    /// about 1e-7 m of the lowest: `Some(false)`); `None`: the scan decides.
+    #[inline]
+    fn lowest_vertex_verdict(&self, k: usize, m: &[f64; 12]) -> Option<bool> {
+        let (Shape::Convex(part), Some(climber)) = (&self.shapes[k].shape, &self.shapes[k].climber) else {
+            return None;
+        };
+        use std::sync::atomic::Ordering::Relaxed;
+        let warm = &self.warm.0[2 * self.pairs.len() + self.shapes.len() + k];
+        let i = climber.support(Vec3::new(-m[8] as f32, -m[9] as f32, -m[10] as f32), warm.load(Relaxed));
+        warm.store(i, Relaxed);
+        let p = part.points_m.get(i as usize)?;
+        let z = m[11] + (m[8] * p[0] + m[9] * p[1] + m[10] * p[2]);
+        if z < 0.0 {
+            Some(true)
+        } else if z - FLOOR_ROOM_M > 0.0 {
+            Some(false)
+        } else {
+            None
         }
     }
 

@@ -228,6 +228,35 @@ fn a_mesh_link_meets_the_floor_where_its_lowest_corner_does() {
         }
     }
     assert!(hits > 50 && clear > 50, "{hits} {clear}");
+    // Within microns of the floor, where the lowest vertex found by climbing does not settle
+    // it and every vertex is scanned: `check` (placing the part partly, first) agrees with
+    // `contacts` (every vertex) on both sides of each crossing.
+    let lowest = |t: f64| 0.3 - 0.3 * t.sin() - 0.05 * (t.cos().abs() + t.sin().abs());
+    let (mut fresh, mut every) =
+        (ArmCollider::new(&chain, Checks::default()), ArmCollider::new(&chain, Checks::default()));
+    let mut sides = [0; 2];
+    for i in 0..600 {
+        let (mut lo, mut hi) = (-3.0 + 6.0 * i as f64 / 600.0, -3.0 + 6.0 * (i + 1) as f64 / 600.0);
+        if (lowest(lo) < 0.0) == (lowest(hi) < 0.0) {
+            continue;
+        }
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if (lowest(mid) < 0.0) == (lowest(lo) < 0.0) {
+                lo = mid
+            } else {
+                hi = mid
+            }
+        }
+        for k in -100..=100 {
+            let t = lo + k as f64 * 2e-8;
+            let got = fresh.check(&chain, &[t]).is_some();
+            every.contacts(&chain, &[t], &mut all);
+            assert_eq!(got, all.contains(&Contact::Floor { shape: 0 }), "t = {t}");
+            sides[usize::from(got)] += 1;
+        }
+    }
+    assert!(sides[0] > 50 && sides[1] > 50, "{sides:?}");
 }
 
 /// A 0.1 m mesh cube on a prismatic joint along z above a 0.2 m mesh cube at the base: the
