@@ -325,14 +325,9 @@ fn mesh_links_collide_with_each_other_as_the_gap_between_them_says() {
 }
 
 /// A three-joint arm whose four links are random elongated blobs (OBJ files of vertices, each
-/// loaded as its hull), with obstacles: the capsules around the hulls (the broad phase) never
-/// change a verdict. Over 4000 random poses every contact `contacts` reports, and `check`'s
-/// first, are those of parry's exact test on every pair without the capsules; and over 6000
-/// steps of a random walk too, where most exact tests are answered by the axis that separated
-/// the pair at the step before (a sign error there fails this).
-#[test]
-fn the_capsules_around_mesh_parts_never_change_a_verdict() {
-    let d = std::env::temp_dir().join(format!("stagerl-collision-{}-blobs", std::process::id()));
+/// loaded as its hull; the same blobs for every `name`, written under a scratch folder of it).
+fn blob_arm(name: &str) -> Chain {
+    let d = std::env::temp_dir().join(format!("stagerl-collision-{}-blobs-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     let mut rng = Rng::new(17);
@@ -367,45 +362,61 @@ fn the_capsules_around_mesh_parts_never_change_a_verdict() {
     std::fs::write(d.join("blobs.urdf"), urdf).unwrap();
     let chain = Chain::from_urdf_file(&d.join("blobs.urdf"), None).unwrap();
     assert_eq!(chain.collision_shapes().len(), 4);
-    let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
-    let obstacles = [
+    chain
+}
+
+/// The obstacles the blob arm is checked among.
+fn blob_obstacles() -> [Obstacle; 2] {
+    [
         Obstacle::sphere(0.08, [0.3, 0.1, 0.3]),
         Obstacle::cuboid([0.1, 0.05, 0.2], [-0.25, 0.0, 0.35], Some([0.0, 0.0, 0.38268343, 0.92387953])),
-    ];
-    c.set_obstacles(&obstacles);
-    // Every contact parry's exact test finds on every pair at `c`'s last placement, in the
-    // order of the checks; and how many pairs have capsules that meet where the hulls do not.
-    let parry_contacts = |c: &ArmCollider, want: &mut Vec<Contact>| {
-        want.clear();
-        for (k, s) in c.shapes.iter().enumerate().filter(|(_, s)| s.segment >= 0) {
-            if lowest_z(&s.shape, &c.world[k]) < 0.0 {
-                want.push(Contact::Floor { shape: s.index });
-            }
+    ]
+}
+
+/// Every contact parry's exact test finds on every pair at `c`'s last (whole) placement, into
+/// `want` in the order of the checks; and how many pairs have capsules that meet where the hulls
+/// do not.
+fn parry_contacts(c: &ArmCollider, want: &mut Vec<Contact>) -> usize {
+    want.clear();
+    for (k, s) in c.shapes.iter().enumerate().filter(|(_, s)| s.segment >= 0) {
+        if lowest_z(&s.shape, &c.world[k]) < 0.0 {
+            want.push(Contact::Floor { shape: s.index });
         }
-        let exact = |a: usize, pose: &Pose3, s: &dyn ParryShape| {
-            overlap(&pose3(&c.world[a]), c.shapes[a].parry.shape(), pose, s)
-        };
-        let mut near_misses = 0;
-        for &(a, b) in &c.pairs {
-            let (pb, sb) = (pose3(&c.world[b]), c.shapes[b].parry.shape());
-            let hit = exact(a, &pb, sb);
-            let (ga, gb) = (&c.geo[a], &c.geo[b]);
-            let capsules_meet =
-                segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) < (ga.radius + gb.radius).powi(2);
-            near_misses += usize::from(capsules_meet && !hit);
-            if hit {
-                want.push(Contact::SelfCollision { shape_a: c.shapes[a].index, shape_b: c.shapes[b].index });
-            }
-        }
-        for (i, o) in c.obstacles.iter().enumerate() {
-            for k in 0..c.shapes.len() {
-                if exact(k, &o.pose, o.prim.shape()) {
-                    want.push(Contact::Obstacle { shape: c.shapes[k].index, obstacle: i });
-                }
-            }
-        }
-        near_misses
+    }
+    let exact = |a: usize, pose: &Pose3, s: &dyn ParryShape| {
+        overlap(&pose3(&c.world[a]), c.shapes[a].parry.shape(), pose, s)
     };
+    let mut near_misses = 0;
+    for &(a, b) in &c.pairs {
+        let (pb, sb) = (pose3(&c.world[b]), c.shapes[b].parry.shape());
+        let hit = exact(a, &pb, sb);
+        let (ga, gb) = (&c.geo[a], &c.geo[b]);
+        let capsules_meet =
+            segment_segment_distance2(ga.a, ga.b, gb.a, gb.b) < (ga.radius + gb.radius).powi(2);
+        near_misses += usize::from(capsules_meet && !hit);
+        if hit {
+            want.push(Contact::SelfCollision { shape_a: c.shapes[a].index, shape_b: c.shapes[b].index });
+        }
+    }
+    for (i, o) in c.obstacles.iter().enumerate() {
+        for k in 0..c.shapes.len() {
+            if exact(k, &o.pose, o.prim.shape()) {
+                want.push(Contact::Obstacle { shape: c.shapes[k].index, obstacle: i });
+            }
+        }
+    }
+    near_misses
+}
+
+/// The capsules around mesh parts (the broad phase) never change a verdict: over 4000 random
+/// poses of the blob arm among obstacles, every contact `contacts` reports, and `check`'s first,
+/// are those of parry's exact test on every pair without the capsules.
+#[test]
+fn the_capsules_around_mesh_parts_never_change_a_verdict() {
+    let chain = blob_arm("random");
+    let mut rng = Rng::new(18);
+    let mut c = ArmCollider::new(&chain, Checks { floor: true, self_collision: true });
+    c.set_obstacles(&blob_obstacles());
     let (mut out, mut want) = (Vec::new(), Vec::new());
     let (mut contacts, mut near_misses) = (0, 0);
     for _ in 0..4000 {
@@ -416,8 +427,21 @@ fn the_capsules_around_mesh_parts_never_change_a_verdict() {
         assert_eq!(c.check(&chain, &q), want.first().copied(), "q = {q:?}");
         contacts += usize::from(!want.is_empty());
     }
-    // Steps of a random walk (0.03 rad a joint at most), as an episode takes them: the axis
-    // that separated a pair at the last step answers most exact tests, and never wrongly.
+    // Both kinds of pose are common: contacts, and capsules that meet where the hulls do not
+    // (the exact test decides those).
+    assert!(contacts > 400 && near_misses > 200, "{contacts} {near_misses}");
+}
+
+/// Over 6000 steps of a random walk of the blob arm among obstacles (0.03 rad a joint at most,
+/// as an episode takes them), most exact tests are answered by the axis that separated the pair
+/// at the step before, and never wrongly: every contact and `check`'s first are parry's (a sign
+/// error in the axis test fails this).
+#[test]
+fn the_last_separating_axis_never_changes_a_verdict() {
+    let chain = blob_arm("walk");
+    let mut rng = Rng::new(19);
+    let obstacles = blob_obstacles();
+    let (mut out, mut want) = (Vec::new(), Vec::new());
     // (No floor test: its contacts would come first.)
     let mut walk = ArmCollider::new(&chain, Checks { floor: false, self_collision: true });
     walk.set_obstacles(&obstacles);
@@ -441,9 +465,6 @@ fn the_capsules_around_mesh_parts_never_change_a_verdict() {
         skips > walk_near / 2,
         "{skips} exact tests answered by the last axis of {walk_near} near misses"
     );
-    // Both kinds of pose are common: contacts, and capsules that meet where the hulls do not
-    // (the exact test decides those).
-    assert!(contacts > 400 && near_misses > 200, "{contacts} {near_misses}");
 }
 
 /// An arm of capsules, spheres, a box and a mesh part (written under a scratch folder).
