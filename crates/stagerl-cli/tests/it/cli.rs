@@ -1,19 +1,17 @@
 //! End-to-end tests of the `stagerl` binary's fixed interfaces.
 
 use serde_json::Value;
-use std::io::Write;
 use std::process::{Command, Output, Stdio};
 
 fn stagerl(args: &[&str], stdin: &str) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_stagerl"))
+    let child = Command::new(env!("CARGO_BIN_EXE_stagerl"))
         .args(args)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn stagerl");
-    child.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
-    child.wait_with_output().unwrap()
+    crate::common::feed(child, stdin)
 }
 
 fn lines(out: &Output) -> Vec<Value> {

@@ -43,9 +43,7 @@ fn floats(v: &Value) -> Vec<f64> {
 }
 
 fn with_stdin(args: &[&str], input: &str) -> Output {
-    let mut child = common::spawn_piped(bin().args(args));
-    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
-    child.wait_with_output().unwrap()
+    common::feed(common::spawn_piped(bin().args(args)), input)
 }
 
 /// `stagerl fk` of joint positions.

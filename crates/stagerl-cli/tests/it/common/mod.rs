@@ -42,6 +42,18 @@ pub fn spawn_piped(cmd: &mut Command) -> Child {
         .expect("spawn")
 }
 
+/// Write `input` to a child's piped stdin, then wait for it: a command that refuses its
+/// arguments or its first line exits without reading the rest, and the pipe it leaves broken is
+/// its answer, not the test's error (any other write error is).
+pub fn feed(mut child: Child, input: &str) -> Output {
+    use std::io::Write;
+    match child.stdin.take().unwrap().write_all(input.as_bytes()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+        r => r.unwrap(),
+    }
+    child.wait_with_output().unwrap()
+}
+
 /// Every file and directory under `dir`, with the files' bytes; but the run directories' lock
 /// files (`.stagerl.lock`), which any process taking a run rewrites with its pid (bookkeeping of
 /// the lock, not a result of the run).
