@@ -10,7 +10,6 @@
 use crate::common;
 
 use common::{bin, snapshot, spawn_piped};
-use std::io::Write;
 use std::path::Path;
 use std::process::Output;
 
@@ -316,10 +315,8 @@ fn fixture(dir: &Path) {
 }
 
 fn run(args: &[String], stdin: &str) -> Output {
-    let mut child = spawn_piped(bin().args(args));
-    // A command may exit before reading its input (a bad argument): ignore a broken pipe.
-    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
-    child.wait_with_output().unwrap()
+    // A command may exit before reading its input (a bad argument): `feed` takes the broken pipe.
+    crate::common::feed(spawn_piped(bin().args(args)), stdin)
 }
 
 /// Run every case of `table`; return the failures.

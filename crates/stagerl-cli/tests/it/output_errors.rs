@@ -5,24 +5,14 @@
 
 use crate::common;
 
-use common::{bin, scratch, spawn_piped};
+use common::{bin, redirected, scratch, spawn_piped};
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 const FK_LINE: &str = "{\"joints\":[0,0,0,0,0,0]}\n";
 const REWARD_LINE: &str =
     "{\"ee_pos\":[0,0,0],\"ee_quat\":[0,0,0,1],\"target\":[0.3,0,0],\"joint_vel\":[0,0,0,0,0,0]}\n";
-
-/// Run `stagerl args` with its standard output opened by the shell redirection `redirect`
-/// (`>/dev/full`, `>&-`, ...), `stdin` on standard input.
-fn shell(args: &[&str], redirect: &str, stdin: &str) -> Output {
-    let script = format!("exec \"$0\" \"$@\" {redirect}");
-    let mut child =
-        spawn_piped(Command::new("sh").arg("-c").arg(script).arg(env!("CARGO_BIN_EXE_stagerl")).args(args));
-    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
-    child.wait_with_output().unwrap()
-}
 
 /// Run `stagerl args`, read one line of its output, then close the pipe (as `| head -1` does).
 fn head_1(args: &[&str], stdin: &str) -> (String, Output) {
@@ -60,21 +50,21 @@ fn full_disk_and_closed_stdout_are_errors() {
         (&["reward", "--function", "sar"][..], REWARD_LINE),
         (&["bench", "env", "--steps", "100"][..], ""),
     ] {
-        let out = shell(args, ">/dev/full", stdin);
+        let out = redirected(args, ">/dev/full", stdin);
         assert_clean_error(&format!("{args:?} >/dev/full"), &out, "No space left on device");
         // Standard error closed as well: still a failure, silently.
-        let out = shell(args, ">/dev/full 2>&-", stdin);
+        let out = redirected(args, ">/dev/full 2>&-", stdin);
         assert_eq!(out.status.code(), Some(1), "{args:?} >/dev/full 2>&-");
     }
     // fk and reward, whose product is their output, refuse a closed standard output.
     for (args, stdin) in [(&["fk"][..], FK_LINE), (&["reward", "--function", "sar"][..], REWARD_LINE)] {
-        let out = shell(args, ">&-", stdin);
+        let out = redirected(args, ">&-", stdin);
         assert_clean_error(&format!("{args:?} >&-"), &out, "standard output is closed");
-        let out = shell(args, ">&- 2>&-", stdin);
+        let out = redirected(args, ">&- 2>&-", stdin);
         assert_eq!(out.status.code(), Some(1), "{args:?} >&- 2>&-");
     }
     // `> /dev/null` is not a closed output.
-    let out = shell(&["fk"], ">/dev/null", FK_LINE);
+    let out = redirected(&["fk"], ">/dev/null", FK_LINE);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
@@ -130,7 +120,7 @@ fn train_whose_output_closes_saves_the_run_and_says_how_to_resume() {
 
     // A full disk on standard output from the start: refused before anything is trained.
     let full = root.join("full");
-    let out = shell(&["train", "--config", &s(&cfg), "--out", &s(&full)], ">/dev/full", "");
+    let out = redirected(&["train", "--config", &s(&cfg), "--out", &s(&full)], ">/dev/full", "");
     assert_clean_error("train >/dev/full", &out, "No space left on device");
     assert!(!full.join("episodes.csv").exists());
     std::fs::remove_dir_all(&root).ok();

@@ -9,9 +9,8 @@ use common::{bin, run, scratch};
 use serde_json::Value;
 use stagerl::agent::Algo;
 use stagerl::config::Config;
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Output, Stdio};
+use std::process::Output;
 use std::sync::OnceLock;
 
 /// A SAC run of 150 episodes with small networks, trained once for all tests.
@@ -286,23 +285,6 @@ fn a_target_outside_the_training_distribution_warns_and_still_plans() {
     assert_eq!(stdout_of(&out).lines().count(), 1);
 }
 
-/// `stagerl args` with standard output opened by the shell redirection `redirect`.
-fn redirected(args: &[&str], redirect: &str, stdin: &str) -> Output {
-    let script = format!("exec \"$0\" \"$@\" {redirect}");
-    let cmd = std::process::Command::new("sh")
-        .arg("-c")
-        .arg(script)
-        .arg(env!("CARGO_BIN_EXE_stagerl"))
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn();
-    let mut child = cmd.unwrap();
-    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
-    child.wait_with_output().unwrap()
-}
-
 #[test]
 fn closed_or_full_stdout_is_an_error() {
     let single = ["plan", "--controller", "jacobian", "--target", "-0.4,0.1,0.35"];
@@ -313,10 +295,10 @@ fn closed_or_full_stdout_is_an_error() {
         for (redirect, needle) in
             [(">&-", "standard output is closed"), (">/dev/full", "No space left on device")]
         {
-            let err = failure(&redirected(args, redirect, &input));
+            let err = failure(&common::redirected(args, redirect, &input));
             assert!(err.contains(needle), "{args:?} {redirect}: {err}");
         }
-        assert!(redirected(args, ">/dev/null", &input).status.success());
+        assert!(common::redirected(args, ">/dev/null", &input).status.success());
     }
 }
 

@@ -54,6 +54,15 @@ pub fn feed(mut child: Child, input: &str) -> Output {
     child.wait_with_output().unwrap()
 }
 
+/// Run `stagerl args` with its standard output opened by the shell redirection `redirect`
+/// (`>/dev/full`, `>&-`, ...), `stdin` on standard input.
+pub fn redirected(args: &[&str], redirect: &str, stdin: &str) -> Output {
+    let script = format!("exec \"$0\" \"$@\" {redirect}");
+    let mut sh = Command::new("sh");
+    sh.arg("-c").arg(script).arg(env!("CARGO_BIN_EXE_stagerl")).args(args);
+    feed(spawn_piped(&mut sh), stdin)
+}
+
 /// Every file and directory under `dir`, with the files' bytes; but the run directories' lock
 /// files (`.stagerl.lock`), which any process taking a run rewrites with its pid (bookkeeping of
 /// the lock, not a result of the run).
