@@ -26,7 +26,8 @@ in [-1, 1], scaled by the joint's speed limit. The episode terminates when the t
 (``distance`` in metres, ``reached``, ``position``, ``phi``, ``direction``, ``posture``, ``move``,
 ``stride``, ``gamma_posture``, ``har``, ``alpha1``, ``alpha2``, ``sar``, ``basic``, ``reward``,
 ``bonus``, ``total``, ``clearance``: the clearance penalty already taken off ``total``, 0 without
-``[reward.clearance]``), ``collision`` and ``is_success``; ``reset`` returns ``distance`` and
+``[reward.clearance]``; ``shield``: the shield's penalty, likewise, 0 without
+``reward.shield_penalty``), ``collision`` and ``is_success``; ``reset`` returns ``distance`` and
 ``is_success``.
 
 With ``[task.random_obstacles]``, the config's ``train.obstacles_in_path`` (a probability,

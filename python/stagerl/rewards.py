@@ -19,7 +19,8 @@ fresh memory, whose pages the system clears on first use (about a sixth of a 1 M
 ``prev_ee_pos`` ((N, 3) metres, needed by ``direction="displacement"``). The clearance term
 (``[reward.clearance]``, our extension: a penalty as the arm comes near an obstacle) needs the
 whole arm and the obstacles, which these rows do not hold: ``clearance=`` is refused with a
-ValueError naming ``reward.clearance`` (the environment, ``ReachEnv``, charges it).
+ValueError naming ``reward.clearance`` (the environment, ``ReachEnv``, charges it), and so is
+``shield_penalty=`` (the safety shield's penalty needs what the shield did to each command).
 """
 
 from __future__ import annotations

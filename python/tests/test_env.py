@@ -10,7 +10,7 @@ from stagerl.envs import ReachEnv
 
 TERMS = ["distance", "reached", "position", "phi", "direction", "posture", "move", "stride",
          "gamma_posture", "har", "alpha1", "alpha2", "sar", "basic", "reward", "bonus", "total",
-         "clearance"]
+         "clearance", "shield"]
 
 
 @pytest.mark.parametrize("reward", ["basic", "posture", "stride", "har", "sar"])
@@ -352,3 +352,32 @@ def test_the_shield_through_the_config_keeps_random_actions_clear_of_obstacles()
     assert hits[True] == 0 and hits[False] > 0, hits
     with pytest.raises(ValueError, match="task.shield.enabled"):
         ReachEnv(config={"task": {"shield": {"enabled": True}, "sim": "dynamic"}})
+
+
+def test_the_shield_penalty_is_charged_behind_the_shield():
+    """reward.shield_penalty with [task.shield] on: a step's ``shield`` term is the weight times
+    the change the shield made to the command (so twice the weight charges twice as much, and no
+    weight nothing), taken off ``total``; the penalty changes no motion; refused without the
+    shield, naming the field."""
+    task = {"obstacles": [{"shape": "sphere", "radius_m": 0.08, "position_m": [0.25, 0.1, 0.45]}],
+            "shield": {"enabled": True}}
+    envs = [gym.make("stagerl/Reach-v0", config={"task": task, "reward": r})
+            for r in ({"shield_penalty": 2.0}, {"shield_penalty": 1.0}, {})]
+    rng = np.random.default_rng(5)
+    for e in envs:
+        e.reset(seed=5)
+    charged = 0
+    for _ in range(300):
+        a = rng.uniform(-1, 1, 6).astype(np.float32)
+        (o2, r2, t2, u2, i2), (o1, _, _, _, i1), (o0, _, _, _, i0) = (e.step(a) for e in envs)
+        np.testing.assert_array_equal(o2, o1)
+        np.testing.assert_array_equal(o2, o0)
+        assert i2["shield"] == 2.0 * i1["shield"] >= 0.0 and i0["shield"] == 0.0, (i2, i1, i0)
+        assert r2 == i2["total"] == i2["reward"] + i2["bonus"] - i2["shield"]
+        charged += i2["shield"] > 0
+        if t2 or u2:
+            for e in envs:
+                e.reset()
+    assert charged > 10, charged
+    with pytest.raises(ValueError, match="reward.shield_penalty"):
+        gym.make("stagerl/Reach-v0", config={"reward": {"shield_penalty": 1.0}})

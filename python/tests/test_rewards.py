@@ -251,6 +251,9 @@ def test_any_number_of_joints():
         (dict(direction="displacement"), ["prev_ee_pos", "displacement"]),
         # The clearance term needs the arm and the obstacles, which the rows do not hold.
         (dict(clearance={"weight": 1.0, "margin_m": 0.1}), ["reward.clearance", "stagerl.rewards.compute", "end effector"]),
+        # So does the shield's penalty, which needs what the safety shield did to each command.
+        (dict(shield_penalty=1.0), ["reward.shield_penalty", "stagerl.rewards.compute", "safety shield"]),
+        (dict(shield_penalty=-1.0), ["reward.shield_penalty", "-1", "a finite number >= 0"]),
     ],
 )
 def test_bad_constants_name_field_value_and_allowed(kwargs, words):

@@ -52,7 +52,7 @@ pub(crate) fn build_config(
 /// taken off `total`, 0 without `[reward.clearance]`), then `collision` (1 when the step ended
 /// with the arm in contact with the floor, itself or an obstacle, else 0); `is_success` follows
 /// them in the info.
-pub(crate) const STEP_KEYS: [&str; 19] = [
+pub(crate) const STEP_KEYS: [&str; 20] = [
     "distance",
     "reached",
     "position",
@@ -71,11 +71,12 @@ pub(crate) const STEP_KEYS: [&str; 19] = [
     "bonus",
     "total",
     "clearance",
+    "shield",
     "collision",
 ];
 
 /// The values of [`STEP_KEYS`] for a step.
-pub(crate) fn step_values(s: &Step) -> [f64; 19] {
+pub(crate) fn step_values(s: &Step) -> [f64; 20] {
     let t = &s.terms;
     [
         t.distance,
@@ -96,6 +97,7 @@ pub(crate) fn step_values(s: &Step) -> [f64; 19] {
         t.bonus,
         t.total,
         t.clearance,
+        t.shield,
         f64::from(u8::from(s.collision.is_some())),
     ]
 }

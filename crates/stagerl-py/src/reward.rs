@@ -59,9 +59,7 @@ pub fn compute<'py>(
     let cfg: RewardConfig = serde_json::from_str(config_json)
         .map_err(|e| bad_arg("constants", config_json, &format!("fields of the [reward] section ({e})")))?;
     cfg.validate().map_err(to_py)?;
-    if let Some(c) = &cfg.clearance {
-        return Err(to_py(c.refused_by("stagerl.rewards.compute")));
-    }
+    cfg.pose_only("stagerl.rewards.compute").map_err(to_py)?;
     if !(dt_s.is_finite() && dt_s > 0.0) {
         return Err(bad_arg("dt_s", dt_s, "a finite number of seconds > 0"));
     }

@@ -42,9 +42,7 @@ fn fixed<const N: usize>(key: &str, v: &[f64]) -> Result<[f64; N]> {
 pub fn run(args: Args) -> Result<()> {
     let mut cfg = super::load_config(args.config.as_deref())?;
     cfg.reward.function = args.function;
-    if let Some(c) = &cfg.reward.clearance {
-        return Err(c.refused_by("stagerl reward").into());
-    }
+    cfg.reward.pose_only("stagerl reward")?;
     let dt = cfg.task.dt_s;
     let chain = args.robot.load()?;
     let dof = chain.dof();

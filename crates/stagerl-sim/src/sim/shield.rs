@@ -225,6 +225,8 @@ pub struct Shield {
     motion: Vec<f64>,
     total: ShieldStats,
     episode: ShieldStats,
+    /// The change of the last filtered command, rad/s (0: kept).
+    last_change: f64,
 }
 
 impl Shield {
@@ -254,6 +256,7 @@ impl Shield {
             motion: vec![0.0; collider.len()],
             total: ShieldStats::default(),
             episode: ShieldStats::default(),
+            last_change: 0.0,
         }
     }
 
@@ -269,6 +272,13 @@ impl Shield {
     /// What it did since [`Shield::begin_episode`].
     pub fn episode_stats(&self) -> &ShieldStats {
         &self.episode
+    }
+
+    /// How much the last [`Shield::filter`] changed its command, rad/s: `|x - c'|` of step 6
+    /// (the Euclidean norm over the joints) when it intervened, else 0. The environment charges
+    /// it with `reward.shield_penalty`.
+    pub fn last_change_rad_per_s(&self) -> f64 {
+        self.last_change
     }
 
     /// Continue an episode whose counts were `stats` (a resumed run's).
@@ -344,6 +354,7 @@ impl Shield {
         }
         self.total.record(verdict, change);
         self.episode.record(verdict, change);
+        self.last_change = if verdict == Verdict::Kept { 0.0 } else { change };
         verdict
     }
 

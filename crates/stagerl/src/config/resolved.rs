@@ -36,6 +36,7 @@ impl Config {
         let task = self.task.resolve_checked(&chain)?;
         crate::env::check_task_for_arm(&chain, &task)?;
         crate::env::check_clearance_settings(&chain, &task, &self.reward)?;
+        crate::env::check_shield_penalty(&task, &self.reward)?;
         Ok(Resolved { config: self.clone(), chain, task })
     }
 }

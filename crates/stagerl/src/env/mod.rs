@@ -59,6 +59,9 @@ pub struct Step {
     /// measured: with `[reward.clearance]` or the per-link observation, among obstacles nearer
     /// than their margin or radius (`f64::INFINITY`: none was). `None`: not measured.
     pub clearance_m: Option<f64>,
+    /// How much the safety shield changed this step's command (rad/s, 0: kept it; see
+    /// [`crate::sim::shield::Shield::last_change_rad_per_s`]). `None`: the shield is off.
+    pub shield_change_rad_per_s: Option<f64>,
 }
 
 impl Step {
@@ -78,7 +81,8 @@ impl Step {
     /// The outcome of a step of `task` from what the arm did (`input`: the end-effector pose
     /// after the step and before it, the joint velocities applied, the target), whether it ended
     /// in contact (`collided`), the arm's clearance from the obstacles (`clearance_m`, metres,
-    /// see [`Step::clearance_m`]) and the steps taken so far, this one included (the result's
+    /// see [`Step::clearance_m`]), the shield's change to the command (`shield_change`, rad/s,
+    /// see [`Step::shield_change_rad_per_s`]) and the steps taken so far, this one included (the result's
     /// `collision` is left for the caller, who knows what was touched). One rule for the
     /// environment and for hindsight relabelling, which asks it again for substituted goals:
     /// 1. the reward terms of the run's reward function (eqs. 1-15 and 18), the success bonus
@@ -87,7 +91,9 @@ impl Step {
     ///    `reward.collision_penalty` (0 when unset); with `"record"` contact changes nothing;
     /// 3. with `[reward.clearance]`, R_clearance of `clearance_m` is taken off (eqs. 19-21 of
     ///    [`crate::reward`]; 0 when not measured); unset, nothing is;
-    /// 4. terminated: reached or ended by contact; truncated: not terminated at `max_steps`.
+    /// 4. with `reward.shield_penalty`, R_shield = `shield_penalty * shield_change` is taken off
+    ///    (eqs. 22-23; 0 without the shield);
+    /// 5. terminated: reached or ended by contact; truncated: not terminated at `max_steps`.
     #[inline]
     pub fn outcome(
         task: &ResolvedTask,
@@ -95,6 +101,7 @@ impl Step {
         input: &RewardInput<'_>,
         collided: bool,
         clearance_m: Option<f64>,
+        shield_change: Option<f64>,
         steps: u32,
     ) -> Step {
         let mut terms = RewardTerms::compute(reward, task.dt_s, input);
@@ -106,9 +113,20 @@ impl Step {
             terms.clearance = c.penalty(d);
             terms.total -= terms.clearance;
         }
+        if let (Some(w), Some(c)) = (reward.shield_penalty, shield_change) {
+            terms.shield = w * c;
+            terms.total -= terms.shield;
+        }
         let terminated = terms.reached || ended_by_contact;
         let truncated = !terminated && steps >= task.max_steps;
-        Step { terms, terminated, truncated, collision: None, clearance_m }
+        Step {
+            terms,
+            terminated,
+            truncated,
+            collision: None,
+            clearance_m,
+            shield_change_rad_per_s: shield_change,
+        }
     }
 }
 
@@ -248,7 +266,22 @@ pub fn check_parts(chain: &Chain, task: &ResolvedTask, reward: &RewardConfig) ->
     reward.validate()?;
     check_collision_settings(task.on_collision, reward)?;
     check_clearance_settings(chain, task, reward)?;
+    check_shield_penalty(task, reward)?;
     check_task_for_arm(chain, task)
+}
+
+/// Check that `reward.shield_penalty` has a shield to charge: `[task.shield]` enabled (turning
+/// it off later, as `stagerl eval --no-shield` does, leaves nothing to charge: the term is 0).
+pub fn check_shield_penalty(task: &ResolvedTask, reward: &RewardConfig) -> Result<()> {
+    match reward.shield_penalty {
+        Some(w) if !task.shield.is_some_and(|s| s.enabled) => Err(Error::config(
+            "reward.shield_penalty",
+            w,
+            "unset unless [task.shield] has enabled = true: it charges the changes the safety \
+             shield makes to the commands",
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Check that `[reward.clearance]` can measure something: obstacles to keep clear of, and an
@@ -653,8 +686,16 @@ impl ReachEnv {
             prev_ee_pos: Some(prev_ee),
         };
         let contact = self.arm.contact();
-        let mut step =
-            Step::outcome(&self.task, &self.reward, &input, contact.is_some(), clearance, self.steps);
+        let shield_change = self.arm.shield().map(|s| s.last_change_rad_per_s());
+        let mut step = Step::outcome(
+            &self.task,
+            &self.reward,
+            &input,
+            contact.is_some(),
+            clearance,
+            shield_change,
+            self.steps,
+        );
         step.collision = contact.map(|c| c.kind());
         self.done = step.done();
         self.write_observation();

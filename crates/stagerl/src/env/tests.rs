@@ -989,3 +989,95 @@ fn the_largest_random_obstacle_count_can_be_capped() {
     }
     assert!(env(1).set_max_random_obstacles(1).is_err());
 }
+
+/// The UR5's default task with a sphere beside the tool at the home pose and the shield on, and
+/// `reward` (the sphere's centre: the shield then changes some of the random commands).
+fn shielded_ur5(reward: RewardConfig, seed: u64) -> ReachEnv {
+    use crate::sim::scene::Obstacle;
+    use crate::sim::shield::ShieldConfig;
+    let chain = Arc::new(Chain::ur5());
+    let tool = chain.fk(&task::UR5_HOME_POSE_RAD).position;
+    let task = TaskConfig {
+        obstacles: vec![Obstacle::sphere(0.08, [tool.x + 0.15, tool.y, tool.z - 0.05])],
+        shield: Some(ShieldConfig { enabled: true, ..ShieldConfig::default() }),
+        ..TaskConfig::default()
+    };
+    let task = task.resolve(&chain).unwrap();
+    ReachEnv::new(chain, task, reward, seed).unwrap()
+}
+
+/// Eq. 22 against an independent computation: every step's shield term is `w |x - c'|`, with `x`
+/// the command asked for (the action times the speed limits, clamped so that the joints stay
+/// within their limits, as the shield's step 1 clamps it) and `c'` the joint velocities the arm
+/// moved with; the total is the reward and bonus less it; the same episodes without the penalty
+/// take the same steps; and the terms of an episode add up to the shield's own count of changes.
+#[test]
+fn the_shield_penalty_charges_the_change_the_shield_made() {
+    let w = 2.0;
+    let mut env = shielded_ur5(RewardConfig { shield_penalty: Some(w), ..RewardConfig::default() }, 6);
+    let mut plain = shielded_ur5(RewardConfig::default(), 6);
+    let chain = env.chain().clone();
+    let (lo, hi, vmax) = (chain.lower_limits(), chain.upper_limits(), chain.velocity_limits());
+    let dt = env.task().dt_s;
+    let (mut rng, mut action, mut charged) = (Rng::new(8), [0.0f32; 6], 0);
+    for _ in 0..6 {
+        env.reset();
+        plain.reset();
+        let mut sum = 0.0;
+        while !env.is_done() {
+            action.iter_mut().for_each(|x| *x = rng.uniform_range(-1.0, 1.0) as f32);
+            let q = env.joint_positions().to_vec();
+            let (s, p) = (env.step(&action).unwrap(), plain.step(&action).unwrap());
+            let change = (0..6)
+                .map(|i| {
+                    let x = (f64::from(action[i]) * vmax[i]).clamp(
+                        (-vmax[i]).max((lo[i] - q[i]) / dt).min(0.0),
+                        vmax[i].min((hi[i] - q[i]) / dt).max(0.0),
+                    );
+                    (x - env.joint_velocities()[i]).powi(2)
+                })
+                .sum::<f64>()
+                .sqrt();
+            let expected = if change > 1e-9 { w * change } else { 0.0 };
+            assert!((s.terms.shield - expected).abs() < 1e-9, "{} against {expected}", s.terms.shield);
+            assert_eq!(s.total(), s.terms.reward + s.terms.bonus - s.terms.shield);
+            assert_eq!(s.shield_change_rad_per_s.map(|c| w * c), Some(s.terms.shield));
+            assert_eq!((p.terms.shield, p.total()), (0.0, p.terms.reward + p.terms.bonus));
+            assert_eq!(
+                (s.terms.reward, s.terminated, env.joint_positions()),
+                (p.terms.reward, p.terminated, plain.joint_positions())
+            );
+            sum += s.terms.shield / w;
+            charged += usize::from(s.terms.shield > 0.0);
+        }
+        let counted = env.episode_shield_stats().unwrap().change_sum_rad_per_s;
+        assert!((sum - counted).abs() < 1e-9 * (1.0 + counted), "{sum} against {counted}");
+    }
+    assert!(charged > 10, "the penalty was exercised: {charged} steps");
+}
+
+/// `reward.shield_penalty` needs the shield: refused without it and when negative or not finite,
+/// and by the tools that see the end effector only, each naming the field; with the shield
+/// turned off afterwards (`eval --no-shield`) nothing is charged.
+#[test]
+fn the_shield_penalty_is_checked_and_charges_nothing_without_the_shield() {
+    let with = |w: f64| RewardConfig { shield_penalty: Some(w), ..RewardConfig::default() };
+    let chain = Arc::new(Chain::ur5());
+    let task = TaskConfig::default().resolve(&chain).unwrap();
+    let e = ReachEnv::new(chain, task, with(1.0), 1).unwrap_err().to_string();
+    assert!(e.contains("reward.shield_penalty") && e.contains("[task.shield] has enabled = true"), "{e}");
+    for bad in [-1.0, f64::NAN, f64::INFINITY] {
+        let e = with(bad).validate().unwrap_err().to_string();
+        assert!(e.contains("reward.shield_penalty") && e.contains("a finite number >= 0"), "{e}");
+    }
+    let e = with(1.0).pose_only("stagerl reward").unwrap_err().to_string();
+    assert!(e.contains("reward.shield_penalty") && e.contains("unset for stagerl reward"), "{e}");
+    assert!(RewardConfig::default().pose_only("stagerl reward").is_ok());
+    let mut e = shielded_ur5(with(1.0), 3);
+    e.set_shield(false).unwrap();
+    e.reset();
+    while !e.is_done() {
+        let s = e.step(&[1.0, -1.0, 1.0, -1.0, 1.0, -1.0]).unwrap();
+        assert_eq!((s.shield_change_rad_per_s, s.terms.shield), (None, 0.0));
+    }
+}

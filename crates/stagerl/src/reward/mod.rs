@@ -15,6 +15,15 @@
 //!     `stagerl reward` and `stagerl.rewards.compute`, which see the end effector only, refuse
 //!     `[reward.clearance]`.
 //!
+//! A second one, for training with the safety shield on (`reward.shield_penalty`, weight
+//! `w_s >= 0`; [`crate::sim::shield`]): with `x` the command the policy asked for (rad/s, within
+//! the joint limits) and `c'` the one the shield let through,
+//! 22. `R_shield = w_s |x - c'|` (the Euclidean norm over the joints, rad/s; 0 when the shield
+//!     kept the command), so that a policy trained behind the shield learns to need it less;
+//! 23. the agent receives `R + bonus - R_clearance - R_shield`. Like the clearance term it is
+//!     the environment's ([`crate::env::Step::outcome`]), and hindsight relabelling charges a
+//!     step's term again as it was.
+//!
 //! [`RewardTerms::compute`] evaluates every term at once, so a caller can see why a step got its
 //! reward; [`RewardTerms::reward`] is the value of the configured [`RewardFunction`] and
 //! [`RewardTerms::total`] adds the bonus.
@@ -130,6 +139,11 @@ pub struct RewardConfig {
     /// rewards.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clearance: Option<ClearanceConfig>,
+    /// Weight of the shield's penalty, reward per rad/s of the change the safety shield made to
+    /// a step's command (eq. 22 of this module; our extension, >= 0). Only with `[task.shield]`
+    /// enabled. Unset: 0 (and left out of a written config).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shield_penalty: Option<f64>,
 }
 
 /// `[reward.clearance]`: a penalty taken off every step's reward as the arm comes closer to an
@@ -208,6 +222,7 @@ impl Default for RewardConfig {
             direction_fold: true,
             collision_penalty: None,
             clearance: None,
+            shield_penalty: None,
         }
     }
 }
@@ -227,6 +242,31 @@ impl RewardConfig {
         }
         if let Some(c) = &self.clearance {
             c.validate()?;
+        }
+        if let Some(w) = self.shield_penalty {
+            non_negative("reward.shield_penalty", w)?;
+        }
+        Ok(())
+    }
+
+    /// The error of a tool that computes rewards from the end effector's pose alone (`tool`:
+    /// `stagerl reward`, `stagerl.rewards.compute`) for a config with a term only the
+    /// environment can charge: `[reward.clearance]` (the arm's distance to the obstacles) or
+    /// `reward.shield_penalty` (what the safety shield did). `Ok` without either.
+    pub fn pose_only(&self, tool: &str) -> Result<()> {
+        if let Some(c) = &self.clearance {
+            return Err(c.refused_by(tool));
+        }
+        if let Some(w) = self.shield_penalty {
+            return Err(Error::config(
+                "reward.shield_penalty",
+                w,
+                format!(
+                    "unset for {tool}: it computes the rewards from the end effector's pose alone, \
+                     and the shield's penalty needs what the safety shield did to each command (the \
+                     environment charges it: stagerl train, eval, plan, the Python ReachEnv)"
+                ),
+            ));
         }
         Ok(())
     }
@@ -350,6 +390,10 @@ pub struct RewardTerms {
     /// `[reward.clearance]` is set.
     #[serde(default)]
     pub clearance: f64,
+    /// R_shield (eq. 22), taken off `total` by the environment; 0 unless
+    /// `reward.shield_penalty` is set and the shield changed the step's command.
+    #[serde(default)]
+    pub shield: f64,
 }
 
 impl RewardTerms {
@@ -551,6 +595,7 @@ impl RewardTerms {
             bonus,
             total: reward + bonus,
             clearance: 0.0,
+            shield: 0.0,
         }
     }
 

@@ -14,8 +14,9 @@
 //! ([`crate::env::ObservationLayout::write_target_entries`]), the reward with the run's reward function (any of the
 //! five: each is a pure function of the step's end-effector pose, joint velocities and target,
 //! eqs. 1-15 and 18), the success bonus and the termination (`D_PT < beta` for `g`). The clearance
-//! term (`[reward.clearance]`) depends on the arm's pose, not on the goal: the step's measured
-//! clearance is logged and charged again. The real
+//! term (`[reward.clearance]`) and the shield's (`reward.shield_penalty`) depend on the arm's pose
+//! and command, not on the goal: the step's measured clearance and the shield's change to its
+//! command are logged and charged again. The real
 //! transitions are stored as without HER, after every step, so that the updates of Algorithm 1
 //! see them at once; the relabelled ones follow when the episode ends.
 //!
@@ -54,6 +55,10 @@ pub struct EpisodeLog {
     /// absent in checkpoints of older versions and when it is not measured).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     clearance: Vec<Option<f64>>,
+    /// The shield's change to each step's command, rad/s ([`crate::env::Step::shield_change_rad_per_s`];
+    /// absent in checkpoints of older versions and when the shield is off).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    shield_change: Vec<f64>,
 }
 
 impl EpisodeLog {
@@ -68,6 +73,7 @@ impl EpisodeLog {
         }
         self.contact.clear();
         self.clearance.clear();
+        self.shield_change.clear();
     }
 
     /// Record a step of the episode (after the environment took it).
@@ -83,6 +89,9 @@ impl EpisodeLog {
         if t.step.clearance_m.is_some() {
             // An infinite clearance (no obstacle near) is charged as none: JSON has no infinity.
             self.clearance.push(t.step.clearance_m.filter(|d| d.is_finite()));
+        }
+        if let Some(c) = t.step.shield_change_rad_per_s {
+            self.shield_change.push(c);
         }
     }
 
@@ -101,6 +110,10 @@ impl EpisodeLog {
 
     fn clearance_after(&self, t: usize) -> Option<f64> {
         self.clearance.get(t).copied().flatten()
+    }
+
+    fn shield_change_at(&self, t: usize) -> Option<f64> {
+        self.shield_change.get(t).copied()
     }
 
     fn ee_after(&self, t: usize) -> Vector3<f64> {
@@ -198,7 +211,8 @@ impl Relabeller {
                     prev_ee_pos: Some(before),
                 };
                 let (contact, clearance) = (log.contact_after(t), log.clearance_after(t));
-                let step = Step::outcome(task, reward, &input, contact, clearance, t as u32 + 1);
+                let shield = log.shield_change_at(t);
+                let step = Step::outcome(task, reward, &input, contact, clearance, shield, t as u32 + 1);
                 sink(&Relabelled {
                     step: t,
                     goal,

@@ -124,6 +124,7 @@ fn reward_config() -> impl Strategy<Value = RewardConfig> {
                     direction_fold: fold,
                     collision_penalty: None,
                     clearance: None,
+                    shield_penalty: None,
                 }
             },
         )

@@ -75,7 +75,9 @@ fn the_shield_off_changes_nothing_and_far_from_everything_on_changes_nothing_eit
         assert_eq!(sa, sb);
         assert_eq!(a.joint_positions(), b.joint_positions());
         if c.shield_stats().unwrap().interventions == 0 {
-            assert_eq!(sa, sc);
+            // The same step, but that the shielded one says what the shield changed: nothing.
+            assert_eq!((sa.shield_change_rad_per_s, sc.shield_change_rad_per_s), (None, Some(0.0)));
+            assert_eq!(sa, stagerl::env::Step { shield_change_rad_per_s: None, ..sc });
             assert_eq!(a.joint_positions(), c.joint_positions());
         }
         if sa.done() {

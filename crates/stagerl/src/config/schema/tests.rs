@@ -40,6 +40,7 @@ radius_m = 0.05
 count = [1, 2]
 [reward]
 collision_penalty = 10.0
+shield_penalty = 0.5
 [reward.clearance]
 weight = 2.0
 margin_m = 0.05

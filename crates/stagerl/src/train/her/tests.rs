@@ -175,3 +175,37 @@ fn a_relabelled_step_keeps_its_clearance_penalty() {
     });
     assert!(n > 0 && charged > 0, "{charged} of {n} relabelled steps charged");
 }
+
+/// With `reward.shield_penalty` and the shield on, every relabelled step is charged the shield's
+/// penalty the environment charged for it (it depends on the command, not on the goal), bit for
+/// bit as a fresh environment's step for the new goal; some steps are charged.
+#[test]
+fn a_relabelled_step_keeps_its_shield_penalty() {
+    use crate::sim::scene::Obstacle;
+    use crate::sim::shield::ShieldConfig;
+    let chain = Arc::new(crate::robot::Chain::ur5());
+    let tool = chain.fk(&crate::env::UR5_HOME_POSE_RAD).position;
+    let task = crate::env::TaskConfig {
+        obstacles: vec![Obstacle::sphere(0.08, [tool.x + 0.15, tool.y, tool.z - 0.05])],
+        shield: Some(ShieldConfig { enabled: true, ..ShieldConfig::default() }),
+        ..Default::default()
+    };
+    let task = task.resolve(&chain).unwrap();
+    let reward = RewardConfig { shield_penalty: Some(2.0), ..RewardConfig::default() };
+    let mut e = ReachEnv::new(chain, task.clone(), reward.clone(), 5).unwrap();
+    let mut fresh = e.clone();
+    let (mut n, mut charged) = (0, 0);
+    for seed in 3..6 {
+        let (log, qs) = episode(&mut e, seed);
+        let cfg = HerConfig { strategy: HerStrategy::Future, k: 2 };
+        Relabeller::default().relabel(&cfg, &task, &reward, &log, &mut Rng::new(2), |x| {
+            fresh.reset_to(&qs[x.step], x.goal).unwrap();
+            let s = fresh.step(x.action).unwrap();
+            assert_eq!(s.terms, x.terms, "step {}", x.step);
+            assert_eq!(x.terms.total, x.terms.reward + x.terms.bonus - x.terms.shield);
+            n += 1;
+            charged += usize::from(x.terms.shield > 0.0);
+        });
+    }
+    assert!(n > 0 && charged > 0, "{charged} of {n} relabelled steps charged");
+}
