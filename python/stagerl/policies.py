@@ -82,14 +82,15 @@ class Policy:
 
 
 def plan(run_dir, target, start=None, checkpoint=None, max_steps: Optional[int] = None, obstacles=None,
-         shield: bool = False) -> dict:
+         shield: Optional[bool] = None) -> dict:
     """The ``stagerl plan`` trajectory from ``start`` (radians; default the home pose) to
     ``target`` (metres) with the run's policy (see the module documentation). ``obstacles``: a
     list of dicts in the schema of ``[[task.obstacles]]`` (as a ``stagerl plan --targets`` line's
     ``"obstacles"``), checked with the command line's messages; the summary then reports
     ``collision``, ``min_clearance_m`` and ``plan_time_s`` against them. ``shield=True`` filters
     every command through the safety shield (``--shield``; the summary then adds its ``shield_*``
-    counts)."""
+    counts), ``shield=False`` plans without it (``--no-shield``), ``None`` as the run was trained
+    (behind the shield for a run with ``[task.shield] enabled = true``)."""
     run_dir = _path("run_dir", run_dir)
     if not os.path.isdir(run_dir):
         raise ValueError(f"`run_dir` = {run_dir!r} is invalid: a run directory (use `checkpoint=` for a checkpoint file)")
@@ -100,10 +101,10 @@ def plan(run_dir, target, start=None, checkpoint=None, max_steps: Optional[int] 
         checkpoint = _path("checkpoint", checkpoint)
     if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or not 1 <= max_steps <= 1_000_000):
         raise ValueError(f"`max_steps` = {max_steps!r} is invalid: an integer from 1 to 1 000 000")
-    if not isinstance(shield, (bool, np.bool_)):
-        raise ValueError(f"`shield` = {shield!r} is invalid: True or False")
+    if shield is not None and not isinstance(shield, (bool, np.bool_)):
+        raise ValueError(f"`shield` = {shield!r} is invalid: True, False or None (as the run was trained)")
     arrays, summary, warning = _core.plan(run_dir, target, start, checkpoint, None if max_steps is None else int(max_steps),
-                                          obstacles, bool(shield))
+                                          obstacles, None if shield is None else bool(shield))
     arrays["summary"] = json.loads(summary)
     arrays["warning"] = warning
     return arrays

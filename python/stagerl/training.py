@@ -232,7 +232,7 @@ class Run:
         return _core.export_onnx(self.dir, os.fspath(path), self._checkpoint(checkpoint), bool(force))
 
     def plan(self, target, start=None, checkpoint: Optional[str] = None, max_steps: Optional[int] = None,
-             obstacles=None, shield: bool = False) -> dict:
+             obstacles=None, shield: Optional[bool] = None) -> dict:
         """:func:`stagerl.plan` with this run's policy."""
         return _plan(self.dir, target, start=start, checkpoint=checkpoint, max_steps=max_steps, obstacles=obstacles,
                      shield=shield)

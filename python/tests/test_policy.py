@@ -108,6 +108,26 @@ def test_a_shielded_plan_is_the_cli_one_with_the_shield_counts(stagerl_bin, trai
         stagerl.plan(trained_run, target, shield="yes")
 
 
+def test_a_run_trained_behind_the_shield_plans_behind_it_unless_told_not_to(stagerl_bin, tmp_path):
+    """`shield=None` (the default) plans as the run was trained, here behind the shield;
+    `shield=False` is the policy alone, the command line's `--no-shield`."""
+    config = tmp_path / "shielded.toml"
+    config.write_text('[task]\non_collision = "terminate"\n[task.shield]\nenabled = true\n'
+                      '[task.random_obstacles]\ncount = [1, 1]\n[train]\nepisodes = 2\neval_trials = 2\n')
+    run = tmp_path / "run"
+    done = subprocess.run([stagerl_bin, "train", "--config", str(config), "--out", str(run)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    target = [0.4, 0.2, 0.5]
+    assert "shield_steps" in stagerl.plan(run, target)["summary"]
+    alone = stagerl.plan(run, target, shield=False)
+    assert "shield_steps" not in alone["summary"]
+    args = [stagerl_bin, "plan", "--run", str(run), "--target", "0.4,0.2,0.5", "--format", "jsonl", "--no-shield"]
+    cli = subprocess.run(args, capture_output=True, text=True)
+    assert cli.returncode == 0, cli.stderr
+    rows = [json.loads(line) for line in cli.stdout.splitlines()][:-1]
+    np.testing.assert_array_equal(alone["q"], np.array([r["q"] for r in rows]))
+
+
 def test_policy_from_a_checkpoint_file_batched_and_one_row(trained_run):
     by_dir = stagerl.Policy.load(trained_run)
     best = trained_run / "checkpoints" / "best.safetensors"

@@ -99,9 +99,10 @@ impl PolicyCore {
 
 /// The trajectory `stagerl plan` writes for the run's policy: (a dict of arrays keyed like its
 /// JSON lines, the summary line's fields as JSON, the warning or None); `shield`: through the
-/// safety shield (`--shield`), the summary then adds its `shield_*` counts.
+/// safety shield or not (`--shield`, `--no-shield`; unset: as the run was trained), the summary
+/// then adds its `shield_*` counts when it ran.
 #[pyfunction]
-#[pyo3(signature = (run_dir, target, start=None, checkpoint=None, max_steps=None, obstacles=None, shield=false))]
+#[pyo3(signature = (run_dir, target, start=None, checkpoint=None, max_steps=None, obstacles=None, shield=None))]
 #[allow(clippy::too_many_arguments)] // Python's keyword arguments, one per plan option
 pub fn plan<'py>(
     py: Python<'py>,
@@ -111,15 +112,15 @@ pub fn plan<'py>(
     checkpoint: Option<&str>,
     max_steps: Option<u32>,
     obstacles: Option<Bound<'py, PyAny>>,
-    shield: bool,
+    shield: Option<bool>,
 ) -> PyResult<(Bound<'py, PyDict>, String, Option<String>)> {
     let obstacles = crate::obstacles::obstacles_of(obstacles.as_ref())?;
     let plan = guard("plan", || {
         let run = RunDir::new(Path::new(run_dir));
         let (_, mut planner) =
             Planner::from_run(&run, checkpoint.map(Path::new), max_steps).map_err(to_py)?;
-        if shield {
-            planner.set_shield(true).map_err(to_py)?;
+        if let Some(on) = shield {
+            planner.set_shield(on).map_err(to_py)?;
         }
         planner.plan_among(&target, start.as_deref(), obstacles.as_deref()).map_err(to_py)
     })?;

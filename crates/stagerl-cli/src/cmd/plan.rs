@@ -69,9 +69,14 @@ pub struct Args {
     #[arg(long, requires = "view")]
     force: bool,
     /// Filter every command through the safety shield (`[task.shield]`: no checked pair closer
-    /// than its margin within a step; a plan's output adds the `shield_*` counts).
+    /// than its margin within a step; a plan's output adds the `shield_*` counts). A run trained
+    /// with `[task.shield] enabled = true` plans behind it without this flag too.
     #[arg(long)]
     shield: bool,
+    /// Plan without the safety shield with a run trained with `[task.shield] enabled = true`
+    /// (the policy alone).
+    #[arg(long, conflicts_with = "shield")]
+    no_shield: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -110,8 +115,8 @@ pub fn run(args: Args) -> Result<()> {
         let scene = stagerl::env::request::parse_scene(&text, &name)?;
         planner.set_scene(scene, &format!("--scene {name}: obstacles"))?;
     }
-    if args.shield {
-        planner.set_shield(true).context("--shield")?;
+    if args.shield || args.no_shield {
+        planner.set_shield(args.shield).context(if args.shield { "--shield" } else { "--no-shield" })?;
     }
     let mut view = args.view.as_ref().map(|_| View::for_planner(&view_title(&args), &planner));
     if let Some(path) = &args.targets {

@@ -154,3 +154,69 @@ fn bench_obstacles_writes_the_table_the_problems_and_the_plans() {
     assert!(plans.iter().filter(|p| p["set"] == "in-the-way").any(|p| p["collision"] == true));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A run trained behind the shield (`[task.shield] enabled = true`): its `policy` row is the
+/// policy alone (no shield counts on its plans) and `policy+shield` the policy behind it; `plan`
+/// plans behind it, and alone with `--no-shield`.
+#[test]
+fn bench_obstacles_plans_a_shield_trained_policy_alone_and_behind_the_shield() {
+    let dir = scratch("bench-obstacles-shielded-run");
+    let config = dir.join("shielded.toml");
+    std::fs::write(
+        &config,
+        "[task]\non_collision = \"terminate\"\n[task.shield]\nenabled = true\n\
+         [task.random_obstacles]\ncount = [1, 1]\n[train]\nepisodes = 2\neval_trials = 2\n",
+    )
+    .unwrap();
+    let run_dir = dir.join("run");
+    let out = run(&[
+        "train",
+        "--config",
+        config.to_str().unwrap(),
+        "--seed",
+        "1",
+        "--out",
+        run_dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let plans_path = dir.join("plans.jsonl");
+    let out = run(&[
+        "bench",
+        "obstacles",
+        "--problems",
+        "3",
+        "--sets",
+        "in-the-way",
+        "--solvable-budget-s",
+        "0.5",
+        "--planners",
+        "policy,policy+shield",
+        "--run",
+        run_dir.to_str().unwrap(),
+        "--out",
+        plans_path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let plans: Vec<Value> = std::fs::read_to_string(&plans_path)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(plans.len(), 6);
+    for p in &plans {
+        let shielded = p["planner"] == "policy+shield";
+        assert_eq!(p.get("shield_steps").is_some(), shielded, "{p}");
+    }
+    // `stagerl plan` with the run: behind its shield, unless --no-shield.
+    let plan = |extra: &[&str]| {
+        let mut args = vec!["plan", "--run", run_dir.to_str().unwrap(), "--target", "0.4,0.2,0.5"];
+        args.extend_from_slice(extra);
+        let out = run(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8(out.stdout).unwrap();
+        serde_json::from_str::<Value>(text.lines().last().unwrap()).unwrap()["summary"].clone()
+    };
+    assert!(plan(&[]).get("shield_steps").is_some());
+    assert!(plan(&["--no-shield"]).get("shield_steps").is_none());
+    std::fs::remove_dir_all(&dir).ok();
+}
