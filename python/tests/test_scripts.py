@@ -73,3 +73,12 @@ def test_obstacle_summary_counts_successes_and_contacts_and_refuses_a_missing_ev
         assert summary.EVALS[1][1] in str(e) and "missing" in str(e)
     else:
         raise AssertionError("a missing evaluation was not refused")
+    # A run trained behind the shield: alone is its --no-shield evaluation, shielded its own.
+    (run / summary.EVALS[1][1]).write_text(header + "".join(f"{t},0,5,1,0\n" for t in range(1, 501)))
+    (run / "config.toml").write_text("[task.shield]\nenabled = true\n")
+    for i, (_, file) in enumerate(summary.SHIELD_TRAINED_EVALS):
+        rows = [f"{t},0,5,{int(t <= 50 * (i + 1))},{1 if t > 500 - 10 * i else 0}\n" for t in range(1, 501)]
+        (run / file).write_text(header + "".join(rows))
+    summary.main(str(tmp_path))
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == "her,2,4,15,13,2;4,10.0,0.0,20.0,2.0,30.0,4.0,40.0,6.0", out[-1]

@@ -8,11 +8,15 @@ the shield; the training's length, wall time and curriculum stages from `episode
 usage: obstacle_summary.py RUNS_DIR > summary.csv
 
 RUNS_DIR holds one folder per run, named CONFIG-sSEED. A run missing one of the four per-trial
-CSVs is an error naming the file: no row reports a check that did not run.
+CSVs is an error naming the file: no row reports a check that did not run. A run trained behind
+the shield (`[task.shield] enabled = true` in its config.toml) is evaluated behind it by default,
+so its files are the other way round: alone is `stagerl eval --no-shield` (`...-no-shield.csv`),
+with the shield the closing evaluation and `--obstacles-in-path 1`.
 """
 import csv
 import pathlib
 import sys
+import tomllib
 
 EVALS = [  # (column prefix, per-trial CSV in the run folder)
     ("alone", "eval-final-seed0.csv"),
@@ -20,6 +24,20 @@ EVALS = [  # (column prefix, per-trial CSV in the run folder)
     ("in_way_alone", "eval-best-trials500-seed0-in-path-1.csv"),
     ("in_way_shield", "eval-best-trials500-seed0-in-path-1-shield.csv"),
 ]
+
+SHIELD_TRAINED_EVALS = [  # the same columns for a run trained behind the shield
+    ("alone", "eval-best-trials500-seed0-no-shield.csv"),
+    ("shield", "eval-final-seed0.csv"),
+    ("in_way_alone", "eval-best-trials500-seed0-in-path-1-no-shield.csv"),
+    ("in_way_shield", "eval-best-trials500-seed0-in-path-1.csv"),
+]
+
+
+def evals_of(run):
+    """The per-trial CSVs of `run`'s four columns, by whether it was trained behind the shield."""
+    config = tomllib.loads((run / "config.toml").read_text()) if (run / "config.toml").exists() else {}
+    shield = config.get("task", {}).get("shield", {})
+    return SHIELD_TRAINED_EVALS if shield.get("enabled", False) else EVALS
 
 
 def rates(path):
@@ -64,7 +82,7 @@ def main(root):
         last = episodes[-1]
         row = [name, seed, last["episode"], last["env_steps"], f"{float(last['wall_s']):.0f}",
                stages(episodes)]
-        for _, file in EVALS:
+        for _, file in evals_of(run):
             row += rates(run / file)
         w.writerow(row)
 
