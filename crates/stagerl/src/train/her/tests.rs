@@ -144,35 +144,53 @@ fn future_goals_cover_the_rest_of_the_episode_and_k_is_checked() {
     }
 }
 
+/// The UR5 with a sphere beside its tool at the home pose (and the shield on when `shield`), and
+/// `reward`: random-action episodes of seeds `seeds` relabelled (`future`, k = 2), each relabelled
+/// step checked bit for bit against a fresh environment's step for its goal, and its total against
+/// the reward and bonus less `term` of its terms. Returns the steps relabelled and those with
+/// `term` charged.
+fn relabel_beside_a_sphere(
+    reward: RewardConfig,
+    shield: bool,
+    seeds: std::ops::Range<u64>,
+    term: fn(&crate::reward::RewardTerms) -> f64,
+) -> (usize, usize) {
+    use crate::sim::scene::Obstacle;
+    use crate::sim::shield::ShieldConfig;
+    let chain = Arc::new(crate::robot::Chain::ur5());
+    let tool = chain.fk(&crate::env::UR5_HOME_POSE_RAD).position;
+    let task = crate::env::TaskConfig {
+        obstacles: vec![Obstacle::sphere(0.08, [tool.x + 0.15, tool.y, tool.z - 0.05])],
+        shield: shield.then(|| ShieldConfig { enabled: true, ..ShieldConfig::default() }),
+        ..Default::default()
+    };
+    let task = task.resolve(&chain).unwrap();
+    let mut e = ReachEnv::new(chain, task.clone(), reward.clone(), 5).unwrap();
+    let mut fresh = e.clone();
+    let (mut n, mut charged) = (0, 0);
+    for seed in seeds {
+        let (log, qs) = episode(&mut e, seed);
+        let cfg = HerConfig { strategy: HerStrategy::Future, k: 2 };
+        Relabeller::default().relabel(&cfg, &task, &reward, &log, &mut Rng::new(2), |x| {
+            fresh.reset_to(&qs[x.step], x.goal).unwrap();
+            let s = fresh.step(x.action).unwrap();
+            assert_eq!(s.terms, x.terms, "step {}", x.step);
+            assert_eq!(x.terms.total, x.terms.reward + x.terms.bonus - term(&x.terms));
+            n += 1;
+            charged += usize::from(term(&x.terms) > 0.0);
+        });
+    }
+    (n, charged)
+}
+
 /// With `[reward.clearance]`, every relabelled step is charged the clearance penalty the
 /// environment charged for it (it depends on the arm, not on the goal), bit for bit as a fresh
 /// environment's step for the new goal; some steps near the sphere are charged.
 #[test]
 fn a_relabelled_step_keeps_its_clearance_penalty() {
-    use crate::reward::ClearanceConfig;
-    use crate::sim::scene::Obstacle;
-    let chain = Arc::new(crate::robot::Chain::ur5());
-    let tool = chain.fk(&crate::env::UR5_HOME_POSE_RAD).position;
-    let task = crate::env::TaskConfig {
-        obstacles: vec![Obstacle::sphere(0.08, [tool.x + 0.15, tool.y, tool.z - 0.05])],
-        ..Default::default()
-    };
-    let task = task.resolve(&chain).unwrap();
-    let clearance = Some(ClearanceConfig { weight: 2.0, margin_m: 0.15 });
+    let clearance = Some(crate::reward::ClearanceConfig { weight: 2.0, margin_m: 0.15 });
     let reward = RewardConfig { clearance, ..RewardConfig::default() };
-    let mut e = ReachEnv::new(chain, task.clone(), reward.clone(), 5).unwrap();
-    let mut fresh = e.clone();
-    let (log, qs) = episode(&mut e, 3);
-    let (mut n, mut charged) = (0, 0);
-    let cfg = HerConfig { strategy: HerStrategy::Future, k: 2 };
-    Relabeller::default().relabel(&cfg, &task, &reward, &log, &mut Rng::new(2), |x| {
-        fresh.reset_to(&qs[x.step], x.goal).unwrap();
-        let s = fresh.step(x.action).unwrap();
-        assert_eq!(s.terms, x.terms, "step {}", x.step);
-        assert_eq!(x.terms.total, x.terms.reward + x.terms.bonus - x.terms.clearance);
-        n += 1;
-        charged += usize::from(x.terms.clearance > 0.0);
-    });
+    let (n, charged) = relabel_beside_a_sphere(reward, false, 3..4, |t| t.clearance);
     assert!(n > 0 && charged > 0, "{charged} of {n} relabelled steps charged");
 }
 
@@ -181,31 +199,7 @@ fn a_relabelled_step_keeps_its_clearance_penalty() {
 /// bit as a fresh environment's step for the new goal; some steps are charged.
 #[test]
 fn a_relabelled_step_keeps_its_shield_penalty() {
-    use crate::sim::scene::Obstacle;
-    use crate::sim::shield::ShieldConfig;
-    let chain = Arc::new(crate::robot::Chain::ur5());
-    let tool = chain.fk(&crate::env::UR5_HOME_POSE_RAD).position;
-    let task = crate::env::TaskConfig {
-        obstacles: vec![Obstacle::sphere(0.08, [tool.x + 0.15, tool.y, tool.z - 0.05])],
-        shield: Some(ShieldConfig { enabled: true, ..ShieldConfig::default() }),
-        ..Default::default()
-    };
-    let task = task.resolve(&chain).unwrap();
     let reward = RewardConfig { shield_penalty: Some(2.0), ..RewardConfig::default() };
-    let mut e = ReachEnv::new(chain, task.clone(), reward.clone(), 5).unwrap();
-    let mut fresh = e.clone();
-    let (mut n, mut charged) = (0, 0);
-    for seed in 3..6 {
-        let (log, qs) = episode(&mut e, seed);
-        let cfg = HerConfig { strategy: HerStrategy::Future, k: 2 };
-        Relabeller::default().relabel(&cfg, &task, &reward, &log, &mut Rng::new(2), |x| {
-            fresh.reset_to(&qs[x.step], x.goal).unwrap();
-            let s = fresh.step(x.action).unwrap();
-            assert_eq!(s.terms, x.terms, "step {}", x.step);
-            assert_eq!(x.terms.total, x.terms.reward + x.terms.bonus - x.terms.shield);
-            n += 1;
-            charged += usize::from(x.terms.shield > 0.0);
-        });
-    }
+    let (n, charged) = relabel_beside_a_sphere(reward, true, 3..6, |t| t.shield);
     assert!(n > 0 && charged > 0, "{charged} of {n} relabelled steps charged");
 }
