@@ -381,3 +381,17 @@ def test_the_shield_penalty_is_charged_behind_the_shield():
     assert charged > 10, charged
     with pytest.raises(ValueError, match="reward.shield_penalty"):
         gym.make("stagerl/Reach-v0", config={"reward": {"shield_penalty": 1.0}})
+
+
+def test_stagerl_simd_caps_the_level_and_a_bad_value_fails_the_import():
+    """STAGERL_SIMD as the command line reads it: the level is reported, a bad value refused."""
+    import os
+    import subprocess
+    import sys
+    code = "import stagerl; print(stagerl.SIMD_LEVEL)"
+    base = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "STAGERL_SIMD": "baseline"})
+    assert base.returncode == 0 and base.stdout.strip() == "baseline", base.stderr
+    bad = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "STAGERL_SIMD": "sse9"})
+    assert bad.returncode != 0 and "ValueError" in bad.stderr and "STAGERL_SIMD" in bad.stderr, bad.stderr

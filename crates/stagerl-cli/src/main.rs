@@ -74,21 +74,22 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(e) => return usage(&e),
     };
-    let result = match cli.command {
-        Command::Train(a) => cmd::train::run(a),
-        Command::Eval(a) => cmd::eval::run(a),
-        Command::Reproduce(a) => cmd::reproduce::run(a),
-        Command::Demo(a) => cmd::demo::run(a),
-        Command::Plan(a) => cmd::plan::run(a),
-        Command::Export(a) => cmd::export::run(a),
-        Command::View(a) => cmd::view::run(a),
-        Command::Fk(a) => cmd::fk::run(a),
-        Command::Reward(a) => cmd::reward::run(a),
-        Command::Robot(a) => cmd::robot::run(a),
-        Command::Report(a) => cmd::report::run(a),
-        Command::Bench(b) => cmd::bench::run(b),
-        Command::Config(a) => cmd::config::run(a),
-    };
+    let result =
+        stagerl::base::simd::simd_cap().map_err(anyhow::Error::from).and_then(|_| match cli.command {
+            Command::Train(a) => cmd::train::run(a),
+            Command::Eval(a) => cmd::eval::run(a),
+            Command::Reproduce(a) => cmd::reproduce::run(a),
+            Command::Demo(a) => cmd::demo::run(a),
+            Command::Plan(a) => cmd::plan::run(a),
+            Command::Export(a) => cmd::export::run(a),
+            Command::View(a) => cmd::view::run(a),
+            Command::Fk(a) => cmd::fk::run(a),
+            Command::Reward(a) => cmd::reward::run(a),
+            Command::Robot(a) => cmd::robot::run(a),
+            Command::Report(a) => cmd::report::run(a),
+            Command::Bench(b) => cmd::bench::run(b),
+            Command::Config(a) => cmd::config::run(a),
+        });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

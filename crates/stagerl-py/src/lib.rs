@@ -78,7 +78,10 @@ pub(crate) fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     stagerl::run::provenance::Code::record_build(env!("STAGERL_GIT_COMMIT"), env!("STAGERL_GIT_DIRTY"));
+    // A bad STAGERL_SIMD: the import fails with the command line's message (ValueError).
+    stagerl::base::simd::simd_cap().map_err(to_py)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("SIMD_LEVEL", stagerl::base::simd::simd_level().name())?;
     m.add("STEP_KEYS", env::STEP_KEYS.to_vec())?;
     m.add_class::<env::ReachCore>()?;
     m.add_class::<kin::Chain>()?;

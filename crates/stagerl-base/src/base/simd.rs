@@ -24,10 +24,32 @@ pub enum SimdLevel {
     Baseline,
 }
 
-/// The level [`multiversion!`](crate::multiversion!) functions run at on this CPU (detected once, then cached by the
-/// standard library).
-#[inline]
-pub fn simd_level() -> SimdLevel {
+/// The environment variable that caps the SIMD level (`avx512`, `avx2` or `baseline`; unset: the
+/// widest the CPU has), for measuring and checking a narrower instruction set on a wider CPU.
+/// Results are the same bits at every level (see the module docs); only the speed changes.
+pub const SIMD_ENV: &str = "STAGERL_SIMD";
+
+impl SimdLevel {
+    /// The level's name, as [`SIMD_ENV`] takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            SimdLevel::Avx512 => "avx512",
+            SimdLevel::Avx2 => "avx2",
+            SimdLevel::Baseline => "baseline",
+        }
+    }
+
+    fn rank(self) -> u8 {
+        match self {
+            SimdLevel::Baseline => 0,
+            SimdLevel::Avx2 => 1,
+            SimdLevel::Avx512 => 2,
+        }
+    }
+}
+
+/// The widest level this CPU has.
+fn detected_level() -> SimdLevel {
     #[cfg(target_arch = "x86_64")]
     {
         let avx2 = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
@@ -39,6 +61,37 @@ pub fn simd_level() -> SimdLevel {
         }
     }
     SimdLevel::Baseline
+}
+
+/// The cap [`SIMD_ENV`] sets (`None`: unset or empty). Errors: a value that is not a level's
+/// name (the command line and the Python module refuse it at start; [`simd_level`] ignores it).
+pub fn simd_cap() -> crate::Result<Option<SimdLevel>> {
+    let Some(value) = std::env::var_os(SIMD_ENV) else { return Ok(None) };
+    let text = value.to_string_lossy();
+    let levels = [SimdLevel::Avx512, SimdLevel::Avx2, SimdLevel::Baseline];
+    match levels.into_iter().find(|l| l.name().eq_ignore_ascii_case(text.trim())) {
+        Some(level) => Ok(Some(level)),
+        None if text.trim().is_empty() => Ok(None),
+        None => Err(crate::Error::config(
+            SIMD_ENV,
+            format!("{text:?}"),
+            "one of avx512, avx2, baseline (a cap on the instruction set; unset: the widest the CPU has)",
+        )),
+    }
+}
+
+/// The level [`multiversion!`](crate::multiversion!) functions, the matrix products and the
+/// kinematics run at: the widest this CPU has, capped by [`SIMD_ENV`] (read once).
+#[inline]
+pub fn simd_level() -> SimdLevel {
+    static LEVEL: std::sync::OnceLock<SimdLevel> = std::sync::OnceLock::new();
+    *LEVEL.get_or_init(|| {
+        let hardware = detected_level();
+        match simd_cap() {
+            Ok(Some(cap)) if cap.rank() < hardware.rank() => cap,
+            _ => hardware,
+        }
+    })
 }
 
 /// Defines `fn name<T: Scalar>(args) body` (or a function without a type parameter) so that `body` is compiled for AVX-512F, for AVX2 +

@@ -265,7 +265,7 @@ fn env(a: EnvArgs) -> Result<()> {
     let sps = a.steps as f64 / secs;
     outln!(
         "env: {} steps ({} episodes) in {:.3} s, {:.0} steps/s, {:.1} ns/step (single thread, {}, {} simulation, \
-         reward {}, {} collision shapes, {} obstacles, checksum {:.3})",
+         reward {}, {} collision shapes, {} obstacles, checksum {:.3}, simd {})",
         a.steps,
         episodes,
         secs,
@@ -276,9 +276,10 @@ fn env(a: EnvArgs) -> Result<()> {
         a.reward,
         env.chain().collision_shapes().len(),
         env.task().obstacles.len(),
-        checksum
+        checksum,
+        simd()
     )?;
-    outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
+    outln!("{}", serde_json::json!({ "steps_per_sec": sps, "simd": simd() }))?;
     Ok(())
 }
 
@@ -368,10 +369,10 @@ fn update(a: UpdateArgs) -> Result<()> {
     times.sort_by(f64::total_cmp);
     let median = times[times.len() / 2];
     outln!(
-        "update: {} hidden {}x{} batch {}: median {:.3} ms, min {:.3} ms over {} updates (obs {od}, act {ad}, {})",
-        a.algo, a.hidden, a.hidden, a.batch, median, times[0], times.len(), threads_text(a.threads)
+        "update: {} hidden {}x{} batch {}: median {:.3} ms, min {:.3} ms over {} updates (obs {od}, act {ad}, {}, simd {})",
+        a.algo, a.hidden, a.hidden, a.batch, median, times[0], times.len(), threads_text(a.threads), simd()
     )?;
-    outln!("{}", serde_json::json!({ "ms_per_update": median }))?;
+    outln!("{}", serde_json::json!({ "ms_per_update": median, "simd": simd() }))?;
     Ok(())
 }
 
@@ -390,10 +391,10 @@ fn train(a: TrainArgs) -> Result<()> {
     std::fs::remove_dir_all(&dir).ok();
     let sps = summary.env_steps as f64 / secs;
     outln!(
-        "train: {} hidden {}x{}: {} env steps, {} updates in {:.2} s, {:.0} env steps/s end to end (one update per step, {})",
-        a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps, threads_text(a.threads)
+        "train: {} hidden {}x{}: {} env steps, {} updates in {:.2} s, {:.0} env steps/s end to end (one update per step, {}, simd {})",
+        a.algo, a.hidden, a.hidden, summary.env_steps, summary.updates, secs, sps, threads_text(a.threads), simd()
     )?;
-    outln!("{}", serde_json::json!({ "steps_per_sec": sps }))?;
+    outln!("{}", serde_json::json!({ "steps_per_sec": sps, "simd": simd() }))?;
     Ok(())
 }
 
@@ -494,4 +495,9 @@ fn plan(a: PlanArgs) -> Result<()> {
     )?;
     outln!("{}", serde_json::json!({ "plans_per_sec": pps }))?;
     Ok(())
+}
+
+/// The instruction set the kernels run at (`STAGERL_SIMD` caps it), as the timings report it.
+fn simd() -> &'static str {
+    stagerl::base::simd::simd_level().name()
 }

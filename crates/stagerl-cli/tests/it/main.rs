@@ -16,6 +16,7 @@ mod reproduce;
 mod resume;
 mod shield_cli;
 mod sigterm_resume;
+mod simd_levels;
 mod special_files;
 mod stale_results;
 mod stops;

@@ -329,7 +329,9 @@ impl Kinematics {
     #[inline]
     pub fn fk_tf(&self, q: &[f64]) -> Tf {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx2")
+            && crate::base::simd::simd_level() != crate::base::simd::SimdLevel::Baseline
+        {
             // SAFETY: the CPU has AVX2.
             return unsafe { self.fk_tf_avx2(q) };
         }
@@ -377,7 +379,9 @@ impl Kinematics {
     /// the joint's motion and the constant after it (the same products in the same order).
     pub fn segment_frames(&self, q: &[f64], out: &mut [Tf]) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx2")
+            && crate::base::simd::simd_level() != crate::base::simd::SimdLevel::Baseline
+        {
             // SAFETY: the CPU has AVX2.
             return unsafe { self.segment_frames_avx2(q, out) };
         }

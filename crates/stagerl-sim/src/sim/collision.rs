@@ -522,7 +522,9 @@ impl ArmCollider {
     /// or the obstacles, in that order of tests; `None` when it is clear.
     pub fn check(&mut self, chain: &Chain, q: &[f64]) -> Option<Contact> {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx2")
+            && crate::base::simd::simd_level() != crate::base::simd::SimdLevel::Baseline
+        {
             // SAFETY: the CPU has AVX2.
             return unsafe { self.check_avx2(chain, q) };
         }
