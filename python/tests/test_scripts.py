@@ -82,3 +82,26 @@ def test_obstacle_summary_counts_successes_and_contacts_and_refuses_a_missing_ev
     summary.main(str(tmp_path))
     out = capsys.readouterr().out.splitlines()
     assert out[-1] == "her,2,4,15,13,2;4,10.0,0.0,20.0,2.0,30.0,4.0,40.0,6.0", out[-1]
+
+
+def test_obstacle_seeds_averages_each_config_over_its_seeds(tmp_path, capsys):
+    seeds = load("obstacle_seeds")
+    summary = tmp_path / "summary.csv"
+    cols = ["success_alone", "collisions_alone", "success_shield", "collisions_shield", "success_in_way_alone",
+            "collisions_in_way_alone", "success_in_way_shield", "collisions_in_way_shield"]
+    head = "config,seed,episodes,env_steps,train_wall_s,stages_began_at_episode," + ",".join(cols)
+    summary.write_text(head + "\n"
+                       "a,1,10,100,50,,80.0,5.0,81.0,0.0,50.0,20.0,60.0,0.0\n"
+                       "a,2,10,100,70,,90.0,7.0,91.0,0.0,60.0,30.0,70.0,0.0\n"
+                       "b,1,10,100,9,,70.0,1.0,71.0,0.0,40.0,10.0,45.0,0.0\n")
+    seeds.main(str(summary), ["b", "a"])
+    out = capsys.readouterr().out.splitlines()
+    assert out[2] == "| `b` | 1 | 70.0 / 1.0 | 71.0 / 0.0 | 40.0 / 10.0 | 45.0 / 0.0 | 9-9 |", out[2]
+    assert out[3] == ("| `a` | 1,2 | 85.0 [80.0-90.0] / 6.0 [5.0-7.0] | 86.0 [81.0-91.0] / 0.0 [0.0-0.0] "
+                      "| 55.0 [50.0-60.0] / 25.0 [20.0-30.0] | 65.0 [60.0-70.0] / 0.0 [0.0-0.0] | 50-70 |"), out[3]
+    try:
+        seeds.main(str(summary), ["c"])
+    except SystemExit as e:
+        assert "'c'" in str(e)
+    else:
+        raise AssertionError("a missing config was not refused")
