@@ -187,14 +187,15 @@ fn report_on_trained_runs() {
 #[test]
 fn the_committed_reports_regenerate_from_the_committed_runs() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    // crossq-rewards and sample-efficiency were reported without trajectories (their archives
-    // hold no checkpoint).
+    // crossq-rewards, sample-efficiency and obstacle-her were reported without trajectories
+    // (their archives hold no checkpoint).
     for (study, regime, trajectories) in [
         ("quick", "tuned regime", "5"),
         ("paper", "paper regime", "5"),
         ("learners", "tuned regime", "5"),
         ("crossq-rewards", "tuned regime", "0"),
         ("sample-efficiency", "tuned regime", "0"),
+        ("obstacle-her", "custom settings", "0"),
     ] {
         let dir = root.join("docs/results").join(study);
         let out = crate::common::scratch(&format!("regenerate-{study}"));
