@@ -175,19 +175,19 @@ pub fn run(a: ObstaclesArgs) -> Result<()> {
 /// task, the run's policy with `--run`, and the first and the policy again behind the shield.
 /// `policy` is the policy alone, also for a run trained behind the shield (`[task.shield]`).
 fn planners(cfg: &Config, a: &ObstaclesArgs, rrt: RrtConnect) -> Result<Vec<(&'static str, Planner)>> {
-    let shielded = |mut p: Planner, on: bool| -> Result<Planner> {
+    let with_shield = |mut p: Planner, on: bool| -> Result<Planner> {
         p.set_shield(on).context(if on { "the shielded planners" } else { "the policy alone" })?;
         Ok(p)
     };
     let mut planners: Vec<(&'static str, Planner)> = vec![
         ("jacobian", Planner::jacobian(cfg, None)?),
-        ("jacobian+shield", shielded(Planner::jacobian(cfg, None)?, true)?),
+        ("jacobian+shield", with_shield(Planner::jacobian(cfg, None)?, true)?),
         ("rrt-connect", Planner::rrt_connect(cfg, None, rrt).context("--planner-budget-s")?),
     ];
     if let Some(run) = &a.run {
         let policy = || Planner::from_run(&stagerl::run::dir::RunDir::new(run), None, None).map(|(_, p)| p);
-        planners.push(("policy", shielded(policy()?, false)?));
-        planners.push(("policy+shield", shielded(policy()?, true)?));
+        planners.push(("policy", with_shield(policy()?, false)?));
+        planners.push(("policy+shield", with_shield(policy()?, true)?));
     } else if let Some(p) = a.planners.iter().find(|p| p.starts_with("policy")) {
         anyhow::bail!("--planners {p}: the policy's planners need --run (a trained run)");
     }

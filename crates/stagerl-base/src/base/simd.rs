@@ -80,6 +80,21 @@ pub fn simd_cap() -> crate::Result<Option<SimdLevel>> {
     }
 }
 
+/// Whether code compiled for AVX2 (without FMA) may run: the CPU has AVX2 and [`simd_level`]
+/// (capped by [`SIMD_ENV`]) is not the baseline. For the kinematics and the contact checks, whose
+/// AVX2 builds give the baseline's bits.
+#[inline]
+pub fn avx2_enabled() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && simd_level() != SimdLevel::Baseline
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// The level [`multiversion!`](crate::multiversion!) functions, the matrix products and the
 /// kinematics run at: the widest this CPU has, capped by [`SIMD_ENV`] (read once).
 #[inline]

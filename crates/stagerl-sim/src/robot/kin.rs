@@ -329,10 +329,8 @@ impl Kinematics {
     #[inline]
     pub fn fk_tf(&self, q: &[f64]) -> Tf {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2")
-            && crate::base::simd::simd_level() != crate::base::simd::SimdLevel::Baseline
-        {
-            // SAFETY: the CPU has AVX2.
+        if crate::base::simd::avx2_enabled() {
+            // SAFETY: the CPU has AVX2 (`avx2_enabled` checked it).
             return unsafe { self.fk_tf_avx2(q) };
         }
         self.fk_tf_body(q)
@@ -379,10 +377,8 @@ impl Kinematics {
     /// the joint's motion and the constant after it (the same products in the same order).
     pub fn segment_frames(&self, q: &[f64], out: &mut [Tf]) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2")
-            && crate::base::simd::simd_level() != crate::base::simd::SimdLevel::Baseline
-        {
-            // SAFETY: the CPU has AVX2.
+        if crate::base::simd::avx2_enabled() {
+            // SAFETY: the CPU has AVX2 (`avx2_enabled` checked it).
             return unsafe { self.segment_frames_avx2(q, out) };
         }
         self.segment_frames_body(q, out)

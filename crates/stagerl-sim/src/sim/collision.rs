@@ -522,10 +522,8 @@ impl ArmCollider {
     /// or the obstacles, in that order of tests; `None` when it is clear.
     pub fn check(&mut self, chain: &Chain, q: &[f64]) -> Option<Contact> {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2")
-            && crate::base::simd::simd_level() != crate::base::simd::SimdLevel::Baseline
-        {
-            // SAFETY: the CPU has AVX2.
+        if crate::base::simd::avx2_enabled() {
+            // SAFETY: the CPU has AVX2 (`avx2_enabled` checked it).
             return unsafe { self.check_avx2(chain, q) };
         }
         self.check_body(chain, q)
