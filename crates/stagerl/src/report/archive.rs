@@ -26,6 +26,16 @@ pub fn is_archive(path: &Path) -> bool {
     path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with(".tar.xz"))
 }
 
+/// How a report names an archive: its folder and file name (`obstacle-her/runs.tar.xz`), not an
+/// absolute path of this machine nor the folder it unpacks to.
+pub fn display_name(archive: &Path) -> String {
+    let file = archive.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    match archive.parent().and_then(|p| p.file_name()) {
+        Some(parent) => format!("{}/{file}", parent.to_string_lossy()),
+        None => file,
+    }
+}
+
 /// An archive unpacked into a temporary directory, removed on drop.
 #[derive(Debug)]
 pub struct Unpacked {
@@ -275,6 +285,15 @@ mod tests {
         let p = dir.join(name);
         std::fs::write(&p, bytes).unwrap();
         p
+    }
+
+    #[test]
+    fn an_archive_is_named_by_its_folder_and_file() {
+        assert_eq!(
+            display_name(Path::new("/home/u/docs/results/obstacle-her/runs.tar.xz")),
+            "obstacle-her/runs.tar.xz"
+        );
+        assert_eq!(display_name(Path::new("runs.tar.xz")), "runs.tar.xz");
     }
 
     #[test]

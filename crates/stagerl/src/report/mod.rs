@@ -195,6 +195,22 @@ pub fn analyze(
     criterion: &ConvergenceCriterion,
     include_incomplete: bool,
 ) -> Result<(Vec<Group>, Report)> {
+    analyze_named(dir, &dir_name(dir), criterion, include_incomplete)
+}
+
+/// How outputs name an input directory: by its own name, not an absolute path of this machine.
+fn dir_name(dir: &Path) -> String {
+    dir.file_name().map_or_else(|| ".".into(), |n| n.to_string_lossy().into_owned())
+}
+
+/// [`analyze`], the input named `name` in the outputs (an archive's unpacked folder is named
+/// after the archive, not after the folder inside it).
+fn analyze_named(
+    dir: &Path,
+    name: &str,
+    criterion: &ConvergenceCriterion,
+    include_incomplete: bool,
+) -> Result<(Vec<Group>, Report)> {
     criterion.validate()?;
     let (groups, skipped) = load_groups(dir, include_incomplete)?;
     let summaries = groups.iter().map(|g| table::summarize(g, criterion)).collect::<Result<Vec<_>>>()?;
@@ -203,8 +219,7 @@ pub fn analyze(
     let aggregates = aggregate::compute(&summaries);
     let sample_efficiency = sample_efficiency::compute(&groups);
     let sensitivity = sensitivity(&groups, criterion)?;
-    let name = dir.file_name().map_or_else(|| ".".into(), |n| n.to_string_lossy().into_owned());
-    let study = reference::study_line(&groups, &name);
+    let study = reference::study_line(&groups, name);
     let reference = reference::evaluate(&groups, &summaries)?;
     let report = Report {
         input: PathBuf::from(name),
@@ -322,13 +337,19 @@ pub fn generate(dir: &Path, opts: &ReportOptions) -> Result<Report> {
     check_options(dir, opts)?;
     if archive::is_archive(dir) && !dir.is_dir() {
         let unpacked = archive::unpack(dir)?;
-        return generate_from(&unpacked.root, opts, clock);
+        return generate_from(&unpacked.root, &archive::display_name(dir), opts, clock);
     }
-    generate_from(dir, opts, clock)
+    generate_from(dir, &dir_name(dir), opts, clock)
 }
 
-fn generate_from(dir: &Path, opts: &ReportOptions, clock: crate::run::provenance::Clock) -> Result<Report> {
-    let (groups, mut report) = analyze(dir, &opts.criterion, opts.include_incomplete)?;
+/// The report of the runs under `dir`, named `name` in its outputs.
+fn generate_from(
+    dir: &Path,
+    name: &str,
+    opts: &ReportOptions,
+    clock: crate::run::provenance::Clock,
+) -> Result<Report> {
+    let (groups, mut report) = analyze_named(dir, name, &opts.criterion, opts.include_incomplete)?;
     if groups.is_empty() {
         return Err(no_runs(dir, &report));
     }
