@@ -191,6 +191,8 @@ fn the_committed_reports_regenerate_from_the_committed_runs() {
     // (their archives hold no checkpoint).
     for (study, regime, trajectories) in [
         ("quick", "tuned regime", "5"),
+        ("tuned", "tuned regime", "5"),
+        ("quick-dynamic", "tuned regime", "5"),
         ("paper", "paper regime", "5"),
         ("learners", "tuned regime", "5"),
         ("crossq-rewards", "tuned regime", "0"),
@@ -217,6 +219,11 @@ fn the_committed_reports_regenerate_from_the_committed_runs() {
             };
             if name != "aggregates.md" {
                 assert!(ours.contains(regime), "{study}/{name}: the regime the preset names");
+                // Named by the archive it was read from, not by the folder inside it.
+                assert!(
+                    ours.contains(&format!("Study `{study}/runs.tar.xz`")),
+                    "{study}/{name}: the study's name"
+                );
             }
             assert_eq!(keep(&ours), keep(&committed), "{study}/{name} differs from the committed one");
         }
