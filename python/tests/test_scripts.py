@@ -105,3 +105,31 @@ def test_obstacle_seeds_averages_each_config_over_its_seeds(tmp_path, capsys):
         assert "'c'" in str(e)
     else:
         raise AssertionError("a missing config was not refused")
+
+
+def test_bench_seeds_averages_each_set_and_planner_over_the_seeds(tmp_path, capsys):
+    seeds = load("bench_seeds")
+    head = ("obstacles: 200 problems per set\n| planner | set | success % | collision % | path length m |\n"
+            "|---|---|---|---|---|\n")
+    files = []
+    for seed, (ok, hit) in [(1, (80.0, 10.0)), (2, (90.0, 4.0))]:
+        f = tmp_path / f"bench-a-b-s{seed}.md"
+        f.write_text(head + f"| policy | in-the-way | {ok} | {hit} | 0.5 |\n| policy+shield | in-the-way | {ok + 5} | 0.0 | - |\n")
+        files.append(str(f))
+    one = tmp_path / "bench-c-s3.md"
+    one.write_text(head + "| policy | free | 100.0 | 0.0 | 0.4 |\n")
+    seeds.main(files + [str(one)])
+    out = capsys.readouterr().out.splitlines()
+    assert out[2] == "| `a-b` | 1,2 | in-the-way | policy | 85.0 [80.0-90.0] | 7.0 [4.0-10.0] |", out[2]
+    assert out[3] == "| `a-b` | 1,2 | in-the-way | policy+shield | 90.0 [85.0-95.0] | 0.0 [0.0-0.0] |", out[3]
+    assert out[4] == "| `c` | 3 | free | policy | 100.0 | 0.0 |", out[4]
+    # A seed that ran other sets is refused rather than averaged over fewer seeds.
+    other = tmp_path / "bench-c-s4.md"
+    other.write_text(head + "| policy | narrow-gap | 0.0 | 100.0 | - |\n")
+    for bad, word in [([str(one), str(other)], "other sets"), ([str(tmp_path / "x.md")], "not named")]:
+        try:
+            seeds.main(bad)
+        except SystemExit as e:
+            assert word in str(e), e
+        else:
+            raise AssertionError(f"{bad} was not refused")
