@@ -126,7 +126,8 @@ def test_bench_seeds_averages_each_set_and_planner_over_the_seeds(tmp_path, caps
     # A seed that ran other sets is refused rather than averaged over fewer seeds.
     other = tmp_path / "bench-c-s4.md"
     other.write_text(head + "| policy | narrow-gap | 0.0 | 100.0 | - |\n")
-    for bad, word in [([str(one), str(other)], "other sets"), ([str(tmp_path / "x.md")], "not named")]:
+    for bad, word in [([str(one), str(other)], "other sets"), ([str(tmp_path / "x.md")], "not named"),
+                      ([str(tmp_path / "bench-d-s1.md")], "missing")]:
         try:
             seeds.main(bad)
         except SystemExit as e:

@@ -20,6 +20,8 @@ NAME = re.compile(r"^bench-(?P<config>.+)-s(?P<seed>\d+)\.md$")
 
 def table(path):
     """{(set, planner): (success %, collision %)} of one benchmark file, in its order."""
+    if not Path(path).is_file():
+        sys.exit(f"bench_seeds.py: {path} is missing (run that benchmark first)")
     lines = [l for l in Path(path).read_text().splitlines() if l.startswith("|")]
     if len(lines) < 3:
         sys.exit(f"bench_seeds.py: {path} holds no benchmark table")
