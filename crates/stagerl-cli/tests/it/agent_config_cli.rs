@@ -102,3 +102,31 @@ fn the_obstacle_preset_trains_as_it_is() {
     assert_eq!(log.lines().count(), 31, "a header and 30 episodes");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The preset for planning behind the shield (`configs/obstacles-shield.toml`) is
+/// `configs/obstacles.toml` trained behind the shield: the same settings but `[task.shield]`
+/// (enabled) and the shield's penalty, and it trains as it is behind the shield.
+#[test]
+fn the_shielded_obstacle_preset_is_the_obstacle_preset_behind_the_shield() {
+    let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs");
+    let plain = Config::load(&configs.join("obstacles.toml")).unwrap();
+    let preset = configs.join("obstacles-shield.toml");
+    let mut shielded = Config::load(&preset).unwrap();
+    assert!(shielded.task.shield.as_ref().is_some_and(|s| s.enabled), "trained behind the shield");
+    assert!(plain.task.shield.as_ref().is_none_or(|s| !s.enabled));
+    assert_eq!(shielded.reward.shield_penalty, Some(0.25), "the penalty its figures were measured with");
+    shielded.task.shield = plain.task.shield.clone();
+    shielded.reward.shield_penalty = plain.reward.shield_penalty;
+    assert_eq!(shielded, plain, "nothing else differs from configs/obstacles.toml");
+    let dir = scratch("obstacle-shield-preset");
+    let out = dir.join("run");
+    let o = bin()
+        .args(["train", "--config", preset.to_str().unwrap(), "--seed", "1", "--episodes", "20"])
+        .args(["--eval-trials", "5", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cfg = Config::load(&out.join("config.toml")).unwrap();
+    assert!(cfg.task.shield.as_ref().is_some_and(|s| s.enabled), "the run's config keeps the shield");
+    std::fs::remove_dir_all(&dir).ok();
+}

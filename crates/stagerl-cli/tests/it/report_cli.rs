@@ -187,8 +187,8 @@ fn report_on_trained_runs() {
 #[test]
 fn the_committed_reports_regenerate_from_the_committed_runs() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    // crossq-rewards, sample-efficiency and obstacle-her were reported without trajectories
-    // (their archives hold no checkpoint).
+    // crossq-rewards, sample-efficiency, obstacle-her and obstacle-shield were reported without
+    // trajectories (their archives hold no checkpoint).
     for (study, regime, trajectories) in [
         ("quick", "tuned regime", "5"),
         ("tuned", "tuned regime", "5"),
@@ -198,6 +198,7 @@ fn the_committed_reports_regenerate_from_the_committed_runs() {
         ("crossq-rewards", "tuned regime", "0"),
         ("sample-efficiency", "tuned regime", "0"),
         ("obstacle-her", "custom settings", "0"),
+        ("obstacle-shield", "custom settings", "0"),
     ] {
         let dir = root.join("docs/results").join(study);
         let out = crate::common::scratch(&format!("regenerate-{study}"));
