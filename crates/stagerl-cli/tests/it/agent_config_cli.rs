@@ -115,7 +115,7 @@ fn the_shielded_obstacle_preset_is_the_obstacle_preset_behind_the_shield() {
     assert!(shielded.task.shield.as_ref().is_some_and(|s| s.enabled), "trained behind the shield");
     assert!(plain.task.shield.as_ref().is_none_or(|s| !s.enabled));
     assert_eq!(shielded.reward.shield_penalty, Some(0.25), "the penalty its figures were measured with");
-    shielded.task.shield = plain.task.shield.clone();
+    shielded.task.shield = plain.task.shield;
     shielded.reward.shield_penalty = plain.reward.shield_penalty;
     assert_eq!(shielded, plain, "nothing else differs from configs/obstacles.toml");
     let dir = scratch("obstacle-shield-preset");
