@@ -4,35 +4,14 @@
 //!
 //! `cargo bench -p stagerl --bench fk_vs_k`
 
-use std::f64::consts::PI;
 use std::hint::black_box;
 
 use stagerl::base::rng::Rng;
 use stagerl::robot::{Chain, UR5_URDF};
 
-/// `k`'s serial chain from the root to the joint whose child is `tip`.
-fn k_chain(xml: &str, tip: &str) -> k::SerialChain<f64> {
-    let robot = urdf_rs::read_from_string(xml).expect("URDF parses");
-    let chain = k::Chain::<f64>::from(&robot);
-    let end = chain.find_link(tip).expect("tip link in k's chain");
-    k::SerialChain::from_end(end)
-}
-
-/// A random configuration within the limits (continuous joints: within +-2 pi).
-fn random_q(chain: &Chain, rng: &mut Rng) -> Vec<f64> {
-    let limits = chain.lower_limits().iter().zip(chain.upper_limits());
-    limits
-        .map(
-            |(&lo, &hi)| {
-                if lo.is_finite() {
-                    rng.uniform_range(lo, hi)
-                } else {
-                    rng.uniform_range(-2.0 * PI, 2.0 * PI)
-                }
-            },
-        )
-        .collect()
-}
+#[path = "../tests/it/k_oracle.rs"]
+mod k_oracle;
+use k_oracle::{k_chain, random_q};
 
 /// Nanoseconds per call: the best of 300 batches of 4096 calls.
 fn best_ns(mut f: impl FnMut(usize)) -> f64 {

@@ -8,6 +8,7 @@ mod degenerate;
 mod determinism;
 mod docs_links;
 mod float_roundtrip;
+mod k_oracle;
 mod learning;
 mod nan_guard;
 mod policy_portable;

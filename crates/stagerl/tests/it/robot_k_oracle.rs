@@ -8,34 +8,10 @@ use std::path::Path;
 use stagerl::base::rng::Rng;
 use stagerl::robot::{Chain, UR5_URDF};
 
+use crate::k_oracle::{k_chain, random_q};
+
 const TEST_ARM_PATH: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/robot_test_arm.urdf");
 const CONFIGS: usize = 10_000;
-
-/// `k`'s serial chain from the root to the joint whose child is `tip`.
-fn k_chain(xml: &str, tip: &str) -> k::SerialChain<f64> {
-    let robot = urdf_rs::read_from_string(xml).expect("URDF parses");
-    let chain = k::Chain::<f64>::from(&robot);
-    let end = chain.find_link(tip).expect("tip link in k's chain");
-    k::SerialChain::from_end(end)
-}
-
-/// A random configuration within the limits (continuous joints: within +-2 pi).
-fn random_q(chain: &Chain, rng: &mut Rng) -> Vec<f64> {
-    chain
-        .lower_limits()
-        .iter()
-        .zip(chain.upper_limits())
-        .map(
-            |(&lo, &hi)| {
-                if lo.is_finite() {
-                    rng.uniform_range(lo, hi)
-                } else {
-                    rng.uniform_range(-2.0 * PI, 2.0 * PI)
-                }
-            },
-        )
-        .collect()
-}
 
 /// Rotation angle of `a^-1 b` for quaternions `[x, y, z, w]`, either sign (atan2: exact near 0).
 fn angle_between(a: [f64; 4], b: [f64; 4]) -> f64 {
