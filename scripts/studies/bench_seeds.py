@@ -15,6 +15,9 @@ import re
 import sys
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from obstacle_seeds import mean_range  # noqa: E402
+
 NAME = re.compile(r"^bench-(?P<config>.+)-s(?P<seed>\d+)\.md$")
 
 
@@ -38,11 +41,6 @@ def table(path):
     return rows
 
 
-def cell(v):
-    mean = sum(v) / len(v)
-    return f"{mean:.1f}" if len(v) == 1 else f"{mean:.1f} [{min(v):.1f}-{max(v):.1f}]"
-
-
 def main(paths):
     by = {}  # config -> [(seed, rows)]
     for p in paths:
@@ -62,7 +60,7 @@ def main(paths):
         for key in keys:
             ok = [rows[key][0] for _, rows in runs]
             hit = [rows[key][1] for _, rows in runs]
-            print(f"| `{config}` | {seeds} | {key[0]} | {key[1]} | {cell(ok)} | {cell(hit)} |")
+            print(f"| `{config}` | {seeds} | {key[0]} | {key[1]} | {mean_range(ok)} | {mean_range(hit)} |")
 
 
 if __name__ == "__main__":

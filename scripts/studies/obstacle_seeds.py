@@ -15,10 +15,14 @@ EVALS = [("alone", "1-3 random obstacles, alone"), ("shield", "the same, with th
          ("in_way_alone", "in the way, alone"), ("in_way_shield", "in the way, with the shield")]
 
 
-def cell(rows, key):
-    v = [float(r[key]) for r in rows]
+def mean_range(v):
+    """The mean of `v` with its range in brackets (one value: the value), to 0.1."""
     mean = sum(v) / len(v)
     return f"{mean:.1f}" if len(v) == 1 else f"{mean:.1f} [{min(v):.1f}-{max(v):.1f}]"
+
+
+def cell(rows, key):
+    return mean_range([float(r[key]) for r in rows])
 
 
 def main(path, configs):
